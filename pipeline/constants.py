@@ -1,0 +1,22 @@
+"""Names that must agree across modules: topics, message types, entity paths."""
+
+from __future__ import annotations
+
+TOPIC_JOINT_STATES = "/joint_states"
+TOPIC_CONTROLLER_STATE = "/controller_state"
+TOPIC_PLANNED_TRAJECTORY = "/planned_trajectory"
+TOPIC_ROBOT_DESCRIPTION = "/robot_description"
+TOPIC_TF = "/tf"
+
+TYPE_JOINT_STATE = "sensor_msgs/msg/JointState"
+TYPE_CONTROLLER_STATE = "control_msgs/msg/JointTrajectoryControllerState"
+TYPE_JOINT_TRAJECTORY = "trajectory_msgs/msg/JointTrajectory"
+TYPE_STRING = "std_msgs/msg/String"
+TYPE_TF = "tf2_msgs/msg/TFMessage"
+
+# MCAP metadata record holding the episode's full settings (JSON strings).
+METADATA_EPISODE = "armlab.episode"
+
+DEFAULT_PARAMS = "params.yaml"
+DEFAULT_RECORDINGS_DIR = "recordings"
+DEFAULT_REPORTS_DIR = "reports"

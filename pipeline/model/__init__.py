@@ -1,0 +1,3 @@
+"""Robot spec -> models: DH forward kinematics, MJCF (MuJoCo), URDF and Pinocchio."""
+
+from __future__ import annotations

@@ -1,0 +1,218 @@
+"""Robot spec -> MJCF (MuJoCo XML), with optional plant mismatch and obstacles.
+
+Body i sits at DH frame i, so link inertias from the YAML go in unchanged and
+the ``tool0`` site is the DH flange frame. Collision filtering by bit masks:
+robot links collide with each other (MuJoCo already skips parent/child pairs),
+links 2..n with the ground, and every link with obstacles.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from dataclasses import dataclass
+from xml.sax.saxutils import quoteattr
+
+import mujoco
+import numpy as np
+
+from pipeline.errors import ModelError
+from pipeline.model import transforms as tf
+from pipeline.model.chain import BASE_LINK, FLANGE, chain, link_name
+from pipeline.robots.spec import RobotSpec
+
+ROBOT_BIT, GROUND_BIT, OBSTACLE_BIT = 1, 2, 4
+FLOOR_Z_M = -0.4  # the arm stands on a pedestal: UR arms hang below their base plane at q = 0
+_COLOURS = ("0.3 0.5 0.8 1", "0.8 0.8 0.8 1", "0.3 0.5 0.8 1", "0.8 0.8 0.8 1", "0.3 0.5 0.8 1")
+
+
+@dataclass(frozen=True)
+class Box:
+    """An axis-aligned box obstacle in the robot base frame.
+
+    Attributes:
+        name: geom name.
+        center: centre [m].
+        half_size: half extents [m].
+    """
+
+    name: str
+    center: tuple[float, float, float]
+    half_size: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class PlantOptions:
+    """How the simulated plant differs from the nominal model (all zero = identical).
+
+    Attributes:
+        damping: joint viscous damping per joint [N m s/rad].
+        frictionloss: joint Coulomb friction per joint [N m].
+        armature: rotor armature (reflected inertia) per joint [kg m^2].
+        payload_kg: point-like mass at the flange [kg].
+    """
+
+    damping: tuple[float, ...] = ()
+    frictionloss: tuple[float, ...] = ()
+    armature: tuple[float, ...] = ()
+    payload_kg: float = 0.0
+
+
+def _v(xs: Sequence[float] | np.ndarray) -> str:
+    return " ".join(repr(float(x)) for x in xs)
+
+
+def _per_joint(values: tuple[float, ...], dof: int, what: str) -> list[float]:
+    if not values:
+        return [0.0] * dof
+    if len(values) == 1:
+        return [values[0]] * dof
+    if len(values) != dof:
+        raise ModelError(f"plant.{what}: expected 1 or {dof} values, got {len(values)}")
+    return list(values)
+
+
+def build_mjcf(
+    spec: RobotSpec,
+    *,
+    timestep_s: float = 0.001,
+    plant: PlantOptions | None = None,
+    obstacles: Sequence[Box] = (),
+    excluded_pairs: Sequence[tuple[str, str]] | None = None,
+) -> str:
+    """MJCF text for the robot on a pedestal, floor at ``FLOOR_Z_M``.
+
+    Link pairs that touch in the zero pose (e.g. the two links either side of
+    a spherical wrist) are excluded from collision, as MoveIt Setup
+    Assistant disables "default" collisions; pass ``excluded_pairs`` to
+    override.
+
+    A kinematics-only robot gets geometry-derived inertias (density 1000)
+    so the model still compiles and steps; simulation code calls
+    ``spec.require_dynamics`` first and refuses it.
+    """
+    plant = plant or PlantOptions()
+    links = chain(spec)
+    damping = _per_joint(plant.damping, spec.dof, "damping")
+    friction = _per_joint(plant.frictionloss, spec.dof, "frictionloss")
+    armature = _per_joint(plant.armature, spec.dof, "armature")
+    out = [
+        f"<mujoco model={quoteattr(spec.name)}>",
+        '  <compiler angle="radian" autolimits="true" inertiafromgeom="auto"/>',
+        f'  <option timestep="{timestep_s!r}" integrator="Euler"/>',
+        '  <visual><global offwidth="1280" offheight="960"/></visual>',
+        "  <worldbody>",
+        f'    <geom name="ground" type="plane" pos="0 0 {FLOOR_Z_M!r}" size="3 3 0.05" '
+        f'rgba="0.9 0.9 0.9 1" contype="{GROUND_BIT}" conaffinity="0"/>',
+        f'    <geom name="pedestal" type="cylinder" fromto="0 0 {FLOOR_Z_M!r} 0 0 -0.02" '
+        f'size="0.08" rgba="0.4 0.4 0.4 1" contype="{GROUND_BIT}" conaffinity="0"/>',
+    ]
+    for box in obstacles:
+        out.append(
+            f'    <geom name={quoteattr(box.name)} type="box" pos="{_v(box.center)}" '
+            f'size="{_v(box.half_size)}" rgba="0.8 0.3 0.3 0.6" contype="{OBSTACLE_BIT}" '
+            'conaffinity="0"/>'
+        )
+    out.append(f'    <body name="{BASE_LINK}">')
+    indent = "    "
+    for i, (joint, link) in enumerate(zip(spec.joints, links, strict=True)):
+        indent += "  "
+        rel = link.pre @ link.post
+        quat = tf.quat_wxyz(rel[:3, :3])
+        inv_post = tf.inverse(link.post)
+        axis = inv_post[:3, :3] @ np.array([0.0, 0.0, 1.0])
+        anchor = inv_post[:3, 3]
+        lim = joint.limits
+        out.append(
+            f'{indent}<body name="{link_name(joint.name)}" '
+            f'pos="{_v(rel[:3, 3])}" quat="{_v(quat)}">'
+        )
+        out.append(
+            f'{indent}  <joint name={quoteattr(joint.name)} type="hinge" pos="{_v(anchor)}" '
+            f'axis="{_v(axis)}" range="{lim.lower!r} {lim.upper!r}" '
+            f'damping="{damping[i]!r}" frictionloss="{friction[i]!r}" armature="{armature[i]!r}"/>'
+        )
+        if joint.inertial is not None:
+            inn = joint.inertial
+            t = inn.inertia
+            full = (t[0][0], t[1][1], t[2][2], t[0][1], t[0][2], t[1][2])
+            out.append(
+                f'{indent}  <inertial pos="{_v(inn.com)}" mass="{inn.mass!r}" '
+                f'fullinertia="{_v(full)}"/>'
+            )
+        affinity = ROBOT_BIT | OBSTACLE_BIT | (GROUND_BIT if i > 0 else 0)
+        rgba = _COLOURS[i % len(_COLOURS)]
+        for k, seg in enumerate(link.segments_dh):
+            out.append(
+                f'{indent}  <geom name="{link_name(joint.name)}_c{k}" type="capsule" '
+                f'fromto="{_v(seg.start + seg.end)}" size="{seg.radius!r}" rgba="{rgba}" '
+                f'contype="{ROBOT_BIT}" conaffinity="{affinity}"/>'
+            )
+        if not link.segments_dh:
+            out.append(
+                f'{indent}  <geom name="{link_name(joint.name)}_c0" type="sphere" '
+                f'size="{joint.collision_radius!r}" rgba="{rgba}" contype="{ROBOT_BIT}" '
+                f'conaffinity="{affinity}"/>'
+            )
+    out.append(f'{indent}  <site name="{FLANGE}" pos="0 0 0" size="0.01" rgba="1 0.5 0 1"/>')
+    if plant.payload_kg > 0:
+        # a small dense sphere: its own inertia is negligible against the arm's
+        r = 0.02
+        i_sph = 0.4 * plant.payload_kg * r * r
+        out.append(
+            f'{indent}  <body name="payload"><inertial pos="0 0 0" mass="{plant.payload_kg!r}" '
+            f'diaginertia="{i_sph!r} {i_sph!r} {i_sph!r}"/></body>'
+        )
+    for _ in spec.joints:
+        out.append(f"{indent}</body>")
+        indent = indent[:-2]
+    out.append("    </body>")
+    out.append("  </worldbody>")
+    pairs = default_collision_pairs(spec) if excluded_pairs is None else excluded_pairs
+    if pairs:
+        out.append("  <contact>")
+        out.extend(f'    <exclude body1="{a}" body2="{b}"/>' for a, b in pairs)
+        out.append("  </contact>")
+    out.append("  <actuator>")
+    for joint in spec.joints:
+        e = joint.limits.effort
+        out.append(
+            f"    <motor name={quoteattr(joint.name + '_motor')} joint={quoteattr(joint.name)} "
+            f'ctrlrange="{-e!r} {e!r}" gear="1"/>'
+        )
+    out.append("  </actuator>")
+    out.append("</mujoco>")
+    return "\n".join(out) + "\n"
+
+
+@functools.lru_cache(maxsize=32)
+def default_collision_pairs(spec: RobotSpec) -> tuple[tuple[str, str], ...]:
+    """Robot link pairs in contact at q = 0 (always-touching geometry, not a real collision)."""
+    model = mujoco.MjModel.from_xml_string(build_mjcf(spec, excluded_pairs=()))
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    pairs = set()
+    for c in data.contact[: data.ncon]:
+        b1, b2 = model.geom_bodyid[c.geom1], model.geom_bodyid[c.geom2]
+        if b1 > 0 and b2 > 0 and model.body_parentid[b1] != 0 and model.body_parentid[b2] != 0:
+            names = sorted((model.body(b1).name, model.body(b2).name))
+            if BASE_LINK not in names:
+                pairs.add((names[0], names[1]))
+    return tuple(sorted(pairs))
+
+
+def build_mujoco_model(
+    spec: RobotSpec,
+    *,
+    timestep_s: float = 0.001,
+    plant: PlantOptions | None = None,
+    obstacles: Sequence[Box] = (),
+) -> mujoco.MjModel:
+    """Compile the spec into an ``MjModel`` with auto-reset on divergence disabled."""
+    xml = build_mjcf(spec, timestep_s=timestep_s, plant=plant, obstacles=obstacles)
+    try:
+        model = mujoco.MjModel.from_xml_string(xml)
+    except ValueError as err:
+        raise ModelError(f"{spec.source}: MuJoCo rejected the generated model: {err}") from err
+    model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
+    return model

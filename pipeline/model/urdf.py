@@ -1,0 +1,103 @@
+"""Robot spec -> URDF text and a Pinocchio model built from it.
+
+URDF link i's frame is the frame right after joint i's rotation (DH frame
+i-1 composed with ``pre_i @ Rz(q_i)``); the DH frame i is ``post_i`` further.
+That keeps every revolute joint about its own z axis, as URDF wants, for both
+DH conventions. ``tool0`` is the DH flange frame.
+"""
+
+from __future__ import annotations
+
+import math
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from pipeline.errors import ModelError
+from pipeline.model import transforms as tf
+from pipeline.model.chain import BASE_LINK, FLANGE, chain, link_name
+from pipeline.robots.spec import RobotSpec
+
+
+def _v(xs: NDArray[np.float64] | tuple[float, ...]) -> str:
+    return " ".join(repr(float(x)) for x in xs)
+
+
+def _origin(t: NDArray[np.float64]) -> str:
+    return f'<origin xyz="{_v(t[:3, 3])}" rpy="{_v(np.array(tf.rpy(t[:3, :3])))}"/>'
+
+
+def _cylinder_between(
+    a: NDArray[np.float64], b: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], float]:
+    """Origin (z along a->b, at the midpoint) and length of a cylinder joining a and b."""
+    d = b - a
+    length = float(np.linalg.norm(d))
+    z = d / length
+    helper = np.array([1.0, 0, 0]) if abs(z[0]) < 0.9 else np.array([0, 1.0, 0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    t = np.eye(4)
+    t[:3, :3] = np.column_stack([x, y, z])
+    t[:3, 3] = (a + b) / 2
+    return t, length
+
+
+def build_urdf(spec: RobotSpec) -> str:
+    """URDF text of the robot (inertials, visual + collision cylinders, ``tool0``)."""
+    links = chain(spec)
+    out = [f'<?xml version="1.0"?>\n<robot name={quoteattr(spec.name)}>']
+    out.append(f'  <link name="{BASE_LINK}"/>')
+    parent = BASE_LINK
+    prev_post = np.eye(4)
+    for joint, link in zip(spec.joints, links, strict=True):
+        name = link_name(joint.name)
+        out.append(f'  <link name="{name}">')
+        if joint.inertial is not None:
+            inn = joint.inertial
+            # inertial frame: DH frame i (post) shifted to the centre of mass
+            frame = link.post @ tf.trans(*inn.com)
+            t = inn.inertia
+            out.append(
+                f'    <inertial>{_origin(frame)}<mass value="{inn.mass!r}"/>'
+                f'<inertia ixx="{t[0][0]!r}" ixy="{t[0][1]!r}" ixz="{t[0][2]!r}" '
+                f'iyy="{t[1][1]!r}" iyz="{t[1][2]!r}" izz="{t[2][2]!r}"/></inertial>'
+            )
+        for seg in link.segments_dh:
+            a = (link.post @ np.append(seg.start, 1.0))[:3]
+            b = (link.post @ np.append(seg.end, 1.0))[:3]
+            origin, length = _cylinder_between(a, b)
+            geom = f'<geometry><cylinder radius="{seg.radius!r}" length="{length!r}"/></geometry>'
+            out.append(f"    <visual>{_origin(origin)}{geom}</visual>")
+            out.append(f"    <collision>{_origin(origin)}{geom}</collision>")
+        out.append("  </link>")
+        lim = joint.limits
+        out.append(
+            f'  <joint name={quoteattr(joint.name)} type="revolute">'
+            f'<parent link="{parent}"/><child link="{name}"/>{_origin(prev_post @ link.pre)}'
+            f'<axis xyz="0 0 1"/><limit lower="{lim.lower!r}" upper="{lim.upper!r}" '
+            f'effort="{lim.effort!r}" velocity="{lim.velocity!r}"/></joint>'
+        )
+        parent = name
+        prev_post = link.post
+    out.append(f'  <link name="{FLANGE}"/>')
+    out.append(
+        f'  <joint name="{FLANGE}_fixed_joint" type="fixed"><parent link="{parent}"/>'
+        f'<child link="{FLANGE}"/>{_origin(prev_post)}</joint>'
+    )
+    out.append("</robot>")
+    return "\n".join(out) + "\n"
+
+
+def build_pinocchio_model(spec: RobotSpec) -> pin.Model:
+    """Pinocchio model from the URDF text (gravity -9.81 z, frame ``tool0``)."""
+    try:
+        model = pin.buildModelFromXML(build_urdf(spec))
+    except (RuntimeError, ValueError) as err:
+        raise ModelError(f"{spec.source}: Pinocchio rejected the generated URDF: {err}") from err
+    if not math.isclose(model.gravity.linear[2], -9.81):
+        model.gravity.linear[:] = (0.0, 0.0, -9.81)
+    return model

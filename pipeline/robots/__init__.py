@@ -1,0 +1,25 @@
+"""Robot descriptions (YAML package data) and the spec loader."""
+
+from __future__ import annotations
+
+from pipeline.robots.spec import (
+    DHRow,
+    Inertial,
+    JointLimits,
+    JointSpec,
+    RobotSpec,
+    builtin_robot_names,
+    load_spec,
+    parse_spec,
+)
+
+__all__ = [
+    "DHRow",
+    "Inertial",
+    "JointLimits",
+    "JointSpec",
+    "RobotSpec",
+    "builtin_robot_names",
+    "load_spec",
+    "parse_spec",
+]

@@ -1,0 +1,319 @@
+"""Robot descriptions: YAML files validated once at the edge into frozen dataclasses.
+
+A robot is data: one YAML file per robot, shipped in this folder (load by name,
+``load_spec("ur5")``) or anywhere on disk (load by path). Inside the package
+everything is radians, metres, kilograms and newton-metres.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from pipeline.errors import SpecError
+
+Convention = Literal["standard", "modified"]
+
+
+@dataclass(frozen=True)
+class DHRow:
+    """One DH row. Standard: ``[alpha_i, a_i, d_i, theta_offset_i]``; modified
+    (Craig): ``[alpha_{i-1}, a_{i-1}, d_i, theta_offset_i]``.
+
+    Attributes:
+        alpha: link twist [rad].
+        a: link length [m].
+        d: link offset [m].
+        theta_offset: joint zero offset [rad], added to the joint variable.
+    """
+
+    alpha: float
+    a: float
+    d: float
+    theta_offset: float
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Joint limits: position [rad], velocity [rad/s], acceleration [rad/s^2], effort [N m]."""
+
+    lower: float
+    upper: float
+    velocity: float
+    acceleration: float
+    effort: float
+
+
+@dataclass(frozen=True)
+class Inertial:
+    """Rigid-body inertia of the link moved by a joint, in that link's DH frame.
+
+    Attributes:
+        mass: [kg].
+        com: centre of mass in DH frame i [m].
+        inertia: 3x3 inertia tensor about the centre of mass, DH-frame axes [kg m^2].
+    """
+
+    mass: float
+    com: tuple[float, float, float]
+    inertia: tuple[tuple[float, float, float], ...]
+
+
+@dataclass(frozen=True)
+class JointSpec:
+    """One revolute joint and the link it moves."""
+
+    name: str
+    dh: DHRow
+    limits: JointLimits
+    inertial: Inertial | None
+    collision_radius: float
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """A serial revolute arm: the single source for FK, MuJoCo, URDF and Pinocchio."""
+
+    name: str
+    convention: Convention
+    joints: tuple[JointSpec, ...]
+    source: str
+
+    @property
+    def dof(self) -> int:
+        return len(self.joints)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(j.name for j in self.joints)
+
+    @property
+    def has_dynamics(self) -> bool:
+        return all(j.inertial is not None for j in self.joints)
+
+    @property
+    def lower(self) -> np.ndarray:
+        return np.array([j.limits.lower for j in self.joints])
+
+    @property
+    def upper(self) -> np.ndarray:
+        return np.array([j.limits.upper for j in self.joints])
+
+    @property
+    def velocity_limits(self) -> np.ndarray:
+        return np.array([j.limits.velocity for j in self.joints])
+
+    @property
+    def acceleration_limits(self) -> np.ndarray:
+        return np.array([j.limits.acceleration for j in self.joints])
+
+    @property
+    def effort_limits(self) -> np.ndarray:
+        return np.array([j.limits.effort for j in self.joints])
+
+    def require_dynamics(self, what: str) -> None:
+        """Raise a clear error if ``what`` needs link inertias this robot lacks."""
+        if not self.has_dynamics:
+            missing = [j.name for j in self.joints if j.inertial is None]
+            raise SpecError(
+                f"{self.source}: robot '{self.name}' is kinematics-only (no `inertial` for "
+                f"{', '.join(missing)}); {what} needs link dynamics: add mass, com and inertia "
+                "per joint to the YAML"
+            )
+
+
+# --- the YAML edge -----------------------------------------------------------------
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=False, allow_inf_nan=False)
+
+
+class _Limits(_Strict):
+    lower: float
+    upper: float
+    velocity: float = Field(gt=0, allow_inf_nan=False)
+    acceleration: float = Field(gt=0, allow_inf_nan=False)
+    effort: float = Field(gt=0, allow_inf_nan=False)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> _Limits:
+        if not self.lower < self.upper:
+            raise ValueError(f"lower ({self.lower}) must be < upper ({self.upper})")
+        return self
+
+
+class _Inertial(_Strict):
+    mass: float = Field(gt=0, allow_inf_nan=False)
+    com: tuple[float, float, float]
+    inertia: tuple[float, float, float, float, float, float] = Field(
+        description="[ixx, iyy, izz, ixy, ixz, iyz] about the centre of mass [kg m^2]"
+    )
+
+    @field_validator("inertia")
+    @classmethod
+    def _physical(
+        cls, v: tuple[float, float, float, float, float, float]
+    ) -> tuple[float, float, float, float, float, float]:
+        ixx, iyy, izz, ixy, ixz, iyz = v
+        tensor = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+        eig = np.linalg.eigvalsh(tensor)
+        if eig[0] <= 0:
+            raise ValueError(
+                f"inertia tensor must be positive definite (eigenvalues {eig.round(9).tolist()})"
+            )
+        a, b, c = eig
+        if a + b < c * (1 - 1e-9):
+            raise ValueError(
+                "principal moments violate the triangle inequality "
+                f"({a:.6g} + {b:.6g} < {c:.6g}): no rigid body has this inertia"
+            )
+        return v
+
+
+class _Collision(_Strict):
+    radius: float = Field(gt=0, allow_inf_nan=False)
+
+
+class _Joint(_Strict):
+    name: str = Field(min_length=1)
+    dh: tuple[float, float, float, float]
+    limits: _Limits
+    inertial: _Inertial | None = None
+    collision: _Collision = _Collision(radius=0.04)
+
+
+class _Robot(_Strict):
+    name: str = Field(min_length=1)
+    convention: Convention
+    angle_unit: Literal["rad", "deg"] = "rad"
+    joints: list[_Joint] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _unique_names(self) -> _Robot:
+        seen: set[str] = set()
+        for i, j in enumerate(self.joints):
+            if j.name in seen:
+                raise ValueError(f"joints[{i}].name: duplicate joint name '{j.name}'")
+            seen.add(j.name)
+        return self
+
+
+def _field_path(loc: tuple[int | str, ...]) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif part in ("function-after", "tagged-union") or "[" in str(part):
+            continue
+        else:
+            out += ("." if out else "") + str(part)
+    return out
+
+
+def format_validation_error(source: str, err: ValidationError) -> str:
+    """Turn pydantic's error into one line: ``file: field.path: what was wrong``."""
+    first = err.errors()[0]
+    path = _field_path(tuple(first["loc"]))
+    msg = first["msg"].removeprefix("Value error, ")
+    given = first.get("input")
+    shown = "" if isinstance(given, dict | list) or given is None else f" (got {given!r})"
+    where = f"{path}: " if path else ""
+    more = f" (+{err.error_count() - 1} more)" if err.error_count() > 1 else ""
+    return f"{source}: {where}{msg}{shown}{more}"
+
+
+def _to_spec(raw: _Robot, source: str) -> RobotSpec:
+    k = math.pi / 180.0 if raw.angle_unit == "deg" else 1.0
+    joints = []
+    for j in raw.joints:
+        alpha, a, d, off = j.dh
+        lim = j.limits
+        inertial = None
+        if j.inertial is not None:
+            ixx, iyy, izz, ixy, ixz, iyz = j.inertial.inertia
+            inertial = Inertial(
+                mass=j.inertial.mass,
+                com=j.inertial.com,
+                inertia=((ixx, ixy, ixz), (ixy, iyy, iyz), (ixz, iyz, izz)),
+            )
+        joints.append(
+            JointSpec(
+                name=j.name,
+                dh=DHRow(alpha=alpha * k, a=a, d=d, theta_offset=off * k),
+                limits=JointLimits(
+                    lower=lim.lower * k,
+                    upper=lim.upper * k,
+                    velocity=lim.velocity * k,
+                    acceleration=lim.acceleration * k,
+                    effort=lim.effort,
+                ),
+                inertial=inertial,
+                collision_radius=j.collision.radius,
+            )
+        )
+    return RobotSpec(name=raw.name, convention=raw.convention, joints=tuple(joints), source=source)
+
+
+def parse_spec(data: Any, *, source: str) -> RobotSpec:
+    """Validate already-parsed YAML data into a :class:`RobotSpec`."""
+    if not isinstance(data, dict):
+        raise SpecError(f"{source}: expected a mapping with name, convention and joints")
+    try:
+        raw = _Robot.model_validate(data)
+    except ValidationError as err:
+        raise SpecError(format_validation_error(source, err)) from err
+    return _to_spec(raw, source)
+
+
+def builtin_robot_names() -> list[str]:
+    """Names of the robots shipped inside the package."""
+    folder = resources.files("pipeline.robots")
+    return sorted(
+        p.name.removesuffix(".yaml") for p in folder.iterdir() if p.name.endswith(".yaml")
+    )
+
+
+def load_spec(name_or_path: str | Path) -> RobotSpec:
+    """Load a robot by built-in name (``"ur5"``) or by path to a YAML file.
+
+    Raises:
+        SpecError: unknown name (lists the available ones), unreadable file or
+            invalid content (names the file and field path).
+    """
+    text = str(name_or_path)
+    path = Path(text)
+    if path.suffix in (".yaml", ".yml") or path.exists() or "/" in text:
+        if not path.is_file():
+            raise SpecError(f"{text}: no such robot file")
+        source = str(path)
+        try:
+            content = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as err:
+            raise SpecError(f"{source}: cannot read robot file ({err})") from err
+    else:
+        names = builtin_robot_names()
+        if text not in names:
+            close = difflib.get_close_matches(text, names, n=1)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            raise SpecError(
+                f"unknown robot '{text}'. Available: {', '.join(names)}{hint} "
+                "(or pass a path to a YAML file)"
+            )
+        source = f"robots/{text}.yaml"
+        content = (resources.files("pipeline.robots") / f"{text}.yaml").read_text(encoding="utf-8")
+    try:
+        data = yaml.safe_load(content)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise SpecError(f"{source}: not valid YAML{where}") from err
+    return parse_spec(data, source=source)
