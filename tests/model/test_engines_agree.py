@@ -114,3 +114,15 @@ def test_urdf_carries_names_limits_and_flange(ur5):
         assert f'name="{name}"' in urdf
     assert '<link name="tool0"/>' in urdf
     assert 'effort="28.0"' in urdf
+
+
+def test_tf_tree_composes_to_the_dh_flange(any_robot):
+    from pipeline.model.frames import tf_edges
+
+    rng = np.random.default_rng(4)
+    for _ in range(10):
+        q = _random_q(any_robot, rng)
+        pose = np.eye(4)
+        for edge in tf_edges(any_robot, q):
+            pose = pose @ edge.parent_T_child
+        assert np.abs(pose - forward_kinematics(any_robot, q)).max() <= 1e-9
