@@ -66,3 +66,18 @@ class EpisodeResult:
     @property
     def ok(self) -> bool:
         return self.status == "ok"
+
+
+@dataclass(frozen=True)
+class TrajectorySamples:
+    """A time-parameterized trajectory sampled at known instants (for logging).
+
+    Attributes:
+        times_s: (K,) time from the trajectory start [s].
+        positions, velocities, accelerations: (K, n) [rad], [rad/s], [rad/s^2].
+    """
+
+    times_s: F64
+    positions: F64
+    velocities: F64
+    accelerations: F64
