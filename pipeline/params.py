@@ -1,0 +1,231 @@
+"""``params.yaml``: scenarios, controllers and episodes, validated once at the edge.
+
+An episode is scenario x controller x seed, keyed by a name (``paper-ctc``) that
+is also its recording directory and its DVC stage (``record@paper-ctc``). Field paths in errors match the YAML
+(``params.yaml: scenarios.paper.goal.joints: expected 6 values, got 5``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import re
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from pipeline.errors import ParamsError
+from pipeline.robots.spec import format_validation_error
+
+GainValue = float | list[float]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class PoseGoal(_Strict):
+    """A Cartesian flange goal, turned into joints by IK (solution nearest the start)."""
+
+    position: tuple[float, float, float]
+    quaternion_wxyz: tuple[float, float, float, float] | None = None
+    rpy: tuple[float, float, float] | None = None
+    solver: str = "analytic"
+
+    @model_validator(mode="after")
+    def _one_orientation(self) -> PoseGoal:
+        if (self.quaternion_wxyz is None) == (self.rpy is None):
+            raise ValueError("give exactly one of quaternion_wxyz or rpy")
+        return self
+
+
+class Goal(_Strict):
+    joints: list[float] | None = None
+    pose: PoseGoal | None = None
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> Goal:
+        if (self.joints is None) == (self.pose is None):
+            raise ValueError("give exactly one of joints or pose")
+        return self
+
+
+class BoxParams(_Strict):
+    name: str = Field(min_length=1)
+    center: tuple[float, float, float]
+    half_size: tuple[float, float, float]
+
+    @model_validator(mode="after")
+    def _positive(self) -> BoxParams:
+        if min(self.half_size) <= 0:
+            raise ValueError(f"half_size must be > 0 on every axis, got {list(self.half_size)}")
+        return self
+
+
+class PlannerParams(_Strict):
+    time_limit_s: float = Field(default=5.0, gt=0)
+    simplify: bool = True
+    seed: int = Field(default=0, ge=0)
+
+
+class TimingParams(_Strict):
+    velocity_scaling: float = Field(default=1.0, gt=0, le=1)
+    acceleration_scaling: float = Field(default=1.0, gt=0, le=1)
+
+
+class PlantParams(_Strict):
+    """How the simulated plant differs from the nominal model (zero = identical)."""
+
+    damping: GainValue = 0.0
+    frictionloss: GainValue = 0.0
+    armature: GainValue = 0.0
+    payload_kg: float = Field(default=0.0, ge=0)
+    position_noise_std_rad: float = Field(default=0.0, ge=0)
+    velocity_noise_std_rad_s: float = Field(default=0.0, ge=0)
+
+
+class ScenarioParams(_Strict):
+    robot: str = Field(min_length=1)
+    start: list[float]
+    goal: Goal
+    obstacles: list[BoxParams] = []
+    planner: PlannerParams = PlannerParams()
+    timing: TimingParams = TimingParams()
+    plant: PlantParams = PlantParams()
+    hold_s: float = Field(default=1.0, ge=0)
+
+
+class ControllerParams(_Strict):
+    type: str = Field(min_length=1)
+    gains: dict[str, GainValue] = {}
+
+
+class EpisodeParams(_Strict):
+    scenario: str
+    controller: str
+    seed: int = Field(default=0, ge=0)
+
+
+class SimParams(_Strict):
+    physics_dt_s: float = Field(default=0.001, gt=0, le=0.01)
+    control_period_steps: int = Field(default=1, ge=1)
+    joint_state_decimation: int = Field(default=1, ge=1)
+    tf_rate_hz: float = Field(default=50.0, gt=0)
+
+
+class _Params(_Strict):
+    sim: SimParams = SimParams()
+    scenarios: dict[str, ScenarioParams] = Field(min_length=1)
+    controllers: dict[str, ControllerParams] = Field(min_length=1)
+    episodes: dict[str, EpisodeParams] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _references(self) -> _Params:
+        for name, ep in self.episodes.items():
+            if not _NAME.fullmatch(name):
+                raise ValueError(
+                    f"episodes.{name}: episode names are directory names: use letters, "
+                    "digits, '-', '_' and '.' only"
+                )
+            if ep.scenario not in self.scenarios:
+                raise ValueError(
+                    f"episodes.{name}.scenario: unknown scenario '{ep.scenario}' "
+                    f"(defined: {', '.join(sorted(self.scenarios))})"
+                )
+            if ep.controller not in self.controllers:
+                raise ValueError(
+                    f"episodes.{name}.controller: unknown controller '{ep.controller}' "
+                    f"(defined: {', '.join(sorted(self.controllers))})"
+                )
+        return self
+
+
+_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One episode to run, with everything it reads from params."""
+
+    name: str
+    scenario_name: str
+    scenario: ScenarioParams
+    controller_name: str
+    controller: ControllerParams
+    seed: int
+    sim: SimParams
+
+
+@dataclass(frozen=True)
+class Params:
+    """Validated ``params.yaml``."""
+
+    source: str
+    sim: SimParams
+    scenarios: Mapping[str, ScenarioParams]
+    controllers: Mapping[str, ControllerParams]
+    episodes: tuple[Episode, ...] = field(default_factory=tuple)
+
+    def select(self, only: list[str] | None) -> tuple[Episode, ...]:
+        """Episodes named in ``only`` (all when empty); unknown names are an error."""
+        if not only:
+            return self.episodes
+        known = {e.name: e for e in self.episodes}
+        missing = [n for n in only if n not in known]
+        if missing:
+            raise ParamsError(
+                f"{self.source}: unknown episode '{missing[0]}' (episodes: {', '.join(known)})"
+            )
+        return tuple(known[n] for n in only)
+
+
+def parse_params(data: Any, *, source: str) -> Params:
+    """Validate parsed YAML into :class:`Params`."""
+    if not isinstance(data, dict):
+        raise ParamsError(f"{source}: expected a mapping with scenarios, controllers, episodes")
+    try:
+        raw = _Params.model_validate(data)
+    except ValidationError as err:
+        raise ParamsError(format_validation_error(source, err)) from err
+    episodes = tuple(
+        Episode(
+            name=name,
+            scenario_name=e.scenario,
+            scenario=raw.scenarios[e.scenario],
+            controller_name=e.controller,
+            controller=raw.controllers[e.controller],
+            seed=e.seed,
+            sim=raw.sim,
+        )
+        for name, e in raw.episodes.items()
+    )
+    return Params(
+        source=source,
+        sim=raw.sim,
+        scenarios=raw.scenarios,
+        controllers=raw.controllers,
+        episodes=episodes,
+    )
+
+
+def load_params(path: str | Path) -> Params:
+    """Read and validate a params file.
+
+    Raises:
+        ParamsError: missing file, bad YAML, or invalid content (names the field).
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise ParamsError(f"{p}: no such params file (pass --params PATH)")
+    try:
+        data = yaml.safe_load(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as err:
+        raise ParamsError(f"{p}: cannot read params file ({err})") from err
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        raise ParamsError(f"{p}: not valid YAML{where}") from err
+    return parse_params(data, source=str(p))

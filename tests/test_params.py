@@ -1,0 +1,91 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from pipeline.errors import ParamsError
+from pipeline.params import load_params
+
+REPO = Path(__file__).parents[1]
+
+
+def _default() -> dict:
+    return yaml.safe_load((REPO / "params.yaml").read_text())
+
+
+def _write(tmp_path: Path, data: object) -> Path:
+    path = tmp_path / "params.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_default_params_hold_the_papers_scenario_under_pid_and_ctc():
+    params = load_params(REPO / "params.yaml")
+    assert [e.name for e in params.episodes] == ["paper-pid", "paper-ctc"]
+    paper = params.scenarios["paper"]
+    assert paper.robot == "ur5"
+    assert paper.start == [0.0] * 6
+    assert paper.goal.joints == [-0.15, -0.5, 0.785, -1.15, -0.3925, 0.0]
+    assert {e.controller.type for e in params.episodes} == {"pid", "ctc"}
+
+
+@pytest.mark.parametrize(
+    ("mutate", "expected"),
+    [
+        (
+            lambda d: d["episodes"]["paper-ctc"].update(controller="lqr"),
+            r"episodes\.paper-ctc\.controller: unknown controller 'lqr' \(defined: ctc, pid\)",
+        ),
+        (
+            lambda d: d["episodes"]["paper-ctc"].update(scenario="nope"),
+            r"episodes\.paper-ctc\.scenario: unknown scenario 'nope'",
+        ),
+        (
+            lambda d: d["scenarios"]["paper"]["timing"].update(velocity_scaling=1.5),
+            r"scenarios\.paper\.timing\.velocity_scaling: .*less than or equal to 1",
+        ),
+        (
+            lambda d: d["scenarios"]["paper"]["plant"].update(payload_kg=-1),
+            r"scenarios\.paper\.plant\.payload_kg: .*greater than or equal to 0",
+        ),
+        (
+            lambda d: d["scenarios"]["paper"]["goal"].update(
+                pose={"position": [0.3, 0.1, 0.4], "rpy": [0, 0, 0]}
+            ),
+            r"scenarios\.paper\.goal: .*exactly one of joints or pose",
+        ),
+        (
+            lambda d: d["scenarios"]["paper"].update(hold="1s"),
+            r"scenarios\.paper\.hold: Extra inputs are not permitted",
+        ),
+        (lambda d: d["sim"].update(physics_dt_s=0.0), r"sim\.physics_dt_s: .*greater than 0"),
+        (
+            lambda d: d["episodes"].update(
+                {"bad/name": {"scenario": "paper", "controller": "pid"}}
+            ),
+            r"episode names are directory names",
+        ),
+    ],
+)
+def test_bad_params_name_the_field(tmp_path, mutate, expected):
+    data = _default()
+    mutate(data)
+    path = _write(tmp_path, data)
+    with pytest.raises(ParamsError, match=expected) as err:
+        load_params(path)
+    assert str(err.value).startswith(f"{path}: ")
+
+
+def test_unknown_only_episode_lists_the_known_ones():
+    params = load_params(REPO / "params.yaml")
+    with pytest.raises(
+        ParamsError, match=r"unknown episode 'paper-lqr' \(episodes: paper-pid, paper-ctc\)"
+    ):
+        params.select(["paper-lqr"])
+
+
+def test_missing_params_file_says_how_to_fix(tmp_path):
+    with pytest.raises(ParamsError, match=r"no such params file \(pass --params PATH\)"):
+        load_params(tmp_path / "nope.yaml")
