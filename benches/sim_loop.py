@@ -1,0 +1,114 @@
+"""Benchmark: the episode loop's cost per physics step against the physics floor.
+
+The floor is a bare loop of ``mj_step`` plus one Pinocchio RNEA call per step
+on the same plant, the least any Python loop running a model-based controller
+can cost. Every ``run_episode`` call is timed whole (model build, reference
+sampling, noise, result assembly included) and divided by its physics steps.
+Best of ``repeats`` runs, interleaved, so other load on the machine hits both.
+
+Run: ``python benches/sim_loop.py [--robot ur5] [--seconds 10] [--repeats 3]``;
+prints one JSON object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from typing import Any
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+
+from pipeline.control import make_controller
+from pipeline.model.mjcf import build_mujoco_model
+from pipeline.model.urdf import build_pinocchio_model
+from pipeline.robots import load_spec
+from pipeline.robots.spec import RobotSpec
+from pipeline.sim.references import PAPER_GOAL_RAD, PAPER_START_RAD, QuinticReference
+from pipeline.sim.runner import run_episode
+
+
+def physics_floor_s(spec: RobotSpec, *, steps: int, physics_dt_s: float = 0.001) -> float:
+    """Wall time [s] of ``steps`` x (mj_step + pin.rnea) on the nominal plant, at rest start."""
+    model = build_mujoco_model(spec, timestep_s=physics_dt_s)
+    data = mujoco.MjData(model)
+    pmodel = build_pinocchio_model(spec)
+    pdata = pmodel.createData()
+    zeros = np.zeros(spec.dof)
+    step, rnea = mujoco.mj_step, pin.rnea
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        step(model, data)
+        rnea(pmodel, pdata, data.qpos, data.qvel, zeros)
+    return time.perf_counter() - t0
+
+
+def measure(
+    robot: str = "ur5", *, seconds: float = 10.0, repeats: int = 3, motion_s: float = 2.0
+) -> dict[str, Any]:
+    """Floor and per-controller episode cost [us per physics step] (best of ``repeats``)."""
+    spec = load_spec(robot)
+    start = PAPER_START_RAD[: spec.dof]
+    goal = PAPER_GOAL_RAD[: spec.dof]
+    reference = QuinticReference.between(start, goal, duration_s=motion_s)
+    hold_s = seconds - motion_s
+    cases: dict[str, dict[str, Any]] = {
+        "ctc": {"controller": "ctc"},
+        "pid": {"controller": "pid"},
+        "pd_gravity": {"controller": "pd_gravity"},
+        "ctc_noisy": {"controller": "ctc", "noise": True},
+        "ctc_period_5": {"controller": "ctc", "period": 5},
+    }
+    best: dict[str, float] = {"floor": float("inf"), **{k: float("inf") for k in cases}}
+    steps = round(seconds / 0.001)
+    for _ in range(repeats):
+        best["floor"] = min(best["floor"], physics_floor_s(spec, steps=steps))
+        for key, case in cases.items():
+            controller = make_controller(case["controller"], spec)
+            noise = 1e-4 if case.get("noise") else 0.0
+            t0 = time.perf_counter()
+            result = run_episode(
+                spec,
+                reference=reference,
+                controller=controller,
+                seed=0,
+                hold_s=hold_s,
+                control_period_steps=case.get("period", 1),
+                position_noise_std_rad=noise,
+                velocity_noise_std_rad_s=noise,
+            )
+            best[key] = min(best[key], time.perf_counter() - t0)
+            if not result.ok:
+                raise RuntimeError(f"{key}: {result.reason}")
+    floor_us = best["floor"] / steps * 1e6
+    return {
+        "robot": robot,
+        "physics_steps": steps,
+        "physics_dt_s": 0.001,
+        "floor_us_per_step": round(floor_us, 3),
+        "episodes": {
+            key: {
+                "us_per_step": round(best[key] / steps * 1e6, 3),
+                "ratio_to_floor": round(best[key] / best["floor"], 3),
+            }
+            for key in cases
+        },
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    parser.add_argument("--robot", default="ur5")
+    parser.add_argument("--seconds", type=float, default=10.0)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args(argv)
+    out = measure(args.robot, seconds=args.seconds, repeats=args.repeats)
+    sys.stdout.write(json.dumps(out, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,176 @@
+"""The controller interface, gain validation and the nominal-model helpers they share.
+
+A controller maps the measured state and the reference at one control instant
+to a commanded joint torque (before saturation). Gains come from
+``params.yaml`` as scalars (all joints) or per-joint lists; they are checked
+once, here, and every controller reports all of them through ``settings()``
+so a recording holds exactly what ran.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from pipeline.errors import ParamsError
+from pipeline.model.urdf import build_pinocchio_model
+from pipeline.robots.spec import RobotSpec
+
+F64 = NDArray[np.float64]
+
+DEFAULT_OMEGA_N_RAD_S = 40.0
+"""Closed-loop natural frequency of the default gains [rad/s] (see docs/control.md)."""
+DEFAULT_ZETA = 1.0
+"""Closed-loop damping ratio of the default gains (critically damped)."""
+
+
+class Controller(Protocol):
+    """A joint-space torque controller.
+
+    ``compute`` is called once per control period with the measured state and
+    the reference at the same instant; it returns the commanded torque [N m]
+    before saturation (the runner clips it to the effort limits). The
+    returned array belongs to the caller only until the next ``compute``.
+    """
+
+    @property
+    def name(self) -> str:
+        """Registry name, e.g. ``"pid"``."""
+        ...
+
+    def settings(self) -> dict[str, Any]:
+        """Every gain, JSON-serializable, per joint (lists) or flags."""
+        ...
+
+    def reset(self) -> None:
+        """Forget internal state (integrators) before a new episode."""
+        ...
+
+    def compute(self, q: F64, qd: F64, q_ref: F64, qd_ref: F64, qdd_ref: F64, dt_s: float) -> F64:
+        """Commanded torque [N m] for measured q [rad], qd [rad/s], reference q_ref [rad],
+        qd_ref [rad/s], qdd_ref [rad/s^2]; ``dt_s`` is the control period [s]."""
+        ...
+
+
+@dataclass(frozen=True)
+class GainSpec:
+    """One accepted gain key.
+
+    Attributes:
+        key: name in ``params.yaml`` and in ``settings()``.
+        flag: a boolean switch instead of a per-joint number.
+        nonnegative: refuse values < 0 (stiffness, damping, integral gains).
+    """
+
+    key: str
+    flag: bool = False
+    nonnegative: bool = True
+
+
+def _is_number(x: object) -> bool:
+    return isinstance(x, int | float | np.integer | np.floating) and not isinstance(x, bool)
+
+
+def resolve_gains(
+    controller: str,
+    spec: RobotSpec,
+    schema: Sequence[GainSpec],
+    defaults: Mapping[str, Any],
+    gains: Mapping[str, Any] | None,
+    *,
+    where: str = "gains",
+) -> dict[str, Any]:
+    """Merge user gains over the defaults and validate every key and value.
+
+    ``where`` prefixes error messages (e.g. ``controllers.pid_slow.gains``).
+
+    Returns:
+        key -> per-joint ``(dof,)`` float array, or ``bool`` for flags.
+
+    Raises:
+        ParamsError: unknown key (lists the valid ones), a non-number, a list
+            of the wrong length, a non-finite or a negative value.
+    """
+    if gains is not None and not isinstance(gains, Mapping):
+        raise ParamsError(f"{where}: expected a mapping of gain names to values, got {gains!r}")
+    by_key = {g.key: g for g in schema}
+    merged = dict(defaults)
+    for key, value in (gains or {}).items():
+        if key not in by_key:
+            valid = ", ".join(by_key)
+            near = difflib.get_close_matches(str(key).lower(), list(by_key), n=1)
+            hint = f" (did you mean '{near[0]}'?)" if near else ""
+            raise ParamsError(
+                f"{where}.{key}: unknown gain for controller '{controller}'{hint}; valid: {valid}"
+            )
+        merged[key] = value
+    out: dict[str, Any] = {}
+    for g in schema:
+        if g.key not in merged:
+            raise ParamsError(f"{where}.{g.key}: missing for controller '{controller}'")
+        value = merged[g.key]
+        if g.flag:
+            if not isinstance(value, bool | np.bool_):
+                raise ParamsError(f"{where}.{g.key}: expected true or false, got {value!r}")
+            out[g.key] = bool(value)
+            continue
+        out[g.key] = _per_joint(controller, spec, g, value, where)
+    return out
+
+
+def _per_joint(controller: str, spec: RobotSpec, g: GainSpec, value: Any, where: str) -> F64:
+    expected = f"a number or a list of {spec.dof} numbers (one per joint of {spec.name})"
+    if _is_number(value):
+        arr = np.full(spec.dof, float(value))
+    elif isinstance(value, Sequence | np.ndarray) and not isinstance(value, str | bytes):
+        items = list(value)
+        if len(items) != spec.dof:
+            raise ParamsError(
+                f"{where}.{g.key}: expected {expected} for controller '{controller}', "
+                f"got {len(items)} values"
+            )
+        if not all(_is_number(x) for x in items):
+            raise ParamsError(f"{where}.{g.key}: expected {expected}, got {value!r}")
+        arr = np.array([float(x) for x in items])
+    else:
+        raise ParamsError(f"{where}.{g.key}: expected {expected}, got {value!r}")
+    if not np.isfinite(arr).all():
+        raise ParamsError(f"{where}.{g.key}: must be finite, got {arr.tolist()}")
+    if g.nonnegative and (arr < 0).any():
+        raise ParamsError(f"{where}.{g.key}: must be >= 0, got {arr.tolist()}")
+    return arr
+
+
+def settings_of(gains: Mapping[str, Any]) -> dict[str, Any]:
+    """JSON-serializable copy of resolved gains (lists of floats, bools)."""
+    return {k: (v if isinstance(v, bool) else [float(x) for x in v]) for k, v in gains.items()}
+
+
+def nominal_mass_diagonal(spec: RobotSpec, q_config: Sequence[float] | None = None) -> F64:
+    """Diagonal of the nominal joint-space inertia matrix M_n(q) [kg m^2].
+
+    Args:
+        spec: robot with dynamics.
+        q_config: configuration [rad]; ``None`` = all zeros (the paper's start pose).
+    """
+    spec.require_dynamics("model-based default gains")
+    model = build_pinocchio_model(spec)
+    q = np.zeros(spec.dof) if q_config is None else np.asarray(q_config, dtype=float)
+    if q.shape != (spec.dof,) or not np.isfinite(q).all():
+        raise ParamsError(f"q_config: expected {spec.dof} finite angles [rad], got {q.tolist()}")
+    mass: F64 = pin.crba(model, model.createData(), q)
+    return np.array(np.diag(mass), dtype=float)
+
+
+def check_tuning(omega_n_rad_s: float, zeta: float) -> None:
+    """Refuse a natural frequency or damping ratio that is not a positive finite number."""
+    for name, value in (("omega_n_rad_s", omega_n_rad_s), ("zeta", zeta)):
+        if not (_is_number(value) and math.isfinite(value) and value > 0):
+            raise ParamsError(f"{name}: expected a positive number, got {value!r}")

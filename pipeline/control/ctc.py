@@ -1,0 +1,76 @@
+"""Computed-torque control, the paper's eq. 18, on the nominal Pinocchio model.
+
+``tau = M_n(q) (qdd_r + Kd (qd_r - qd) + Kp (q_r - q)) + h_n(q, qd)``, with
+``h_n`` the nominal Coriolis, centrifugal and gravity torques. One RNEA call
+with the commanded acceleration ``a`` returns exactly ``M_n(q) a + h_n(q, qd)``
+(the paper used KDL's ChainIdSolver_RNE for the same quantity). With a
+perfect model the closed loop is ``qdd = a``, i.e. ``e'' + Kd e' + Kp e = 0``
+per joint (eq. 17).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import pinocchio as pin
+
+from pipeline.control.base import (
+    DEFAULT_OMEGA_N_RAD_S,
+    DEFAULT_ZETA,
+    F64,
+    GainSpec,
+    check_tuning,
+    resolve_gains,
+    settings_of,
+)
+from pipeline.model.urdf import build_pinocchio_model
+from pipeline.robots.spec import RobotSpec
+
+NAME = "ctc"
+GAINS = (GainSpec("kp"), GainSpec("kd"))
+
+
+def default_gains(
+    spec: RobotSpec,
+    *,
+    omega_n_rad_s: float = DEFAULT_OMEGA_N_RAD_S,
+    zeta: float = DEFAULT_ZETA,
+    q_config: Sequence[float] | None = None,
+) -> dict[str, Any]:
+    """``Kp = w^2`` [1/s^2], ``Kd = 2 zeta w`` [1/s]: the linearized loop's poles directly.
+
+    ``q_config`` is accepted for a uniform signature; CTC gains do not depend on it.
+    """
+    check_tuning(omega_n_rad_s, zeta)
+    w = float(omega_n_rad_s)
+    return {"kp": [w**2] * spec.dof, "kd": [2.0 * zeta * w] * spec.dof}
+
+
+class ComputedTorqueController:
+    """Model-based CTC; the model is always the nominal one built from the YAML."""
+
+    def __init__(
+        self, spec: RobotSpec, gains: Mapping[str, Any] | None = None, *, where: str = "gains"
+    ) -> None:
+        spec.require_dynamics("the computed-torque controller")
+        self._gains = resolve_gains(NAME, spec, GAINS, default_gains(spec), gains, where=where)
+        self._kp: F64 = self._gains["kp"]
+        self._kd: F64 = self._gains["kd"]
+        self._model = build_pinocchio_model(spec)
+        self._data = self._model.createData()
+
+    @property
+    def name(self) -> str:
+        return NAME
+
+    def settings(self) -> dict[str, Any]:
+        return settings_of(self._gains)
+
+    def reset(self) -> None:
+        """Stateless: nothing to forget."""
+
+    def compute(self, q: F64, qd: F64, q_ref: F64, qd_ref: F64, qdd_ref: F64, dt_s: float) -> F64:
+        a = qdd_ref + self._kd * (qd_ref - qd) + self._kp * (q_ref - q)
+        tau: F64 = pin.rnea(self._model, self._data, q, qd, a)
+        return tau

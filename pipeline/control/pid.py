@@ -1,0 +1,131 @@
+"""Per-joint effort PID, as ros2_control's joint trajectory controller runs it.
+
+With an effort command interface the JTC sends, per joint,
+``ff_velocity_scale * qd_ref + pid.compute_command(e, e_dot, dt)`` with
+``e = q_ref - q`` and ``e_dot = qd_ref - qd`` (control_toolbox::Pid):
+
+- ``p_term = kp * e``, ``d_term = kd * e_dot`` (no derivative kick: the D term
+  acts on the velocity error, not on a differentiated position error);
+- ``i_term += ki * dt * e``; with ``antiwindup`` the *state* is clamped to
+  ``[i_clamp_min, i_clamp_max]``, without it only its contribution to the
+  output is (the state itself keeps winding up);
+- ``command = p_term + clamp(i_term) + d_term``.
+
+No model terms: gravity and inertia are left to the feedback and the integrator.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from pipeline.control.base import (
+    DEFAULT_OMEGA_N_RAD_S,
+    DEFAULT_ZETA,
+    F64,
+    GainSpec,
+    check_tuning,
+    nominal_mass_diagonal,
+    resolve_gains,
+    settings_of,
+)
+from pipeline.errors import ParamsError
+from pipeline.robots.spec import RobotSpec
+
+NAME = "pid"
+GAINS = (
+    GainSpec("kp"),
+    GainSpec("ki"),
+    GainSpec("kd"),
+    GainSpec("i_clamp_min", nonnegative=False),
+    GainSpec("i_clamp_max", nonnegative=False),
+    GainSpec("antiwindup", flag=True),
+    GainSpec("ff_velocity_scale", nonnegative=False),
+)
+INTEGRAL_POLE_FRACTION = 0.1
+"""Default ki puts the integrator's pole near ``-0.1 omega_n`` (see docs/control.md)."""
+
+
+def default_gains(
+    spec: RobotSpec,
+    *,
+    omega_n_rad_s: float = DEFAULT_OMEGA_N_RAD_S,
+    zeta: float = DEFAULT_ZETA,
+    q_config: Sequence[float] | None = None,
+) -> dict[str, Any]:
+    """Gains giving each joint, alone, the closed loop ``s^2 + 2 zeta w s + w^2``.
+
+    ``kp_j = m_jj w^2``, ``kd_j = 2 zeta w m_jj`` with ``m_jj`` the nominal
+    mass-matrix diagonal at ``q_config`` (default: zeros); ``ki_j = m_jj w^2 p``
+    with ``p = 0.1 w`` (integral pole well below the PD poles); the integral
+    term may supply up to the joint's effort limit.
+    """
+    check_tuning(omega_n_rad_s, zeta)
+    m = nominal_mass_diagonal(spec, q_config)
+    w = float(omega_n_rad_s)
+    effort = spec.effort_limits
+    return {
+        "kp": (m * w**2).tolist(),
+        "ki": (m * w**2 * INTEGRAL_POLE_FRACTION * w).tolist(),
+        "kd": (m * 2.0 * zeta * w).tolist(),
+        "i_clamp_min": (-effort).tolist(),
+        "i_clamp_max": effort.tolist(),
+        "antiwindup": True,
+        "ff_velocity_scale": 0.0,
+    }
+
+
+class PidController:
+    """Independent joint PID on effort (ros2_control JTC + control_toolbox::Pid)."""
+
+    def __init__(
+        self, spec: RobotSpec, gains: Mapping[str, Any] | None = None, *, where: str = "gains"
+    ) -> None:
+        g = resolve_gains(NAME, spec, GAINS, default_gains(spec), gains, where=where)
+        if (g["i_clamp_min"] > g["i_clamp_max"]).any():
+            raise ParamsError(
+                f"{where}.i_clamp_min: must be <= i_clamp_max, got {g['i_clamp_min'].tolist()} "
+                f"and {g['i_clamp_max'].tolist()}"
+            )
+        self._gains = g
+        self._kp: F64 = g["kp"]
+        self._ki: F64 = g["ki"]
+        self._kd: F64 = g["kd"]
+        self._i_min: F64 = g["i_clamp_min"]
+        self._i_max: F64 = g["i_clamp_max"]
+        self._antiwindup: bool = g["antiwindup"]
+        self._ff: F64 = g["ff_velocity_scale"]
+        self._use_ff = bool(self._ff.any())
+        self._i_term: F64 = np.zeros(spec.dof)
+        self._ki_dt: F64 = self._ki * 0.0
+        self._dt_s = 0.0
+
+    @property
+    def name(self) -> str:
+        return NAME
+
+    def settings(self) -> dict[str, Any]:
+        return settings_of(self._gains)
+
+    def reset(self) -> None:
+        self._i_term[:] = 0.0
+
+    def compute(self, q: F64, qd: F64, q_ref: F64, qd_ref: F64, qdd_ref: F64, dt_s: float) -> F64:
+        e = q_ref - q
+        i_term = self._i_term
+        if dt_s != self._dt_s:  # the period is fixed in an episode: scale ki once
+            self._ki_dt = self._ki * dt_s
+            self._dt_s = dt_s
+        i_term += self._ki_dt * e
+        if self._antiwindup:
+            np.minimum(i_term, self._i_max, out=i_term)
+            np.maximum(i_term, self._i_min, out=i_term)
+            i_out = i_term
+        else:
+            i_out = np.maximum(np.minimum(i_term, self._i_max), self._i_min)
+        tau: F64 = self._kp * e + self._kd * (qd_ref - qd) + i_out
+        if self._use_ff:
+            tau += self._ff * qd_ref
+        return tau

@@ -1,0 +1,450 @@
+"""One control episode: MuJoCo plant, zero-order-hold control loop, divergence detection.
+
+The plant is the MuJoCo model built from the spec (optionally mismatched:
+damping, Coulomb friction, armature, payload); the controller keeps its own
+nominal model. Each control period the loop reads the plant state, adds the
+(pre-drawn, seeded) sensor noise, asks the controller for a torque, clips it
+to the effort limits, writes it to the motors and steps the physics
+``control_period_steps`` times with that torque held.
+
+The loop is the record stage's hot path: every array is preallocated, the
+reference is sampled before the loop (in one call when the reference has
+``sample_many``), noise is drawn in bulk, and saturation flags and the
+result are assembled after it. Per step it costs a handful of small numpy
+operations besides ``mj_step`` and the controller (see ``benches/sim_loop.py``).
+
+A diverged episode is a result, not an exception: NaN/inf state, a MuJoCo
+warning (bad qpos/qvel/qacc/ctrl, full contact or constraint buffers) or a
+joint speed beyond ``divergence_speed_factor`` times its velocity limit
+ends it with ``status="diverged"`` and a reason naming the time, the joint
+and the cause; the rows before it are kept.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import asdict
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from pipeline.control.base import Controller
+from pipeline.errors import SimulationError
+from pipeline.model.mjcf import Box, PlantOptions, build_mujoco_model
+from pipeline.robots.spec import RobotSpec
+from pipeline.sim.result import F64, EpisodeResult, Reference
+
+DIVERGENCE_SPEED_FACTOR = 10.0
+"""A joint faster than this many times its velocity limit is out of control."""
+
+_WARNING_NAMES = tuple(mujoco.mjtWarning(i).name for i in range(int(mujoco.mjtWarning.mjNWARNING)))
+# warnings whose ``lastinfo`` is a dof (= joint) index, or an actuator (= joint) index
+_PER_JOINT_WARNINGS = frozenset(
+    int(w)
+    for w in (
+        mujoco.mjtWarning.mjWARN_BADQPOS,
+        mujoco.mjtWarning.mjWARN_BADQVEL,
+        mujoco.mjtWarning.mjWARN_BADQACC,
+        mujoco.mjtWarning.mjWARN_BADCTRL,
+    )
+)
+
+ProgressFn = Callable[[float], None]
+
+
+def run_episode(
+    spec: RobotSpec,
+    *,
+    reference: Reference,
+    controller: Controller,
+    seed: int,
+    plant: PlantOptions | None = None,
+    obstacles: Sequence[Box] = (),
+    physics_dt_s: float = 0.001,
+    control_period_steps: int = 1,
+    hold_s: float = 1.0,
+    position_noise_std_rad: float = 0.0,
+    velocity_noise_std_rad_s: float = 0.0,
+    divergence_speed_factor: float = DIVERGENCE_SPEED_FACTOR,
+    progress: ProgressFn | None = None,
+) -> EpisodeResult:
+    """Run ``controller`` on the MuJoCo plant along ``reference``, then hold the goal.
+
+    Starts at rest at ``reference.sample(0)`` and runs ``reference.duration_s +
+    hold_s``; row k of the result is control instant ``k * physics_dt_s *
+    control_period_steps`` (the last row is the state at the end, with the
+    torque that would be applied next).
+
+    Args:
+        spec: robot (must have dynamics).
+        reference: joint reference; ``sample_many`` is used when present.
+        controller: anything satisfying ``pipeline.control.Controller``; reset first.
+        seed: seed of the sensor-noise generator (``numpy.random.default_rng``).
+        plant: plant mismatch (damping, friction, armature, payload); None = nominal.
+        obstacles: boxes added to the MuJoCo scene.
+        physics_dt_s: MuJoCo time step [s].
+        control_period_steps: physics steps per control update (torque held between).
+        hold_s: time kept at the goal after the reference ends [s].
+        position_noise_std_rad: Gaussian noise on measured position [rad].
+        velocity_noise_std_rad_s: Gaussian noise on measured velocity [rad/s].
+        divergence_speed_factor: end the episode when a joint exceeds this many
+            times its velocity limit.
+        progress: called with the completed fraction in [0, 1] about every 1 %.
+
+    Raises:
+        SpecError: the robot has no dynamics.
+        SimulationError: bad settings or a malformed reference or controller output.
+    """
+    spec.require_dynamics("simulation")
+    _check_settings(
+        seed=seed,
+        physics_dt_s=physics_dt_s,
+        control_period_steps=control_period_steps,
+        hold_s=hold_s,
+        position_noise_std_rad=position_noise_std_rad,
+        velocity_noise_std_rad_s=velocity_noise_std_rad_s,
+        divergence_speed_factor=divergence_speed_factor,
+    )
+    plant = plant or PlantOptions()
+    model = build_mujoco_model(spec, timestep_s=physics_dt_s, plant=plant, obstacles=obstacles)
+    data = mujoco.MjData(model)
+    dof = spec.dof
+
+    duration_s = _reference_duration(reference)
+    control_dt_s = physics_dt_s * control_period_steps
+    period_ns = round(physics_dt_s * 1e9) * control_period_steps
+    n = math.ceil((duration_s + hold_s) / control_dt_s - 1e-9) + 1
+    stamp_ns = np.arange(n, dtype=np.int64) * period_ns
+    times_s: F64 = np.arange(n, dtype=np.float64) * control_dt_s
+    q_ref, qd_ref, qdd_ref = _sample_reference(reference, times_s, spec)
+
+    rng = np.random.default_rng(seed)
+    noisy = position_noise_std_rad > 0 or velocity_noise_std_rad_s > 0
+    q_true = np.empty((n, dof))
+    qd_true = np.empty((n, dof))
+    q_meas, qd_meas, noise_q, noise_qd = q_true, qd_true, q_true, qd_true
+    if noisy:
+        # drawn in a fixed order (position block, then velocity block) so a seed
+        # reproduces the same noise whatever the loop does
+        noise_q = rng.standard_normal((n, dof)) * position_noise_std_rad
+        noise_qd = rng.standard_normal((n, dof)) * velocity_noise_std_rad_s
+        q_meas = np.empty((n, dof))
+        qd_meas = np.empty((n, dof))
+    tau_cmd = np.empty((n, dof))
+    tau_app = np.empty((n, dof))
+
+    data.qpos[:] = q_ref[0]
+    data.qvel[:] = 0.0
+    mujoco.mj_forward(model, data)
+    controller.reset()
+
+    loop = _Loop(
+        spec=spec,
+        model=model,
+        data=data,
+        controller=controller,
+        times_s=times_s,
+        control_dt_s=control_dt_s,
+        nstep=control_period_steps,
+        speed_factor=divergence_speed_factor,
+    )
+    with _captured_mujoco_warnings() as warning_texts:
+        rows, reason = loop.run(
+            q_true, qd_true, q_meas, qd_meas, noise_q, noise_qd if noisy else None,
+            q_ref, qd_ref, qdd_ref, tau_cmd, tau_app, progress or _no_progress,
+        )  # fmt: skip
+        if reason and warning_texts and "MuJoCo warning" in reason:
+            reason += f': "{warning_texts[0]}"'
+
+    # A non-finite command is the controller's failure, whatever MuJoCo made of it
+    # (it zeroes a NaN ctrl and warns one step later; the last row is never stepped).
+    bad = ~np.isfinite(tau_cmd[:rows]).all(axis=1)
+    if bad.any():
+        k = int(np.argmax(bad))
+        j = int(np.argmax(~np.isfinite(tau_cmd[k])))
+        rows = k
+        reason = (
+            f"diverged at t={times_s[k]:.4f} s: controller '{controller.name}' returned a "
+            f"non-finite torque for {spec.joint_names[j]} ({tau_cmd[k, j]})"
+        )
+    if progress is not None:
+        progress(1.0)
+
+    effort = spec.effort_limits
+    saturated = np.abs(tau_cmd[:rows]) > effort
+    warnings = {
+        name: int(count)
+        for name, count in zip(_WARNING_NAMES, data.warning.number, strict=True)
+        if count
+    }
+    extra: dict[str, Any] = {
+        "controller": controller.name,
+        "controller_settings": controller.settings(),
+        "seed": int(seed),
+        "physics_dt_s": float(physics_dt_s),
+        "control_period_steps": int(control_period_steps),
+        "control_period_s": float(control_dt_s),
+        "reference_duration_s": duration_s,
+        "hold_s": float(hold_s),
+        "position_noise_std_rad": float(position_noise_std_rad),
+        "velocity_noise_std_rad_s": float(velocity_noise_std_rad_s),
+        "divergence_speed_factor": float(divergence_speed_factor),
+        "plant": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(plant).items()},
+        "obstacles": [asdict(b) for b in obstacles],
+        "saturation_counts": saturated.sum(axis=0).astype(int).tolist(),
+        "rows_planned": int(n),
+    }
+    arrays: dict[str, Any] = {
+        "stamp_ns": stamp_ns[:rows],
+        "q": q_meas[:rows],
+        "qd": qd_meas[:rows],
+        "q_true": q_true[:rows],
+        "qd_true": qd_true[:rows],
+        "q_ref": q_ref[:rows],
+        "qd_ref": qd_ref[:rows],
+        "qdd_ref": qdd_ref[:rows],
+        "tau_cmd_nm": tau_cmd[:rows],
+        "tau_nm": tau_app[:rows],
+        "saturated": saturated,
+    }
+    for a in arrays.values():
+        a.flags.writeable = False  # the result is frozen; so are its arrays
+    return EpisodeResult(
+        joint_names=spec.joint_names,
+        **arrays,
+        status="diverged" if reason else "ok",
+        reason=reason,
+        mujoco_warnings=warnings,
+        extra=extra,
+    )
+
+
+def _no_progress(fraction: float) -> None:
+    """Default progress callback: nothing to draw."""
+
+
+class _Loop:
+    """The control loop and its divergence diagnosis (state kept off the hot path)."""
+
+    def __init__(
+        self,
+        *,
+        spec: RobotSpec,
+        model: Any,
+        data: Any,
+        controller: Controller,
+        times_s: F64,
+        control_dt_s: float,
+        nstep: int,
+        speed_factor: float,
+    ) -> None:
+        self.spec = spec
+        self.model = model
+        self.data = data
+        self.controller = controller
+        self.times_s = times_s
+        self.control_dt_s = control_dt_s
+        self.nstep = nstep
+        self.speed_factor = speed_factor
+        self.speed_limits = spec.velocity_limits
+
+    def run(
+        self,
+        q_true: F64,
+        qd_true: F64,
+        q_meas: F64,
+        qd_meas: F64,
+        noise_q: F64,
+        noise_qd: F64 | None,
+        q_ref: F64,
+        qd_ref: F64,
+        qdd_ref: F64,
+        tau_cmd: F64,
+        tau_app: F64,
+        progress: ProgressFn,
+    ) -> tuple[int, str]:
+        """Fill the arrays row by row; return (rows recorded, divergence reason or "")."""
+        model, data, nstep, dt = self.model, self.data, self.nstep, self.control_dt_s
+        compute = self.controller.compute
+        step = mujoco.mj_step
+        qpos, qvel, ctrl = data.qpos, data.qvel, data.ctrl
+        warn = data.warning.number  # a live view of MuJoCo's warning counters
+        clean = np.zeros_like(warn).tobytes()
+        hi = self.spec.effort_limits
+        lo = -hi
+        # weighted |qd|^2 against the speed limit: one dot product catches NaN, inf
+        # and runaway speed; the per-joint diagnosis runs only when it trips
+        weights = 1.0 / self.speed_limits**2
+        limit_sq = self.speed_factor**2
+        n = q_true.shape[0]
+        last = n - 1
+        tick = max(1, n // 100)
+        next_tick = tick
+        noisy = noise_qd is not None
+        shape = (self.spec.dof,)
+        for k in range(n):
+            qt = q_true[k]
+            qt[:] = qpos
+            vt = qd_true[k]
+            vt[:] = qvel
+            if warn.tobytes() != clean or not (vt * weights).dot(vt) <= limit_sq:
+                reason = self._diagnose(k, qt, vt)
+                if reason:
+                    return k, reason
+            if noisy:
+                qm = np.add(qt, noise_q[k], out=q_meas[k])
+                vm = np.add(vt, noise_qd[k], out=qd_meas[k])  # type: ignore[index]
+            else:
+                qm, vm = qt, vt
+            try:
+                tc = compute(qm, vm, q_ref[k], qd_ref[k], qdd_ref[k], dt)
+                if tc.shape != shape:  # a (1,) or scalar torque would broadcast silently
+                    raise ValueError(f"got shape {tc.shape}")
+                tau_cmd[k] = tc
+            except (ValueError, AttributeError) as err:
+                raise SimulationError(
+                    f"controller '{self.controller.name}' failed at t={self.times_s[k]:.4f} s "
+                    f"(expected an array of {self.spec.dof} torques): {err}"
+                ) from err
+            ta = tau_app[k]
+            np.minimum(tc, hi, out=ta)
+            np.maximum(ta, lo, out=ta)
+            ctrl[:] = ta
+            if k == last:
+                break
+            step(model, data, nstep)
+            if k == next_tick:
+                progress(k / last)
+                next_tick += tick
+        return n, ""
+
+    def _diagnose(self, k: int, q: F64, qd: F64) -> str:
+        """Why row k is not a controlled state ("" if it is, after all)."""
+        t = f"t={self.times_s[k]:.4f} s"
+        names = self.spec.joint_names
+        numbers = self.data.warning.number
+        if numbers.any():
+            i = int(np.argmax(numbers != 0))
+            info = int(self.data.warning.lastinfo[i])
+            where = (
+                f"joint {names[info]}"
+                if i in _PER_JOINT_WARNINGS and 0 <= info < len(names)
+                else f"info {info}"
+            )
+            return f"diverged by {t}: MuJoCo warning {_WARNING_NAMES[i]} at {where}"
+        finite = np.isfinite(q) & np.isfinite(qd)
+        if not finite.all():
+            j = int(np.argmax(~finite))
+            return f"diverged at {t}: {names[j]} state is not finite (q={q[j]}, qd={qd[j]})"
+        ratio = np.abs(qd) / self.speed_limits
+        j = int(np.argmax(ratio))
+        if ratio[j] > self.speed_factor:
+            return (
+                f"diverged at {t}: {names[j]} speed {abs(qd[j]):.4g} rad/s exceeds "
+                f"{self.speed_factor:g} x its velocity limit ({self.speed_limits[j]:.4g} rad/s)"
+            )
+        return ""
+
+
+@contextmanager
+def _captured_mujoco_warnings() -> Iterator[list[str]]:
+    """Collect MuJoCo's warning texts instead of letting it print them.
+
+    The warning goes into the episode's ``reason``; printing it would break the
+    CLI's progress bar. MuJoCo's handler is process-global, so restore it after.
+    """
+    texts: list[str] = []
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(texts.append)
+    try:
+        yield texts
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
+def _check_settings(
+    *,
+    seed: int,
+    physics_dt_s: float,
+    control_period_steps: int,
+    hold_s: float,
+    position_noise_std_rad: float,
+    velocity_noise_std_rad_s: float,
+    divergence_speed_factor: float,
+) -> None:
+    def number(x: object) -> bool:
+        return isinstance(x, int | float | np.integer | np.floating) and not isinstance(x, bool)
+
+    if not (isinstance(seed, int | np.integer) and not isinstance(seed, bool) and seed >= 0):
+        raise SimulationError(f"seed: expected a non-negative integer, got {seed!r}")
+    if not (number(physics_dt_s) and math.isfinite(physics_dt_s) and physics_dt_s > 0):
+        raise SimulationError(
+            f"physics_dt_s: expected a positive time step [s], got {physics_dt_s!r}"
+        )
+    if not (
+        isinstance(control_period_steps, int | np.integer)
+        and not isinstance(control_period_steps, bool)
+        and control_period_steps >= 1
+    ):
+        raise SimulationError(
+            f"control_period_steps: expected an integer >= 1 (physics steps per control "
+            f"update), got {control_period_steps!r}"
+        )
+    for name, value in (
+        ("hold_s", hold_s),
+        ("position_noise_std_rad", position_noise_std_rad),
+        ("velocity_noise_std_rad_s", velocity_noise_std_rad_s),
+    ):
+        if not (number(value) and math.isfinite(value) and value >= 0):
+            raise SimulationError(f"{name}: expected a finite number >= 0, got {value!r}")
+    if not (
+        number(divergence_speed_factor)
+        and math.isfinite(divergence_speed_factor)
+        and divergence_speed_factor > 0
+    ):
+        raise SimulationError(
+            f"divergence_speed_factor: expected a positive number, got {divergence_speed_factor!r}"
+        )
+
+
+def _reference_duration(reference: Reference) -> float:
+    duration = reference.duration_s
+    if not (isinstance(duration, int | float) and math.isfinite(duration) and duration >= 0):
+        raise SimulationError(
+            f"reference.duration_s: expected a finite time >= 0 [s], got {duration!r}"
+        )
+    return float(duration)
+
+
+def _sample_reference(reference: Reference, times_s: F64, spec: RobotSpec) -> tuple[F64, F64, F64]:
+    """Reference position, velocity, acceleration at every control instant, (N, n) each."""
+    sample_many = getattr(reference, "sample_many", None)
+    if callable(sample_many):
+        arrays = tuple(sample_many(times_s))
+    else:
+        samples = [reference.sample(float(t)) for t in times_s]
+        arrays = tuple(np.array([s[i] for s in samples]) for i in range(3))
+    if len(arrays) != 3:
+        raise SimulationError(
+            f"reference: expected (position, velocity, acceleration), got {len(arrays)} arrays"
+        )
+    out = []
+    expected = (len(times_s), spec.dof)
+    for what, arr in zip(("position", "velocity", "acceleration"), arrays, strict=True):
+        a = np.ascontiguousarray(arr, dtype=float)
+        if a.shape != expected:
+            raise SimulationError(
+                f"reference: {what} samples have shape {a.shape}, expected {expected} "
+                f"({spec.dof} joints of {spec.name})"
+            )
+        bad = ~np.isfinite(a)
+        if bad.any():
+            k, j = (int(x) for x in np.argwhere(bad)[0])
+            raise SimulationError(
+                f"reference: {what} of {spec.joint_names[j]} is {a[k, j]} at t={times_s[k]:.4f} s"
+            )
+        out.append(a)
+    return out[0], out[1], out[2]
