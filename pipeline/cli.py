@@ -74,6 +74,256 @@ def robots_cmd(
     console.print(table)
 
 
+_ROBOT_HELP = "Built-in robot name (see `pipeline robots`) or path to a robot YAML file."
+
+
+def _joint_list(text: str, option: str) -> list[float]:
+    """Parse 'a,b,c' or 'a b c' [rad] into floats, with a one-line error."""
+    from pipeline.errors import KinematicsError
+
+    parts = [p for p in text.replace(",", " ").split() if p]
+    try:
+        return [float(p) for p in parts]
+    except ValueError as err:
+        raise KinematicsError(
+            f"{option}: expected numbers separated by commas or spaces [rad], got '{text}'"
+        ) from err
+
+
+@app.command("fk", context_settings={"ignore_unknown_options": True})
+def fk_cmd(
+    robot: Annotated[str, typer.Argument(help=_ROBOT_HELP, show_default=False)],
+    joints: Annotated[
+        list[float],
+        typer.Argument(
+            help="Joint positions \\[rad], one per joint in chain order; negative values are "
+            "fine (e.g. `pipeline fk ur5 0 -1.57 0 0 0 0`).",
+            show_default=False,
+        ),
+    ],
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Forward kinematics: the flange pose (DH frame n) in the DH base frame.
+
+    Prints position \\[m], quaternion (w, x, y, z) and roll/pitch/yaw \\[rad] with
+    R = Rz(yaw) Ry(pitch) Rx(roll).
+    """
+    from pipeline.kinematics.base import pose_summary
+    from pipeline.model.dh import forward_kinematics
+    from pipeline.robots import load_spec
+
+    spec = load_spec(robot)
+    pose = pose_summary(forward_kinematics(spec, joints))
+    if as_json:
+        print_json({"robot": spec.name, "joints": [float(q) for q in joints], **pose})
+        return
+    table = Table("quantity", "value", title=f"{spec.name}: flange in base frame")
+    # "\\[" keeps rich from reading the units as markup tags
+    table.add_row("joints \\[rad]", " ".join(f"{q:.6g}" for q in joints))
+    table.add_row("position \\[m]", " ".join(f"{v:.6f}" for v in pose["position"]))
+    table.add_row("quaternion (w x y z)", " ".join(f"{v:.6f}" for v in pose["quaternion_wxyz"]))
+    table.add_row("rpy (roll pitch yaw) \\[rad]", " ".join(f"{v:.6f}" for v in pose["rpy"]))
+    console.print(table)
+
+
+@app.command("ik")
+def ik_cmd(
+    robot: Annotated[str, typer.Argument(help=_ROBOT_HELP, show_default=False)],
+    position: Annotated[
+        tuple[float, float, float],
+        typer.Option(
+            "--position",
+            help="Flange position X Y Z \\[m] in the DH base frame.",
+            show_default=False,
+        ),
+    ],
+    quaternion: Annotated[
+        tuple[float, float, float, float] | None,
+        typer.Option(
+            "--quaternion",
+            help="Flange orientation as a quaternion W X Y Z (normalised here). "
+            "Give this or --rpy.",
+            show_default=False,
+        ),
+    ] = None,
+    rpy: Annotated[
+        tuple[float, float, float] | None,
+        typer.Option(
+            "--rpy",
+            help="Flange orientation as roll pitch yaw \\[rad], R = Rz(yaw) Ry(pitch) Rx(roll). "
+            "Give this or --quaternion.",
+            show_default=False,
+        ),
+    ] = None,
+    solver: Annotated[
+        str,
+        typer.Option(
+            "--solver",
+            help="IK solver: 'numeric' (Levenberg-Marquardt, any arm, one solution) or "
+            "'analytic' (closed form, UR-type arms, every solution within limits).",
+        ),
+    ] = "numeric",
+    seed_joints: Annotated[
+        str | None,
+        typer.Option(
+            "--seed-joints",
+            help="Seed joints \\[rad], one per joint, comma- or space-separated "
+            "(e.g. '0,-1.57,0,0,0,0'): numeric starts there; solutions nearest to it come "
+            "first. Default: middle of each joint's range.",
+            show_default=False,
+        ),
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Inverse kinematics: joint vectors \\[rad] that put the flange at the given pose.
+
+    Every printed solution is checked by forward kinematics (errors shown).
+    Exits 1 with one line if the pose is unreachable.
+    """
+    from rich import box
+    from rich.table import Column
+
+    from pipeline.errors import KinematicsError
+    from pipeline.kinematics import (
+        DEFAULT_TOL_M,
+        DEFAULT_TOL_RAD,
+        make_solver,
+        pose_summary,
+        target_pose,
+        verify_solution,
+    )
+    from pipeline.robots import load_spec
+
+    spec = load_spec(robot)
+    target = target_pose(position, quaternion_wxyz=quaternion, rpy_rad=rpy)
+    seed = None if seed_joints is None else _joint_list(seed_joints, "--seed-joints")
+    result = make_solver(solver, spec).solve(target, seed_q=seed)
+    if not result.ok:
+        raise KinematicsError(result.reason)
+    rows = []
+    for q in result.solutions:
+        pos_err, ang_err = verify_solution(spec, q, target)
+        if pos_err <= DEFAULT_TOL_M and ang_err <= DEFAULT_TOL_RAD:
+            rows.append(([float(v) for v in q], pos_err, ang_err))
+    if not rows:
+        raise KinematicsError(
+            f"robot '{spec.name}': {solver} IK returned {len(result.solutions)} solution(s) but "
+            f"none reproduces the target within {DEFAULT_TOL_M:g} m / {DEFAULT_TOL_RAD:g} rad"
+        )
+    if as_json:
+        print_json(
+            {
+                "robot": spec.name,
+                "solver": solver,
+                "target": pose_summary(target),
+                "solutions": [r[0] for r in rows],
+                "position_error_m": [r[1] for r in rows],
+                "orientation_error_rad": [r[2] for r in rows],
+            }
+        )
+        return
+    table = Table(
+        "#", *(Column(f"q{i}", justify="right", min_width=7) for i in range(1, spec.dof + 1)),
+        Column("pos \\[m]", min_width=5), Column("ori \\[rad]", min_width=5),
+        title=f"{spec.name}: {len(rows)} IK solution(s) \\[rad] ({solver})", box=box.SIMPLE,
+        pad_edge=False,
+    )  # fmt: skip
+    for i, (q, pos_err, ang_err) in enumerate(rows, start=1):
+        table.add_row(str(i), *(f"{v:.4f}" for v in q), f"{pos_err:.0e}", f"{ang_err:.0e}")
+    console.print(table)
+
+
+@app.command("ik-check")
+def ik_check_cmd(
+    robot: Annotated[str, typer.Argument(help=_ROBOT_HELP, show_default=False)],
+    solver: Annotated[
+        str,
+        typer.Option("--solver", help="IK solver to check: 'numeric' or 'analytic'."),
+    ] = "numeric",
+    samples: Annotated[
+        int,
+        typer.Option("--samples", min=1, help="Random joint configurations to round-trip."),
+    ] = 1000,
+    seed: Annotated[
+        int,
+        typer.Option("--seed", help="Seed of the random configurations and the IK restarts."),
+    ] = 0,
+    out: Annotated[
+        str,
+        typer.Option("--out", help="Folder that receives ik_check.json and error_map.png."),
+    ] = "reports/ik-check",
+    min_success_rate: Annotated[
+        float,
+        typer.Option(
+            "--min-success-rate",
+            min=0.0,
+            max=1.0,
+            help="Fraction of samples that must solve within the error targets to pass.",
+        ),
+    ] = 0.995,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Validate IK: random joints within limits -> FK -> IK -> FK.
+
+    Reports success rate, position error \\[m] and orientation error \\[rad] (max,
+    median over every returned solution), solve time \\[ms] (mean, median, p99),
+    and PASS/FAIL against the kinematics notes' targets: < 0.1 mm, < 0.01 rad,
+    < 5 ms (p99). Writes an error map over the workspace (PNG). Exits 1 on FAIL.
+    """
+    from pathlib import Path
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+    from pipeline.kinematics.check import run_ik_check
+    from pipeline.robots import load_spec
+
+    spec = load_spec(robot)
+    with Progress(
+        TextColumn("ik-check {task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        console=Console(stderr=True),
+        transient=True,
+        disable=as_json,
+    ) as bars:
+        task = bars.add_task(f"{spec.name} ({solver})", total=samples)
+        report = run_ik_check(
+            spec,
+            solver_name=solver,
+            samples=samples,
+            seed=seed,
+            out_dir=Path(out),
+            min_success_rate=min_success_rate,
+            progress=lambda n: bars.advance(task, n),
+        )
+    if as_json:
+        print_json(report.to_json())
+    else:
+        ok = {True: "[green]pass[/green]", False: "[red]FAIL[/red]"}
+        table = Table(
+            "quantity", "value", "target", "",
+            title=f"IK check: {report.robot}, {report.solver}, {report.samples} samples",
+        )  # fmt: skip
+        c, pe, oe, st = (report.checks, report.position_error_m,
+                         report.orientation_error_rad, report.solve_time_ms)  # fmt: skip
+        table.add_row(
+            "success rate", f"{100 * report.success_rate:.2f} %",
+            f">= {100 * min_success_rate:g} %", ok[c["success_rate"]],
+        )  # fmt: skip
+        table.add_row("position error max / median \\[m]", f"{pe.max:.2e} / {pe.median:.2e}",
+                      "< 1e-4", ok[c["position_error"]])  # fmt: skip
+        table.add_row("orientation error max / median \\[rad]", f"{oe.max:.2e} / {oe.median:.2e}",
+                      "< 1e-2", ok[c["orientation_error"]])  # fmt: skip
+        table.add_row("solve time mean / median / p99 \\[ms]",
+                      f"{st.mean:.3f} / {st.median:.3f} / {st.p99:.3f}", "p99 < 5",
+                      ok[c["solve_time"]])  # fmt: skip
+        console.print(table)
+        verdict = "[green]PASS[/green]" if report.passed else "[red]FAIL[/red]"
+        console.print(f"{verdict}; wrote {report.error_map_png} and {report.summary_json}")
+    if not report.passed:
+        raise typer.Exit(1)
+
+
 def main() -> None:
     """Console-script entry point."""
     debug = "--debug" in sys.argv[1:]
@@ -84,3 +334,150 @@ def main() -> None:
             raise
         sys.stderr.write(f"error: {err}\n")
         sys.exit(1)
+
+
+@app.command("record")
+def record_cmd(
+    params: Annotated[
+        str, typer.Option("--params", help="Scenarios, controllers and episodes (YAML).")
+    ] = "params.yaml",
+    out: Annotated[
+        str, typer.Option("--out", help="Directory that receives one ROS 2 bag per episode.")
+    ] = "recordings",
+    only: Annotated[
+        list[str] | None,
+        typer.Option("--only", help="Run only this episode (repeatable). Default: all."),
+    ] = None,
+    jobs: Annotated[
+        int, typer.Option("--jobs", "-j", min=1, help="Episodes run in parallel (processes).")
+    ] = 1,
+    force: Annotated[
+        bool, typer.Option("--force", help="Overwrite recordings that already exist.")
+    ] = False,
+) -> None:
+    """Plan, simulate and record every episode in PARAMS as a ROS 2 bag (MCAP).
+
+    Each scenario is planned once (OMPL RRTConnect, seeded), time-parameterized
+    (TOPP-RA), then run in MuJoCo under each controller. Bags are written to
+    OUT/<scenario>-<controller>-s<seed>/ atomically. Exits 1 if any episode
+    failed, after writing the others.
+    """
+    from pathlib import Path
+
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from pipeline.params import load_params
+    from pipeline.stages.record import record
+
+    loaded = load_params(params)
+    selected = loaded.select(only)
+    with Progress(
+        TextColumn("{task.description:<32}"),
+        BarColumn(),
+        TextColumn("{task.percentage:>5.1f}%"),
+        TimeElapsedColumn(),
+        console=Console(stderr=True),
+        transient=False,
+    ) as bars:
+        tasks = {e.name: bars.add_task(e.name, total=1.0) for e in selected}
+        plan_task = bars.add_task("planning", total=len({e.scenario_name for e in selected}))
+
+        def on_event(kind: str, name: str, value: float) -> None:
+            if kind == "plan":
+                bars.advance(plan_task, 1)
+            elif name in tasks:
+                bars.update(tasks[name], completed=value)
+
+        outcomes = record(
+            loaded, out_dir=Path(out), only=only, jobs=jobs, force=force, on_event=on_event
+        )
+    table = Table("episode", "status", "max |e| (rad)", "final |e| (rad)", "sim (s)", "wall (s)")
+    for o in outcomes:
+        table.add_row(
+            o.name,
+            o.status if o.status == "ok" else f"[red]{o.status}[/red]",
+            f"{o.max_abs_error_rad:.3e}",
+            f"{o.final_abs_error_rad:.3e}",
+            f"{o.duration_s:.2f}",
+            f"{o.wall_s:.2f}",
+        )
+    console.print(table)
+    failed = [o for o in outcomes if o.status != "ok"]
+    for o in failed:
+        sys.stderr.write(f"error: {o.name}: {o.reason}\n")
+    if failed:
+        raise typer.Exit(1)
+    console.print(f"wrote {len(outcomes)} recording(s) to {out}/")
+
+
+@app.command("report")
+def report_cmd(
+    recordings: Annotated[
+        str, typer.Option("--recordings", help="Folder of recordings (rosbag2 folders / .mcap).")
+    ] = "recordings",
+    out: Annotated[
+        str, typer.Option("--out", help="Folder that receives report.md, metrics.json, .rrd.")
+    ] = "reports",
+    baseline: Annotated[
+        str, typer.Option("--baseline", help="Controller the others are compared against.")
+    ] = "pid",
+    skip_bad: Annotated[
+        bool,
+        typer.Option("--skip-bad", help="Skip unreadable recordings (listed in the report)."),
+    ] = False,
+) -> None:
+    """Read every recording and write OUT/report.md (+ figures), metrics.json, plot CSVs
+    and recording.rrd (open it with `rerun OUT/recording.rrd`).
+
+    Outputs are staged and moved into place only when all succeeded: a failed run
+    leaves earlier reports untouched.
+    """
+    from pathlib import Path
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+    from pipeline.stages.report import run_report
+
+    progress_console = Console(stderr=True)
+    with Progress(
+        TextColumn("{task.description:<24}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        console=progress_console,
+        transient=True,
+        # No bar when stderr is not a terminal: error lines stay alone there.
+        disable=not progress_console.is_terminal,
+    ) as bars:
+        tasks: dict[str, Any] = {}
+
+        def on_progress(step: str, done: int, total: int) -> None:
+            if step not in tasks:
+                tasks[step] = bars.add_task(step, total=total)
+            bars.update(tasks[step], completed=done, total=total)
+
+        result = run_report(
+            recordings_dir=Path(recordings),
+            out_dir=Path(out),
+            baseline=baseline,
+            skip_bad=skip_bad,
+            progress=on_progress,
+        )
+    table = Table(
+        "episode", "scenario", "controller", "status", "max |e| [rad]", "RMS [rad]", "final [rad]"
+    )
+    for row in result.summary.iter_rows(named=True):
+        cells = [row[k] for k in ("worst_max_abs_error", "mean_rms_error", "worst_final_error")]
+        table.add_row(
+            row["episode"],
+            row["scenario"],
+            row["controller"],
+            row["status"] if row["status"] == "ok" else f"[red]{row['status']}[/red]",
+            *("n/a" if c is None else f"{c:.3e}" for c in cells),
+        )
+    console.print(table)
+    for source, problem in result.skipped:
+        sys.stderr.write(f"skipped: {source}: {problem}\n")
+    console.print(
+        f"wrote {len(result.files)} file(s) to {result.out_dir}/ "
+        f"(report.md, metrics.json, recording.rrd); max |e|, final: worst joint, RMS: mean"
+    )

@@ -1,0 +1,263 @@
+"""Joint-space motion planning with OMPL's RRTConnect, MuJoCo collision checking.
+
+Seeding (OMPL 2.0.1, found by experiment and from its ``RandomNumbers.cpp``): OMPL
+has one process-wide seed generator; every OMPL RNG (state samplers, the
+nearest-neighbour structure, the path simplifier) takes its seed from it when it
+is constructed. ``RNG.setSeed`` re-seeds that generator even after it has been
+used (it then logs "Random number generation already started", meaning only
+that RNGs which already exist keep their streams). ``plan_path`` therefore
+re-seeds right before it builds fresh OMPL objects, so a plan is a function of
+its inputs and seed alone, whatever was planned before in the process (tested
+in-process and against a fresh subprocess). The re-seeding message is
+suppressed; other OMPL warnings and errors still print.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from ompl import base as ob
+from ompl import geometric as og
+from ompl import util as ou
+
+from pipeline.errors import PlanningError
+from pipeline.model.mjcf import Box
+from pipeline.planning.collision import CollisionChecker, motion_check_step_rad
+from pipeline.robots.spec import RobotSpec
+
+F64 = NDArray[np.float64]
+
+PLANNER_NAME = "RRTConnect"
+MAX_SEED = 2**32 - 2  # OMPL seeds are 32-bit and must be non-zero: we pass seed + 1
+_REFINE_ROUNDS = 3  # subdivide + shortcut rounds after simplifySolution (see _refine)
+
+
+def quiet_ompl() -> None:
+    """Lower OMPL's log level to warnings (no INFO lines per solve/simplify)."""
+    ou.setLogLevel(ou.LogLevel.LOG_WARN)
+
+
+def seed_ompl(seed: int) -> None:
+    """Seed OMPL's process-wide seed generator (``plan_path`` calls this itself).
+
+    Args:
+        seed: 0 <= seed <= 2**32 - 2; OMPL gets ``seed + 1`` (it rejects 0).
+
+    Raises:
+        PlanningError: seed out of range.
+    """
+    if (
+        isinstance(seed, bool)
+        or not isinstance(seed, int | np.integer)
+        or not (0 <= int(seed) <= MAX_SEED)
+    ):
+        raise PlanningError(f"seed: expected an integer in [0, {MAX_SEED}], got {seed!r}")
+    # Re-seeding after first use logs an OMPL error that does not apply to us (we
+    # build every OMPL object after seeding): silence just that call.
+    ou.setLogLevel(ou.LogLevel.LOG_NONE)
+    try:
+        ou.RNG.setSeed(int(seed) + 1)
+    finally:
+        quiet_ompl()
+
+
+@dataclass(frozen=True, eq=False)
+class PlannedPath:
+    """A collision-free piecewise-linear joint path from start to goal.
+
+    Attributes:
+        joint_names: joint order of ``waypoints``.
+        waypoints: (K, n) joint positions [rad], K >= 2, first = start, last = goal.
+        planner: "RRTConnect".
+        seed: the seed the plan was made with.
+        planning_time_s: wall-clock time of solve + simplification [s] (not
+            reproducible: keep it out of byte-compared outputs).
+        time_limit_s: the solve time limit [s].
+        path_length_rad: Euclidean joint-space length of ``waypoints`` [rad].
+        n_states_before_simplify: states in RRTConnect's raw path (2 when direct).
+        direct: the straight segment start -> goal was valid, so it is the path
+            (what RRTConnect's first connection returns; no sampling needed).
+        simplified: the path went through OMPL's simplifier.
+        padding_m: clearance every checked state keeps [m] (see
+            ``CollisionChecker.planning_padding_m``).
+        check_step_rad: joint-space step between collision checks [rad]; with the
+            padding it makes the continuous path collision-free.
+        obstacles: the boxes planned around.
+    """
+
+    joint_names: tuple[str, ...]
+    waypoints: F64
+    planner: str
+    seed: int
+    planning_time_s: float
+    time_limit_s: float
+    path_length_rad: float
+    n_states_before_simplify: int
+    direct: bool
+    simplified: bool
+    padding_m: float
+    check_step_rad: float
+    obstacles: tuple[Box, ...] = field(default=())
+
+    @property
+    def start(self) -> F64:
+        start: F64 = self.waypoints[0]
+        return start
+
+    @property
+    def goal(self) -> F64:
+        goal: F64 = self.waypoints[-1]
+        return goal
+
+
+def path_length_rad(waypoints: F64) -> float:
+    """Euclidean joint-space length of a piecewise-linear path [rad]."""
+    return float(np.sum(np.linalg.norm(np.diff(waypoints, axis=0), axis=1)))
+
+
+def _states_to_array(path: og.PathGeometric, dof: int) -> F64:
+    return np.array(
+        [
+            [st[i] for i in range(dof)]
+            for st in (path.getState(k) for k in range(path.getStateCount()))
+        ],
+        dtype=np.float64,
+    )
+
+
+def _refine(path: og.PathGeometric, simplifier: og.PathSimplifier) -> None:
+    """Shorten a simplified path further, deterministically (fixed iteration counts).
+
+    ``simplifySolution`` stops when a round brings nothing, which on 3-state
+    paths (RRTConnect's long default range jumps far) often leaves detours of
+    several radians. Subdividing gives the shortcutter intermediate vertices to
+    work with; a handful of rounds brings such detours close to the shortest
+    way around the obstacle.
+    """
+    for _ in range(_REFINE_ROUNDS):
+        path.subdivide()
+        simplifier.partialShortcutPath(path, 100, 20)
+        simplifier.reduceVertices(path, 100, 20)
+
+
+def plan_path(
+    spec: RobotSpec,
+    *,
+    start: ArrayLike,
+    goal: ArrayLike,
+    obstacles: Sequence[Box] = (),
+    time_limit_s: float = 5.0,
+    seed: int,
+    simplify: bool = True,
+) -> PlannedPath:
+    """Plan a collision-free joint path with RRTConnect within the joint limits.
+
+    Args:
+        spec: the robot.
+        start, goal: joint positions [rad].
+        obstacles: boxes in the base frame.
+        time_limit_s: solve time limit [s].
+        seed: OMPL seed (see ``seed_ompl``); same inputs + seed => same path.
+        simplify: run OMPL's path simplification (and a few shortcut rounds).
+
+    Raises:
+        PlanningError: start/goal out of limits or in collision (names the joint or
+            the contact pair), or no path found within the time limit.
+    """
+    if not (isinstance(time_limit_s, int | float) and math.isfinite(time_limit_s)) or (
+        time_limit_s <= 0
+    ):
+        raise PlanningError(
+            f"time_limit_s: expected a positive number of seconds, got {time_limit_s!r}"
+        )
+    seed_ompl(seed)
+    checker = CollisionChecker(spec, obstacles=obstacles)
+    q_start = checker.check_state(start, "start")
+    q_goal = checker.check_state(goal, "goal")
+    checker.padding_m = checker.planning_padding_m(q_start, q_goal)
+    step = motion_check_step_rad(spec, checker.padding_m)
+    n = spec.dof
+    t0 = time.perf_counter()
+
+    space = ob.RealVectorStateSpace(n)
+    bounds = ob.RealVectorBounds(n)
+    for i in range(n):
+        bounds.setLow(i, float(spec.lower[i]))
+        bounds.setHigh(i, float(spec.upper[i]))
+    space.setBounds(bounds)
+    ss = og.SimpleSetup(space)
+    qpos = checker.data.qpos
+    collide = checker.collide_current
+
+    def state_valid(state: ob.State) -> bool:
+        # hot path (tens of thousands of calls per plan): no numpy, no bounds check
+        # (the state space keeps samples and interpolations inside the joint limits)
+        for i in range(n):
+            qpos[i] = state[i]
+        return collide() == 0
+
+    ss.setStateValidityChecker(state_valid)
+    si = ss.getSpaceInformation()
+    si.setStateValidityCheckingResolution(step / space.getMaximumExtent())
+    ss.setPlanner(og.RRTConnect(si))
+    # SpaceInformation.allocState hands ownership to Python (freed with the
+    # wrapper); StateSpace.allocState would leak, and freeState would double-free.
+    s_state, g_state = si.allocState(), si.allocState()
+    for i in range(n):
+        s_state[i] = float(q_start[i])
+        g_state[i] = float(q_goal[i])
+    ss.setStartAndGoalStates(s_state, g_state)
+    ss.setup()
+
+    if si.checkMotion(s_state, g_state):
+        waypoints = np.stack([q_start, q_goal])
+        n_raw, direct, simplified = 2, True, False
+    else:
+        status = ss.solve(float(time_limit_s))
+        if status.getStatus() != ob.PlannerStatus.PlannerStatusType.EXACT_SOLUTION:
+            raise PlanningError(
+                f"no collision-free path from start to goal within time_limit_s = "
+                f"{time_limit_s:g} s ({PLANNER_NAME}, seed {seed}, OMPL status "
+                f"'{status.asString()}'); expected an exact solution: raise the time "
+                "limit or move the goal/obstacles"
+            )
+        n_raw = ss.getSolutionPath().getStateCount()
+        direct, simplified = False, simplify
+        if simplify:
+            ss.simplifySolution()
+            path = og.PathGeometric(ss.getSolutionPath())
+            _refine(path, og.PathSimplifier(si))
+        else:
+            path = og.PathGeometric(ss.getSolutionPath())
+        waypoints = _states_to_array(path, n)
+    elapsed = time.perf_counter() - t0
+
+    # Endpoints exactly as given (OMPL copies them, but keep the bits identical),
+    # then re-check the whole path independently of OMPL's motion validator.
+    waypoints[0], waypoints[-1] = q_start, q_goal
+    bad = checker.first_invalid(waypoints, step_rad=step)
+    if bad is not None:
+        raise PlanningError(
+            f"planned path fails the re-check at q = {np.round(bad, 4).tolist()} "
+            f"(clearance {checker.clearance_m(bad)}); this is a bug, please report it"
+        )
+    return PlannedPath(
+        joint_names=spec.joint_names,
+        waypoints=waypoints,
+        planner=PLANNER_NAME,
+        seed=int(seed),
+        planning_time_s=elapsed,
+        time_limit_s=float(time_limit_s),
+        path_length_rad=path_length_rad(waypoints),
+        n_states_before_simplify=n_raw,
+        direct=direct,
+        simplified=simplified,
+        padding_m=checker.padding_m,
+        check_step_rad=step,
+        obstacles=tuple(obstacles),
+    )

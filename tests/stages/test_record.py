@@ -1,0 +1,127 @@
+"""End-to-end: `pipeline record` through the real planner, simulator and writer."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+REPO = Path(__file__).parents[2]
+PIPELINE = [sys.executable, "-m", "pipeline"]
+
+
+def _params(tmp_path: Path, name: str = "params.yaml", **scenario_overrides: object) -> Path:
+    data = yaml.safe_load((REPO / "params.yaml").read_text())
+    data["scenarios"]["paper"]["hold_s"] = 0.3
+    data["scenarios"]["paper"].update(scenario_overrides)
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def _record(params: Path, out: Path, *extra: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [*PIPELINE, "record", "--params", str(params), "--out", str(out), *extra],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=REPO,
+    )
+
+
+def _mcap_bytes(out: Path) -> dict[str, bytes]:
+    return {p.parent.name: p.read_bytes() for p in sorted(out.glob("*/*.mcap"))}
+
+
+@pytest.mark.slow
+def test_two_runs_give_byte_identical_recordings(tmp_path):
+    params = _params(tmp_path)
+    first = _record(params, tmp_path / "a", "--jobs", "2")
+    second = _record(params, tmp_path / "b", "--jobs", "1")
+    assert first.returncode == 0, first.stderr
+    assert second.returncode == 0, second.stderr
+    a, b = _mcap_bytes(tmp_path / "a"), _mcap_bytes(tmp_path / "b")
+    assert sorted(a) == ["paper-ctc", "paper-pid"]
+    assert a == b
+    for name in a:
+        meta_a = (tmp_path / "a" / name / "metadata.yaml").read_bytes()
+        assert meta_a == (tmp_path / "b" / name / "metadata.yaml").read_bytes()
+
+
+@pytest.mark.slow
+def test_existing_recording_is_not_overwritten_without_force(tmp_path):
+    params = _params(tmp_path)
+    out = tmp_path / "rec"
+    assert _record(params, out, "--only", "paper-ctc").returncode == 0
+    before = _mcap_bytes(out)
+    again = _record(params, out, "--only", "paper-ctc")
+    assert again.returncode == 1
+    assert "recording exists" in again.stderr and "--force" in again.stderr
+    assert "Traceback" not in again.stderr
+    assert _mcap_bytes(out) == before
+    assert _record(params, out, "--only", "paper-ctc", "--force").returncode == 0
+
+
+@pytest.mark.slow
+def test_killed_run_leaves_no_partial_bag_and_keeps_earlier_ones(tmp_path):
+    # a 10-minute hold: the simulation and the write take well over the kill delay
+    params = _params(tmp_path, "long.yaml", hold_s=600.0)
+    out = tmp_path / "rec"
+    quick = _params(tmp_path)
+    assert _record(quick, out, "--only", "paper-pid").returncode == 0
+    earlier = _mcap_bytes(out)
+    proc = subprocess.Popen(
+        [*PIPELINE, "record", "--params", str(params), "--out", str(out), "--only", "paper-ctc"],
+        cwd=REPO,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    time.sleep(4.0)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    finals = sorted(p.name for p in out.iterdir() if not p.name.startswith("."))
+    assert finals == ["paper-pid"]
+    assert _mcap_bytes(out) == earlier
+
+
+def test_out_of_limits_goal_is_refused_before_any_work(tmp_path):
+    params = _params(tmp_path, goal={"joints": [0.0, 0.0, 0.0, 0.0, 0.0, 7.0]})
+    result = _record(params, tmp_path / "rec")
+    assert result.returncode == 1
+    assert "Traceback" not in result.stderr
+    assert re.search(
+        r"^error: .*params\.yaml: scenarios\.paper\.goal\.joints\[5\]: 7\.0 rad is outside "
+        r"wrist_3_joint's limits",
+        result.stderr,
+        re.MULTILINE,
+    ), result.stderr
+    assert not (tmp_path / "rec").exists()
+
+
+def test_colliding_goal_fails_its_episodes_with_the_contact(tmp_path):
+    # shoulder lift +1.2 rad swings the upper arm down through the pedestal and floor
+    params = _params(tmp_path, goal={"joints": [0.0, 1.2, 0.0, 0.0, 0.0, 0.0]})
+    result = _record(params, tmp_path / "rec", "--only", "paper-pid")
+    assert result.returncode == 1
+    assert "Traceback" not in result.stderr
+    lines = [ln for ln in result.stderr.splitlines() if ln.startswith("error: paper-pid:")]
+    assert len(lines) == 1, result.stderr
+    assert "goal" in lines[0] and "collision" in lines[0], lines[0]
+    assert not (tmp_path / "rec" / "paper-pid").exists()
+
+
+def test_bad_params_exit_1_with_one_line(tmp_path):
+    params = _params(tmp_path, robot="ur6")
+    result = _record(params, tmp_path / "rec")
+    assert result.returncode == 1
+    lines = [ln for ln in result.stderr.splitlines() if ln.strip()]
+    assert any("unknown robot 'ur6'" in ln and "did you mean 'ur5'" in ln for ln in lines)
+    assert "Traceback" not in result.stderr
