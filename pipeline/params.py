@@ -1,18 +1,17 @@
 """``params.yaml``: scenarios, controllers and episodes, validated once at the edge.
 
 An episode is scenario x controller x seed, keyed by a name (``paper-ctc``) that
-is also its recording directory and its DVC stage (``record@paper-ctc``). Field paths in errors match the YAML
-(``params.yaml: scenarios.paper.goal.joints: expected 6 values, got 5``).
+is also its recording directory and its DVC stage (``record@paper-ctc``). Field
+paths in errors match the YAML (``params.yaml: scenarios.paper.hold_s: ...``).
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
-
-import re
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
@@ -211,6 +210,9 @@ def parse_params(data: Any, *, source: str) -> Params:
     )
 
 
+_Loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
 def load_params(path: str | Path) -> Params:
     """Read and validate a params file.
 
@@ -221,7 +223,7 @@ def load_params(path: str | Path) -> Params:
     if not p.is_file():
         raise ParamsError(f"{p}: no such params file (pass --params PATH)")
     try:
-        data = yaml.safe_load(p.read_text(encoding="utf-8"))
+        data = yaml.load(p.read_text(encoding="utf-8"), Loader=_Loader)
     except (OSError, UnicodeDecodeError) as err:
         raise ParamsError(f"{p}: cannot read params file ({err})") from err
     except yaml.YAMLError as err:
