@@ -1,0 +1,211 @@
+"""Report-stage speed: recording decode throughput vs rosbags, and whole-report wall time.
+
+Prints one JSON object:
+- ``decode``: on one paper-like recording (10 s at 1 kHz, UR5, /joint_states and
+  /controller_state every step, /tf at 50 Hz), in one run: our reader from file to the
+  Polars sample frame (read, CRC checks, SHA-256, decompression, decoding; best of
+  repeats) in messages/s, against rosbags' ``deserialize_cdr`` and mcap_ros2's decoder on
+  the same two topics (raw message bytes loaded beforehand, so only their decoding is
+  timed), and the ratio to rosbags (target >= 10).
+- ``report_two_episodes_s``: ``run_report`` on two paper-like episodes (PID, CTC; 10 s at
+  1 kHz), figures and .rrd included (target <= 10 s).
+- ``report_synthetic``: ``run_report`` on 10 and 100 short synthetic episodes (2 s at
+  500 Hz, two controllers per scenario), to show the growth, and ``read_s``, the part
+  that reads the recordings (figures are drawn for at most 6 scenarios, so they add a
+  constant once there are more).
+
+The recording is written by the project's writer (pipeline.log.bag) when it is
+importable, else by tests/analysis/bagfactory.py (mcap_ros2). ``--recording PATH``
+measures the decode on an existing recording instead.
+
+Usage: python benches/report.py [--repeat 5] [--skip-synthetic] [--recording PATH]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+import numpy as np  # noqa: E402
+
+from pipeline.log.reader import read_recording  # noqa: E402
+from pipeline.stages.report import read_all, run_report  # noqa: E402
+from tests.analysis.bagfactory import paper_like, write_bag  # noqa: E402
+
+CONTROL_TOPICS = ("/joint_states", "/controller_state")
+
+
+def best_s(fn: Callable[[], object], repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def write_paper_like(root: Path, name: str, controller: str, *, scale: float) -> tuple[Path, str]:
+    """A 10 s, 1 kHz paper-like episode; returns (recording, writer used)."""
+    ep = paper_like(
+        name, controller, duration_s=10.0, motion_end_s=6.0, period_s=1e-3, error_scale=scale
+    )
+    try:
+        from pipeline.log.bag import write_episode_bag
+        from pipeline.robots import load_spec
+        from pipeline.sim.result import EpisodeResult, TrajectorySamples
+        from tests.analysis.bagfactory import default_settings
+    except ImportError:
+        return write_bag(root, ep), "tests/analysis/bagfactory.py (mcap_ros2)"
+    spec = load_spec("ur5")
+    n = len(ep.stamp_ns)
+    result = EpisodeResult(
+        spec.joint_names,
+        ep.stamp_ns,
+        ep.q,
+        ep.qd,
+        ep.q,
+        ep.qd,
+        ep.q_ref,
+        ep.qd_ref,
+        np.zeros((n, 6)),
+        ep.effort,
+        ep.effort,
+        np.zeros((n, 6), dtype=bool),
+    )
+    ts = np.linspace(0.0, 6.0, 601)
+    idx = np.searchsorted(ep.stamp_ns / 1e9, ts).clip(0, n - 1)
+    planned = TrajectorySamples(ts, ep.q_ref[idx], ep.qd_ref[idx], np.zeros((ts.size, 6)))
+    meta = {
+        "episode": name,
+        "scenario": "paper",
+        "controller": controller,
+        "robot": "ur5",
+        "seed": "0",
+        "settings": json.dumps(default_settings(ep)),
+    }
+    path = root / name
+    write_episode_bag(path, spec=spec, result=result, planned=planned, metadata=meta)
+    return path, "pipeline.log.bag.write_episode_bag"
+
+
+def decode_bench(recording: Path, repeat: int) -> dict[str, Any]:
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    rec = read_recording(recording)
+    ours_s = best_s(lambda: read_recording(recording), repeat)
+    raw: list[tuple[str, bytes, Any, Any]] = []
+    with open(rec.mcap_path, "rb") as fh:
+        for schema, channel, message in make_reader(fh).iter_messages(topics=CONTROL_TOPICS):
+            raw.append((schema.name, message.data, schema, channel))
+    # rosbags types from the schemas embedded in this recording (whatever ROS distro they are).
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.EMPTY)
+    for _, _, schema, _ in {r[2].id: r for r in raw}.values():
+        store.register(get_types_from_msg(schema.data.decode(), schema.name))
+    rosbags_s = best_s(lambda: [store.deserialize_cdr(d, n) for n, d, _, _ in raw], repeat)
+    factory = DecoderFactory()
+    decoders = {}
+    for _, _, schema, channel in raw:
+        decoders.setdefault(schema.id, factory.decoder_for(channel.message_encoding, schema))
+    mcap_ros2_s = best_s(lambda: [decoders[s.id](d) for _, d, s, _ in raw], max(1, repeat // 2))
+    by_topic = {}
+    for topic in CONTROL_TOPICS:
+        msgs = [(name, d) for name, d, _, c in raw if c.topic == topic]
+        secs = best_s(lambda msgs=msgs: [store.deserialize_cdr(d, n) for n, d in msgs], repeat)
+        by_topic[topic] = round(len(msgs) / secs)
+    n = len(raw)
+    assert n == rec.decoded_messages, (n, rec.decoded_messages)
+    return {
+        "recording_bytes": rec.size_bytes,
+        "messages": n,
+        "rows": rec.samples.height,
+        "ours_msgs_per_s": round(n / ours_s),
+        "rosbags_msgs_per_s": round(n / rosbags_s),
+        "rosbags_msgs_per_s_by_topic": by_topic,
+        "mcap_ros2_msgs_per_s": round(n / mcap_ros2_s),
+        "speedup_vs_rosbags": round(rosbags_s / ours_s, 1),
+        "speedup_vs_mcap_ros2": round(mcap_ros2_s / ours_s, 1),
+    }
+
+
+def synthetic(root: Path, count: int) -> Path:
+    folder = root / f"synthetic_{count}"
+    for k in range(count):
+        scenario = f"s{k // 2:03d}"
+        controller = ("pid", "ctc")[k % 2]
+        ep = paper_like(
+            f"{scenario}_{controller}",
+            controller,
+            duration_s=2.0,
+            motion_end_s=1.5,
+            period_s=2e-3,
+            error_scale=(3e-3, 1.5e-3)[k % 2],
+            scenario=scenario,
+            seed=k,
+        )
+        write_bag(folder, ep)
+    return folder
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--skip-synthetic", action="store_true")
+    parser.add_argument("--recording", type=Path, default=None)
+    args = parser.parse_args()
+    out: dict[str, Any] = {
+        "machine": {
+            "cpu": platform.processor() or platform.machine(),
+            "cores": os.cpu_count(),
+            "python": platform.python_version(),
+        },
+    }
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        rec_dir = root / "recordings"
+        pid, writer = write_paper_like(rec_dir, "pid_paper", "pid", scale=3.3e-3)
+        write_paper_like(rec_dir, "ctc_paper", "ctc", scale=1.8e-3)
+        out["writer"] = writer
+        target = args.recording if args.recording is not None else pid
+        out["decode"] = {"recording": str(args.recording or "paper-like 10 s, 1 kHz")}
+        out["decode"] |= decode_bench(target, args.repeat)
+        t0 = time.perf_counter()
+        run_report(recordings_dir=rec_dir, out_dir=root / "reports")
+        out["report_two_episodes_s"] = round(time.perf_counter() - t0, 2)
+        if not args.skip_synthetic:
+            rows = []
+            for count in (10, 100):
+                folder = synthetic(root, count)
+                t0 = time.perf_counter()
+                read_all(folder, skip_bad=False)
+                read_s = time.perf_counter() - t0
+                t0 = time.perf_counter()
+                run_report(recordings_dir=folder, out_dir=root / f"reports_{count}")
+                wall = time.perf_counter() - t0
+                rows.append(
+                    {
+                        "episodes": count,
+                        "s": round(wall, 2),
+                        "s_per_episode": round(wall / count, 3),
+                        "read_s": round(read_s, 2),
+                    }
+                )
+            out["report_synthetic"] = rows
+    sys.stdout.write(json.dumps(out, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,162 @@
+"""Per-episode facts from recordings: the episode table, effort limits, the robot spec.
+
+Everything is read from the recording's settings (tolerantly: an absent
+optional setting becomes null / "n/a", never a crash).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import polars as pl
+
+from pipeline.errors import SpecError
+from pipeline.log.reader import Recording
+from pipeline.robots import RobotSpec, builtin_robot_names, load_spec, parse_spec
+
+EPISODE_COLUMNS = (
+    "episode",
+    "controller",
+    "scenario",
+    "robot",
+    "seed",
+    "status",
+    "reason",
+    "motion_end_s",
+    "end_s",
+    "samples",
+    "source",
+    "sha256",
+)
+
+
+def episode_table(recordings: Sequence[Recording]) -> pl.DataFrame:
+    """One row per episode: identity, status, timing and provenance.
+
+    ``motion_end_s`` is when the reference stops (null if unknown); ``end_s``
+    the last sample's time [s].
+    """
+    rows: list[dict[str, Any]] = []
+    for rec in recordings:
+        times = rec.samples.get_column("time_s")
+        rows.append(
+            {
+                "episode": rec.episode,
+                "controller": rec.controller,
+                "scenario": rec.scenario,
+                "robot": rec.robot,
+                "seed": rec.meta("seed"),
+                "status": rec.status,
+                "reason": rec.reason,
+                "motion_end_s": rec.motion_end_s,
+                "end_s": float(times.max()) if times.len() else None,  # type: ignore[arg-type]
+                "samples": times.len() // max(len(rec.joint_names), 1),
+                "source": str(rec.source),
+                "sha256": rec.sha256,
+            }
+        )
+    schema = {
+        "episode": pl.String,
+        "controller": pl.String,
+        "scenario": pl.String,
+        "robot": pl.String,
+        "seed": pl.String,
+        "status": pl.String,
+        "reason": pl.String,
+        "motion_end_s": pl.Float64,
+        "end_s": pl.Float64,
+        "samples": pl.Int64,
+        "source": pl.String,
+        "sha256": pl.String,
+    }
+    return pl.DataFrame(rows, schema=schema, orient="row").sort("episode")
+
+
+def _robot_dict_to_yaml_form(data: dict[str, Any]) -> dict[str, Any]:
+    """Accept a spec dumped with ``dataclasses.asdict`` as well as the YAML form."""
+    joints = []
+    for j in data.get("joints", []):
+        if not isinstance(j, dict):
+            return data
+        jj = dict(j)
+        dh = jj.get("dh")
+        if isinstance(dh, dict):
+            jj["dh"] = [dh.get("alpha"), dh.get("a"), dh.get("d"), dh.get("theta_offset")]
+        inertial = jj.get("inertial")
+        if isinstance(inertial, dict) and isinstance(inertial.get("inertia"), list | tuple):
+            m = inertial["inertia"]
+            if len(m) == 3 and all(isinstance(r, list | tuple) for r in m):
+                inertial = dict(inertial)
+                inertial["inertia"] = [m[0][0], m[1][1], m[2][2], m[0][1], m[0][2], m[1][2]]
+                jj["inertial"] = inertial
+        if "collision_radius" in jj:
+            jj["collision"] = {"radius": jj.pop("collision_radius")}
+        joints.append(jj)
+    out = {k: v for k, v in data.items() if k in ("name", "convention", "angle_unit")}
+    out["joints"] = joints
+    return out
+
+
+def robot_spec(rec: Recording) -> RobotSpec | None:
+    """The robot as recorded in settings.robot; else the built-in robot of that name.
+
+    Returns None when neither is available (the report then skips what needs it).
+    """
+    data = rec.settings.get("robot")
+    source = f"{rec.mcap_path}: settings.robot"
+    if isinstance(data, dict):
+        for candidate in (data, _robot_dict_to_yaml_form(data)):
+            try:
+                return parse_spec(candidate, source=source)
+            except (SpecError, TypeError, ValueError):
+                continue
+        return None
+    name = data if isinstance(data, str) else rec.robot
+    if name in builtin_robot_names():
+        return load_spec(name)
+    return None
+
+
+def effort_limits(rec: Recording, spec: RobotSpec | None) -> dict[str, float | None]:
+    """Effort limit [N m] per joint of the recording (None where unknown)."""
+    limits: dict[str, float | None] = dict.fromkeys(rec.joint_names)
+    if spec is not None:
+        for j in spec.joints:
+            if j.name in limits:
+                limits[j.name] = j.limits.effort
+        return limits
+    data = rec.settings.get("robot")
+    joints = data.get("joints") if isinstance(data, dict) else None
+    for j in joints if isinstance(joints, list) else []:
+        if not isinstance(j, dict):
+            continue
+        lim = j.get("limits")
+        value = lim.get("effort") if isinstance(lim, dict) else None
+        if j.get("name") in limits and isinstance(value, int | float) and math.isfinite(value):
+            limits[str(j["name"])] = float(value)
+    return limits
+
+
+def limits_table(recordings: Sequence[Recording]) -> pl.DataFrame:
+    """Effort limit per episode and joint (null where unknown)."""
+    rows = []
+    for rec in recordings:
+        for joint, limit in effort_limits(rec, robot_spec(rec)).items():
+            rows.append({"episode": rec.episode, "joint": joint, "effort_limit_nm": limit})
+    return pl.DataFrame(
+        rows,
+        schema={"episode": pl.String, "joint": pl.String, "effort_limit_nm": pl.Float64},
+        orient="row",
+    )
+
+
+def setting(settings: dict[str, Any], *path: str, default: Any = "n/a") -> Any:
+    """A nested setting (``setting(s, "planner", "planner")``) or ``default``."""
+    node: Any = settings
+    for key in path:
+        if not isinstance(node, dict) or key not in node:
+            return default
+        node = node[key]
+    return default if node is None or node == "" else node

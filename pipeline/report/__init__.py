@@ -1,0 +1,3 @@
+"""Report outputs: metrics.json + plot CSVs, matplotlib figures, Markdown, Rerun .rrd."""
+
+from __future__ import annotations

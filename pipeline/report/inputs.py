@@ -1,0 +1,107 @@
+"""What every report writer reads: the recordings and the frames computed from them."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import polars as pl
+from numpy.typing import NDArray
+
+from pipeline.log.reader import Recording
+
+# Matplotlib's tab10, as RGB bytes: one colour per episode within a scenario.
+PALETTE: tuple[tuple[int, int, int], ...] = (
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (127, 127, 127),
+    (188, 189, 34),
+    (23, 190, 207),
+)
+
+
+@dataclass(frozen=True)
+class Skipped:
+    """A recording left out with --skip-bad, and why."""
+
+    source: str
+    problem: str
+
+
+@dataclass(frozen=True)
+class ReportData:
+    """Recordings plus the frames the report is made of.
+
+    Attributes:
+        recordings: one per episode, sorted by episode name.
+        episodes: :func:`pipeline.analysis.episodes.episode_table`.
+        metrics: :func:`pipeline.analysis.metrics.joint_metrics`.
+        comparisons: :func:`pipeline.analysis.metrics.comparisons`.
+        baseline: the baseline controller name.
+        skipped: recordings that could not be read (with --skip-bad).
+        recordings_dir: where the recordings were found.
+    """
+
+    recordings: tuple[Recording, ...]
+    episodes: pl.DataFrame
+    metrics: pl.DataFrame
+    comparisons: pl.DataFrame
+    baseline: str
+    skipped: tuple[Skipped, ...]
+    recordings_dir: Path
+
+    @cached_property
+    def _metric_rows(self) -> dict[tuple[str, str], dict[str, Any]]:
+        return {(r["episode"], r["joint"]): r for r in self.metrics.iter_rows(named=True)}
+
+    def metric(self, episode: str, joint: str | None, column: str) -> Any:
+        """One metric value (None when absent)."""
+        row = self._metric_rows.get((episode, joint or ""))
+        return None if row is None else row.get(column)
+
+    def recording(self, episode: str) -> Recording:
+        for rec in self.recordings:
+            if rec.episode == episode:
+                return rec
+        raise KeyError(episode)
+
+    def scenarios(self) -> list[str]:
+        return sorted({rec.scenario for rec in self.recordings})
+
+    def in_scenario(self, scenario: str) -> list[Recording]:
+        """Episodes of a scenario, baseline controller first, then by controller and name."""
+        recs = [r for r in self.recordings if r.scenario == scenario]
+        return sorted(recs, key=lambda r: (r.controller != self.baseline, r.controller, r.episode))
+
+    def color(self, episode: str) -> tuple[int, int, int]:
+        rec = self.recording(episode)
+        index = [r.episode for r in self.in_scenario(rec.scenario)].index(episode)
+        return PALETTE[index % len(PALETTE)]
+
+    def label(self, episode: str) -> str:
+        """Legend label: the controller, plus the episode when it is not unique."""
+        rec = self.recording(episode)
+        same = [r for r in self.in_scenario(rec.scenario) if r.controller == rec.controller]
+        return rec.controller if len(same) == 1 else f"{rec.controller} ({episode})"
+
+
+def wide(rec: Recording, column: str) -> NDArray[np.float64]:
+    """(N, n) array of one sample column, joints in the recording's order."""
+    n = len(rec.joint_names)
+    values = rec.samples.get_column(column).to_numpy()
+    return np.asarray(values, dtype=np.float64).reshape(-1, n)
+
+
+def times_s(rec: Recording) -> NDArray[np.float64]:
+    """(N,) sample times [s]."""
+    n = len(rec.joint_names)
+    values = rec.samples.get_column("time_s").to_numpy()[::n]
+    return np.asarray(values, dtype=np.float64)

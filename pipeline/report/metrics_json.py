@@ -1,0 +1,156 @@
+"""metrics.json (stable keys, deterministic bytes) and the series CSVs for ``dvc plots``."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import polars as pl
+
+from pipeline.analysis.metrics import (
+    COMPARED_METRICS,
+    FINAL_WINDOW_S,
+    SETTLING_TOLERANCE_RAD,
+)
+from pipeline.report.inputs import ReportData, times_s, wide
+
+METRICS_FILE = "metrics.json"
+PLOTS_DIR = "plots"
+# Series CSVs are thinned to at most this many samples per episode and joint.
+MAX_CSV_POINTS = 1000
+SIGNIFICANT_DIGITS = 9
+
+# metrics.json key -> metric column (and its unit, documented in docs/report.md).
+JOINT_KEYS = (
+    ("max_abs_error", "max_abs_error"),
+    ("rms_error", "rms_error"),
+    ("final_error", "final_error"),
+    ("settling_time", "settling_time"),
+    ("overshoot", "overshoot"),
+    ("peak_velocity", "peak_velocity"),
+    ("peak_velocity_time", "peak_velocity_time"),
+    ("rms_effort", "rms_effort"),
+    ("saturation_fraction", "saturation_fraction"),
+)
+
+
+def number(value: Any) -> float | None:
+    """A float rounded to :data:`SIGNIFICANT_DIGITS` digits; None for null/NaN/inf."""
+    if value is None:
+        return None
+    x = float(value)
+    if not math.isfinite(x):
+        return None
+    return float(f"{x:.{SIGNIFICANT_DIGITS}g}") + 0.0  # + 0.0 turns -0.0 into 0.0
+
+
+def metrics_document(data: ReportData) -> dict[str, Any]:
+    """The metrics.json content as plain data (see docs/report.md for every key)."""
+    episodes: dict[str, Any] = {}
+    by_episode = {
+        key[0]: group for key, group in data.metrics.group_by("episode", maintain_order=True)
+    }
+    for row in data.episodes.iter_rows(named=True):
+        ep = row["episode"]
+        rec = data.recording(ep)
+        group = by_episode.get(ep)
+        joints: dict[str, Any] = {}
+        if group is not None:
+            for m in group.iter_rows(named=True):
+                joints[m["joint"]] = {key: number(m[col]) for key, col in JOINT_KEYS}
+        episodes[ep] = {
+            "controller": row["controller"],
+            "scenario": row["scenario"],
+            "robot": row["robot"],
+            "seed": row["seed"],
+            "status": row["status"],
+            "reason": row["reason"],
+            "motion_end_s": number(row["motion_end_s"]),
+            "end_s": number(row["end_s"]),
+            "recording": {
+                "path": _relative(rec.source, data.recordings_dir),
+                "sha256": rec.sha256,
+            },
+            "joints": joints,
+        }
+    comparisons: list[dict[str, Any]] = []
+    key = ["scenario", "baseline", "candidate"]
+    for (scenario, base, cand), group in data.comparisons.sort(key).group_by(
+        key, maintain_order=True
+    ):
+        joints = {}
+        for m in group.iter_rows(named=True):
+            joints[m["joint"]] = {
+                f"{metric}_reduction_pct": number(m[f"{metric}_reduction_pct"])
+                for metric in COMPARED_METRICS
+            }
+        comparisons.append(
+            {"scenario": scenario, "baseline": base, "candidate": cand, "joints": joints}
+        )
+    return {
+        "parameters": {
+            "baseline_controller": data.baseline,
+            "final_window_s": FINAL_WINDOW_S,
+            "settling_tolerance_rad": SETTLING_TOLERANCE_RAD,
+            "reduction": "(baseline - candidate) / baseline * 100; null when baseline is 0",
+        },
+        "episodes": episodes,
+        "comparisons": comparisons,
+        "skipped": [{"path": s.source, "problem": s.problem} for s in data.skipped],
+    }
+
+
+def _relative(path: Path, root: Path) -> str:
+    try:
+        return path.resolve().relative_to(root.resolve()).as_posix()
+    except ValueError:
+        return path.as_posix()
+
+
+def dumps_metrics(doc: dict[str, Any]) -> str:
+    """Deterministic JSON text: sorted keys, 2-space indent, trailing newline."""
+    return json.dumps(doc, indent=2, sort_keys=True, allow_nan=False, ensure_ascii=False) + "\n"
+
+
+def write_metrics(data: ReportData, out_dir: Path) -> str:
+    """Write metrics.json into ``out_dir``; return its relative path."""
+    (out_dir / METRICS_FILE).write_text(dumps_metrics(metrics_document(data)), encoding="utf-8")
+    return METRICS_FILE
+
+
+def series_frame(data: ReportData, column: str) -> pl.DataFrame:
+    """Long form ``time_s, episode, joint, value`` of one sample column (thinned)."""
+    parts = []
+    for rec in data.recordings:
+        t = times_s(rec)
+        step = max(1, int(np.ceil(t.size / MAX_CSV_POINTS)))
+        idx = np.arange(0, t.size, step)
+        values = wide(rec, column)[idx]
+        n = len(rec.joint_names)
+        parts.append(
+            pl.DataFrame(
+                {
+                    "time_s": np.repeat(np.round(t[idx], 9), n),
+                    "episode": [rec.episode] * (idx.size * n),
+                    "joint": list(rec.joint_names) * idx.size,
+                    # + 0.0 writes -0.0 as 0.0
+                    "value": values.reshape(-1) + 0.0,
+                }
+            )
+        )
+    return pl.concat(parts) if parts else pl.DataFrame()
+
+
+def write_series_csvs(data: ReportData, out_dir: Path) -> list[str]:
+    """reports/plots/errors.csv and velocities.csv (columns time_s, episode, joint, value)."""
+    folder = out_dir / PLOTS_DIR
+    folder.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name, column in (("errors.csv", "error_rad"), ("velocities.csv", "velocity_rad_s")):
+        frame = series_frame(data, column)
+        frame.write_csv(folder / name)
+        written.append(f"{PLOTS_DIR}/{name}")
+    return written

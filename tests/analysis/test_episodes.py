@@ -1,0 +1,62 @@
+"""Episode facts from settings: tolerant of missing or differently shaped settings."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.analysis.episodes import effort_limits, episode_table, robot_spec, setting
+from pipeline.log.reader import Recording, read_recording
+from pipeline.model.dh import forward_kinematics
+from pipeline.robots import load_spec
+from tests.analysis.bagfactory import default_settings, paper_like, write_bag
+
+
+def _recording(tmp_path: Path, settings: dict | None, name: str = "ep") -> Recording:
+    ep = paper_like(name, "pid", duration_s=0.2, motion_end_s=0.1)
+    ep.settings = default_settings(ep) if settings is None else settings
+    return read_recording(write_bag(tmp_path, ep))
+
+
+def test_robot_from_settings_has_the_same_kinematics_as_the_builtin(tmp_path: Path) -> None:
+    rec = _recording(tmp_path, None)
+    spec = robot_spec(rec)
+    assert spec is not None and spec.joint_names == load_spec("ur5").joint_names
+    q = np.array([0.1, -0.5, 0.7, -1.0, 0.3, 0.2])
+    np.testing.assert_allclose(forward_kinematics(spec, q), forward_kinematics(load_spec("ur5"), q))
+
+
+def test_robot_dumped_as_dataclasses_is_understood_too(tmp_path: Path) -> None:
+    ep = paper_like("dc", "pid", duration_s=0.2)
+    settings = default_settings(ep)
+    settings["robot"] = dataclasses.asdict(load_spec("ur5"))
+    rec = _recording(tmp_path, settings, "dc")
+    spec = robot_spec(rec)
+    assert spec is not None
+    assert effort_limits(rec, spec)["wrist_3_joint"] == 28.0
+
+
+def test_missing_settings_fall_back_to_metadata_and_na(tmp_path: Path) -> None:
+    rec = _recording(tmp_path, {})
+    assert robot_spec(rec) == load_spec("ur5")  # built-in of the recorded robot name
+    table = episode_table([rec])
+    row = table.row(0, named=True)
+    assert (row["controller"], row["scenario"], row["status"]) == ("pid", "paper", "ok")
+    assert row["motion_end_s"] == pytest.approx(0.1)  # last planned point
+    assert setting(rec.settings, "planner", "planner") == "n/a"
+
+
+def test_unusable_robot_settings_give_no_spec_and_raw_limits(tmp_path: Path) -> None:
+    ep = paper_like("raw", "pid", duration_s=0.2)
+    settings = default_settings(ep)
+    settings["robot"] = {
+        "name": "odd",
+        "joints": [{"name": "shoulder_pan_joint", "limits": {"effort": 99.0}}],
+    }
+    rec = _recording(tmp_path, settings, "raw")
+    assert robot_spec(rec) is None
+    limits = effort_limits(rec, None)
+    assert limits["shoulder_pan_joint"] == 99.0 and limits["elbow_joint"] is None

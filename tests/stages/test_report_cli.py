@@ -1,0 +1,169 @@
+"""`pipeline report` as a user meets it: errors, --skip-bad, and never losing old reports."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pipeline.cli import main
+from pipeline.errors import ReportError
+from pipeline.stages import report as report_stage
+from tests.analysis.bagfactory import damage, paper_like, write_bag
+
+KINDS = ("truncated", "bitflip", "empty", "not_mcap", "no_joint_states")
+
+
+def _good(root: Path) -> None:
+    write_bag(root, paper_like("pid_ok", "pid", duration_s=1.5, motion_end_s=1.0))
+    write_bag(root, paper_like("ctc_ok", "ctc", duration_s=1.5, motion_end_s=1.0))
+
+
+def _bad(root: Path, kind: str) -> Path:
+    ep = paper_like(f"bad_{kind}", "pid", duration_s=0.5, scenario="broken")
+    if kind == "no_joint_states":
+        return write_bag(root, ep, topics=("/controller_state", "/planned_trajectory"))
+    path = write_bag(root, ep)
+    damage(path, kind)
+    return path
+
+
+def _old_reports(root: Path) -> dict[str, bytes]:
+    out = root / "reports"
+    (out / "figures").mkdir(parents=True)
+    (out / "report.md").write_text("earlier report\n")
+    (out / "metrics.json").write_text('{"earlier": true}\n')
+    (out / "figures" / "old.png").write_bytes(b"png")
+    return _snapshot(out)
+
+
+def _snapshot(out: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+
+
+def _run(monkeypatch: pytest.MonkeyPatch, root: Path, *args: str) -> int:
+    monkeypatch.chdir(root)
+    monkeypatch.setattr(sys, "argv", ["pipeline", "report", *args])
+    with pytest.raises(SystemExit) as info:
+        main()
+    code = info.value.code
+    return int(code) if code is not None else 0
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_bad_recording_fails_with_one_line_and_keeps_old_reports(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], kind: str
+) -> None:
+    _good(tmp_path / "recordings")
+    bad = _bad(tmp_path / "recordings", kind)
+    before = _old_reports(tmp_path)
+    assert _run(monkeypatch, tmp_path) == 1
+    err = capsys.readouterr().err
+    errors = [line for line in err.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "Traceback" not in err
+    assert bad.name in errors[0] and "--skip-bad" in errors[0]
+    assert _snapshot(tmp_path / "reports") == before
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+@pytest.mark.slow
+def test_skip_bad_reports_the_rest_and_lists_what_was_skipped(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    _good(tmp_path / "recordings")
+    bad = [_bad(tmp_path / "recordings", kind) for kind in KINDS]
+    _old_reports(tmp_path)
+    assert _run(monkeypatch, tmp_path, "--skip-bad") == 0
+    out = capsys.readouterr()
+    text = (tmp_path / "reports" / "report.md").read_text(encoding="utf-8")
+    doc = json.loads((tmp_path / "reports" / "metrics.json").read_text(encoding="utf-8"))
+    assert set(doc["episodes"]) == {"pid_ok", "ctc_ok"}
+    assert len(doc["skipped"]) == len(KINDS)
+    for path in bad:
+        assert path.name in text
+        assert path.name in out.err
+    # The stale figure of the earlier report is gone with the folder it was in.
+    assert not (tmp_path / "reports" / "figures" / "old.png").exists()
+
+
+def test_two_recordings_of_one_episode_name_are_refused(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    _good(tmp_path / "recordings" / "a")
+    _good(tmp_path / "recordings" / "b")
+    assert _run(monkeypatch, tmp_path) == 1
+    err = capsys.readouterr().err
+    assert "episode 'ctc_ok' is recorded twice" in err and "recordings/b/ctc_ok" in err
+
+
+def test_no_recordings_says_to_run_record_first(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    (tmp_path / "recordings").mkdir()
+    assert _run(monkeypatch, tmp_path) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("error: no recordings found in recordings")
+    assert "pipeline record" in err
+
+
+def test_unknown_baseline_lists_controllers_present(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    _good(tmp_path / "recordings")
+    assert _run(monkeypatch, tmp_path, "--baseline", "lqr") == 1
+    err = capsys.readouterr().err.strip()
+    assert err == (
+        "error: unknown baseline controller 'lqr'; controllers in the recordings: ctc, pid "
+        "(choose one with --baseline)"
+    )
+    assert not (tmp_path / "reports").exists()
+
+
+def test_failure_while_writing_leaves_earlier_reports_and_no_temporary_files(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _good(tmp_path / "recordings")
+    before = _old_reports(tmp_path)
+
+    def broken_rrd(*args: object, **kwargs: object) -> None:
+        raise OSError("disk full")
+
+    monkeypatch.setattr(report_stage, "write_rrd", broken_rrd)
+    with pytest.raises(ReportError, match=r"disk full.*earlier reports are untouched"):
+        report_stage.run_report(
+            recordings_dir=tmp_path / "recordings", out_dir=tmp_path / "reports"
+        )
+    assert _snapshot(tmp_path / "reports") == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["recordings", "reports"]
+
+
+@pytest.mark.slow
+def test_cli_process_prints_one_error_line_without_traceback(tmp_path: Path) -> None:
+    recordings = tmp_path / "recordings"
+    _bad(recordings, "truncated")
+    proc = subprocess.run(
+        [sys.executable, "-c", "from pipeline.cli import main; main()", "report"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 1
+    assert proc.stderr.count("\n") == 1 and proc.stderr.startswith("error: ")
+    assert "truncated" in proc.stderr and "Traceback" not in proc.stderr
+    assert not (tmp_path / "reports").exists()
+
+
+@pytest.mark.slow
+def test_successful_run_prints_a_summary_table(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    _good(tmp_path / "recordings")
+    assert _run(monkeypatch, tmp_path) == 0
+    out = capsys.readouterr().out
+    assert "pid_ok" in out and "ctc_ok" in out and "wrote" in out
+    for name in ("report.md", "metrics.json", "recording.rrd", "plots/errors.csv"):
+        assert (tmp_path / "reports" / name).is_file()
