@@ -40,7 +40,7 @@ def _num(x: Any, fmt: str = ".3g") -> str:
 
 def _pct(x: Any) -> str:
     if x is None:
-        return "— (baseline is 0)"
+        return "— (divisor ≈ 0)"
     return f"{float(x):.1f} %" if abs(float(x)) < 1e4 else f"{float(x):.3g} %"
 
 
@@ -312,8 +312,13 @@ def _paper_pair(data: ReportData) -> tuple[Recording, Recording] | None:
     return None
 
 
+# Below this a joint error is numerical noise (a perfect-model CTC settles to ~1e-13 rad);
+# dividing by it gives meaningless percentages like 1e10 %, so such ratios are not shown.
+ERROR_FLOOR_RAD = 1e-9
+
+
 def _red(base: Any, cand: Any, by: Any) -> Any:
-    if base is None or cand is None or by in (None, 0, 0.0):
+    if base is None or cand is None or by is None or abs(float(by)) < ERROR_FLOOR_RAD:
         return None
     return (float(base) - float(cand)) / float(by) * 100.0
 
