@@ -20,3 +20,6 @@ METADATA_EPISODE = "armlab.episode"
 DEFAULT_PARAMS = "params.yaml"
 DEFAULT_RECORDINGS_DIR = "recordings"
 DEFAULT_REPORTS_DIR = "reports"
+
+# "Error at the target": mean |error| over the last min(FINAL_WINDOW_S, hold / 2) seconds.
+FINAL_WINDOW_S = 0.5

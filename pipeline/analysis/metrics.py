@@ -29,9 +29,9 @@ from collections.abc import Sequence
 
 import polars as pl
 
+from pipeline.constants import FINAL_WINDOW_S
 from pipeline.errors import ReportError
 
-FINAL_WINDOW_S = 0.5
 SETTLING_TOLERANCE_RAD = 1e-3
 SATURATION_REL_TOL = 1e-6
 MIN_TRAVEL_RAD = 1e-9

@@ -9,9 +9,9 @@ import polars as pl
 
 from pipeline.analysis.episodes import setting
 from pipeline.analysis.metrics import (
-    FINAL_WINDOW_S,
     SETTLING_TOLERANCE_RAD,
 )
+from pipeline.constants import FINAL_WINDOW_S
 from pipeline.log.reader import Recording
 from pipeline.report import paper
 from pipeline.report.figures import FigureFile

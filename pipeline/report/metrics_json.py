@@ -12,9 +12,9 @@ import polars as pl
 
 from pipeline.analysis.metrics import (
     COMPARED_METRICS,
-    FINAL_WINDOW_S,
     SETTLING_TOLERANCE_RAD,
 )
+from pipeline.constants import FINAL_WINDOW_S
 from pipeline.report.inputs import ReportData, times_s, wide
 
 METRICS_FILE = "metrics.json"

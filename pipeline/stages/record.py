@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from pipeline import __version__
+from pipeline.constants import FINAL_WINDOW_S
 from pipeline.errors import ParamsError, PipelineError
 from pipeline.params import Episode, Params, ScenarioParams
 from pipeline.planning import PlannedPath
@@ -320,7 +321,8 @@ def _run_and_write(
         force=force,
     )
     err = np.abs(result.q_ref - result.q)
-    n_hold = max(1, round(min(scenario.hold_s, 0.5) / control_dt_s))
+    # same window as the report's "error at the target"
+    n_hold = max(1, round(min(FINAL_WINDOW_S, scenario.hold_s / 2) / control_dt_s))
     return EpisodeOutcome(
         name=episode.name,
         status=result.status,
