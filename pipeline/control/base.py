@@ -148,6 +148,39 @@ def _per_joint(controller: str, spec: RobotSpec, g: GainSpec, value: Any, where:
     return arr
 
 
+TUNING_KEYS = ("omega_n_rad_s", "zeta")
+
+
+@dataclass(frozen=True)
+class Tuning:
+    """The knobs that choose default gains: closed-loop natural frequency and damping."""
+
+    omega_n_rad_s: float = DEFAULT_OMEGA_N_RAD_S
+    zeta: float = DEFAULT_ZETA
+
+    def settings(self) -> dict[str, float]:
+        return {"omega_n_rad_s": self.omega_n_rad_s, "zeta": self.zeta}
+
+
+def split_tuning(gains: Any, *, where: str) -> tuple[Tuning, Any]:
+    """Separate the tuning knobs (``omega_n_rad_s``, ``zeta``) from explicit gains.
+
+    The knobs choose the default gains (the fair-comparison mapping, see
+    docs/control.md); explicit gains such as ``kp`` then override those defaults.
+    """
+    if not isinstance(gains, Mapping):
+        return Tuning(), gains  # None, or a wrong type that resolve_gains reports
+    tuning: dict[str, float] = {}
+    for key in TUNING_KEYS:
+        if key in gains:
+            value = gains[key]
+            if not (_is_number(value) and math.isfinite(value) and value > 0):
+                raise ParamsError(f"{where}.{key}: expected a positive number, got {value!r}")
+            tuning[key] = float(value)
+    rest = {k: v for k, v in gains.items() if k not in TUNING_KEYS}
+    return Tuning(**tuning), rest
+
+
 def settings_of(gains: Mapping[str, Any]) -> dict[str, Any]:
     """JSON-serializable copy of resolved gains (lists of floats, bools)."""
     return {k: (v if isinstance(v, bool) else [float(x) for x in v]) for k, v in gains.items()}

@@ -23,6 +23,7 @@ from pipeline.control.base import (
     check_tuning,
     resolve_gains,
     settings_of,
+    split_tuning,
 )
 from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
@@ -54,7 +55,15 @@ class ComputedTorqueController:
         self, spec: RobotSpec, gains: Mapping[str, Any] | None = None, *, where: str = "gains"
     ) -> None:
         spec.require_dynamics("the computed-torque controller")
-        self._gains = resolve_gains(NAME, spec, GAINS, default_gains(spec), gains, where=where)
+        self._tuning, explicit = split_tuning(gains, where=where)
+        self._gains = resolve_gains(
+            NAME,
+            spec,
+            GAINS,
+            default_gains(spec, omega_n_rad_s=self._tuning.omega_n_rad_s, zeta=self._tuning.zeta),
+            explicit,
+            where=where,
+        )
         self._kp: F64 = self._gains["kp"]
         self._kd: F64 = self._gains["kd"]
         self._model = build_pinocchio_model(spec)
@@ -65,7 +74,7 @@ class ComputedTorqueController:
         return NAME
 
     def settings(self) -> dict[str, Any]:
-        return settings_of(self._gains)
+        return {**self._tuning.settings(), **settings_of(self._gains)}
 
     def reset(self) -> None:
         """Stateless: nothing to forget."""

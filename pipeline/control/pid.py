@@ -30,6 +30,7 @@ from pipeline.control.base import (
     nominal_mass_diagonal,
     resolve_gains,
     settings_of,
+    split_tuning,
 )
 from pipeline.errors import ParamsError
 from pipeline.robots.spec import RobotSpec
@@ -83,7 +84,15 @@ class PidController:
     def __init__(
         self, spec: RobotSpec, gains: Mapping[str, Any] | None = None, *, where: str = "gains"
     ) -> None:
-        g = resolve_gains(NAME, spec, GAINS, default_gains(spec), gains, where=where)
+        self._tuning, explicit = split_tuning(gains, where=where)
+        g = resolve_gains(
+            NAME,
+            spec,
+            GAINS,
+            default_gains(spec, omega_n_rad_s=self._tuning.omega_n_rad_s, zeta=self._tuning.zeta),
+            explicit,
+            where=where,
+        )
         if (g["i_clamp_min"] > g["i_clamp_max"]).any():
             raise ParamsError(
                 f"{where}.i_clamp_min: must be <= i_clamp_max, got {g['i_clamp_min'].tolist()} "
@@ -107,7 +116,7 @@ class PidController:
         return NAME
 
     def settings(self) -> dict[str, Any]:
-        return settings_of(self._gains)
+        return {**self._tuning.settings(), **settings_of(self._gains)}
 
     def reset(self) -> None:
         self._i_term[:] = 0.0

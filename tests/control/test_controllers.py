@@ -118,6 +118,8 @@ def test_scalar_gain_applies_to_every_joint_and_settings_report_every_gain(ur5):
         "i_clamp_max",
         "antiwindup",
         "ff_velocity_scale",
+        "omega_n_rad_s",
+        "zeta",
     }
     assert settings["kp"] == [100.0] * 6
     assert settings["ff_velocity_scale"] == [0.0] * 5 + [0.5]
@@ -129,7 +131,7 @@ def test_scalar_gain_applies_to_every_joint_and_settings_report_every_gain(ur5):
 @pytest.mark.parametrize("name", ["ctc", "pd_gravity"])
 def test_model_based_settings_are_json_and_complete(ur5, name):
     settings = make_controller(name, ur5).settings()
-    assert set(settings) == {"kp", "kd"}
+    assert set(settings) == {"kp", "kd", "omega_n_rad_s", "zeta"}
     assert json.loads(json.dumps(settings)) == settings
 
 
@@ -261,3 +263,25 @@ def test_pid_velocity_feed_forward_scales_the_reference_velocity(ur5):
     qd_ref = np.full(6, 0.5)
     tau = ctl.compute(np.zeros(6), qd_ref, np.zeros(6), qd_ref, np.zeros(6), DT_S)
     np.testing.assert_allclose(tau, np.array(scale) * 0.5)
+
+
+@pytest.mark.parametrize("name", ["pid", "ctc", "pd_gravity"])
+def test_tuning_knobs_choose_the_defaults_and_explicit_gains_override_them(ur5, name):
+    from pipeline.control import default_gains
+
+    fast = make_controller(name, ur5, {"omega_n_rad_s": 60.0, "zeta": 0.8})
+    expected = default_gains(ur5, name, omega_n_rad_s=60.0, zeta=0.8)
+    settings = fast.settings()
+    assert settings["omega_n_rad_s"] == 60.0 and settings["zeta"] == 0.8
+    for key, value in expected.items():
+        assert np.broadcast_to(settings[key], ur5.dof) == pytest.approx(
+            np.broadcast_to(value, ur5.dof)
+        )
+    override = make_controller(name, ur5, {"omega_n_rad_s": 60.0, "kp": 5.0}).settings()
+    assert override["kp"] == [5.0] * ur5.dof
+    assert override["kd"] == pytest.approx(default_gains(ur5, name, omega_n_rad_s=60.0)["kd"])
+
+
+def test_bad_tuning_knob_names_the_key(ur5):
+    with pytest.raises(ParamsError, match=r"controllers\.ctc\.gains\.zeta: expected a positive"):
+        make_controller("ctc", ur5, {"zeta": -1.0}, source="controllers.ctc")
