@@ -3,6 +3,8 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+# dvc runs stage commands (`pipeline ...`) through the shell: put the venv first on PATH
+RUN    := PATH="$(CURDIR)/$(BIN):$$PATH"
 
 .PHONY: demo test clean
 
@@ -13,13 +15,17 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/pipeline ik-check ur5 --samples 500 --out reports/ik-check
+	$(RUN) dvc repro
+	@echo
+	@echo "Report:      reports/report.md  (figures in reports/figures/, numbers in reports/metrics.json)"
+	@echo "Rerun view:  $(BIN)/rerun reports/recording.rrd"
+	@echo "ROS 2 bags:  recordings/*/  (ros2 bag info recordings/paper-ctc, or open the .mcap in Foxglove)"
 
 test: $(STAMP)
 	$(BIN)/ruff check pipeline tests benches
 	$(BIN)/ruff format --check pipeline tests benches
 	$(BIN)/mypy
-	$(BIN)/pytest
+	$(RUN) pytest
 
 clean:
 	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache
