@@ -1,0 +1,59 @@
+"""The README path on a fresh clone: `dvc repro` runs record -> report, then nothing.
+
+Clones this repository's HEAD into a temp dir and drives DVC there with the
+clone's own code (PYTHONPATH) and this venv's tools (PATH).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).parents[1]
+
+
+def _run(cmd: list[str], cwd: Path, env: dict[str, str]) -> str:
+    result = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=900)
+    assert result.returncode == 0, f"{cmd}: {result.stdout}\n{result.stderr}"
+    return result.stdout + result.stderr
+
+
+@pytest.mark.slow
+def test_fresh_clone_dvc_repro_runs_once_then_only_what_a_gain_change_touches(tmp_path):
+    clone = tmp_path / "clone"
+    subprocess.run(["git", "clone", "-q", str(REPO), str(clone)], check=True)
+    env = {
+        **os.environ,
+        "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}",
+        "PYTHONPATH": str(clone),
+        "DVC_NO_ANALYTICS": "1",
+    }
+    dvc = [str(Path(sys.executable).parent / "dvc")]
+
+    first = _run([*dvc, "repro"], clone, env)
+    ran = set(re.findall(r"Running stage '([^']+)'", first))
+    assert ran == {"record@paper-pid", "record@paper-ctc", "report"}, first
+    reports = clone / "reports"
+    for name in ("report.md", "metrics.json", "recording.rrd"):
+        assert (reports / name).is_file(), name
+    metrics = json.loads((reports / "metrics.json").read_text())
+    assert set(metrics["episodes"]) == {"paper-pid", "paper-ctc"}
+
+    second = _run([*dvc, "repro"], clone, env)
+    assert "Running stage" not in second, second
+
+    params = clone / "params.yaml"
+    text = params.read_text()
+    assert "gains: {kp: 1600.0, kd: 80.0}" in text
+    params.write_text(text.replace("gains: {kp: 1600.0, kd: 80.0}", "gains: {kp: 900.0, kd: 60.0}"))
+    status = _run([*dvc, "status", "--json"], clone, env)
+    changed = set(json.loads(status))
+    assert changed == {"record@paper-ctc"}, status
+    third = _run([*dvc, "repro"], clone, env)
+    assert set(re.findall(r"Running stage '([^']+)'", third)) == {"record@paper-ctc", "report"}
