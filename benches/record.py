@@ -2,9 +2,10 @@
 
 Prints one JSON object. The floor is a bare loop of ``mj_step`` plus one
 Pinocchio RNEA call per step on the same UR5 model; the episode is the paper's
-CTC episode with full logging (plan excluded, time-parameterization, control
-loop and bag writing included). ``--jobs`` scaling runs ``pipeline record`` on
-four episodes with 1 and 2 processes.
+CTC episode with full logging: controller and plant setup, control loop and bag
+writing included; planning and time-parameterization excluded (done once per
+scenario, shared by its controllers). ``--jobs`` scaling runs ``pipeline record``
+on four episodes with 1 and 2 processes.
 
 Usage: python benches/record.py [--repeat 3] [--no-jobs]
 """
@@ -22,13 +23,13 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-import mujoco
-import numpy as np
-import pinocchio as pin
 import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benches"))
+
+from sim_loop import physics_floor_s  # noqa: E402
 
 from pipeline.params import load_params  # noqa: E402
 from pipeline.robots import load_spec  # noqa: E402
@@ -36,25 +37,11 @@ from pipeline.stages.record import plan_scenario, run_one  # noqa: E402
 
 
 def physics_floor_s_per_step(n_steps: int) -> float:
-    spec = load_spec("ur5")
-    from pipeline.model.mjcf import build_mujoco_model
-    from pipeline.model.urdf import build_pinocchio_model
-
-    model = build_mujoco_model(spec)
-    data = mujoco.MjData(model)
-    pmodel = build_pinocchio_model(spec)
-    pdata = pmodel.createData()
-    zero = np.zeros(spec.dof)
-    t0 = time.perf_counter()
-    for _ in range(n_steps):
-        tau = pin.rnea(pmodel, pdata, data.qpos, data.qvel, zero)
-        data.ctrl[:] = tau
-        mujoco.mj_step(model, data)
-    return (time.perf_counter() - t0) / n_steps
+    return physics_floor_s(load_spec("ur5"), steps=n_steps) / n_steps
 
 
 def _episode_wall_s(hold_s: float, repeat: int) -> tuple[float, int]:
-    """Best wall time of the paper's CTC episode (plan excluded) and its control steps."""
+    """Best wall time of the paper's CTC episode (plan and timing excluded) and its steps."""
     params = load_params(REPO / "params.yaml")
     episode = next(e for e in params.episodes if e.controller.type == "ctc")
     scenario = episode.scenario.model_copy(update={"hold_s": hold_s})

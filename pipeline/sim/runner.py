@@ -174,6 +174,7 @@ def run_episode(
         progress(1.0)
 
     effort = spec.effort_limits
+    np.clip(tau_cmd[:rows], -effort, effort, out=tau_app[:rows])
     saturated = np.abs(tau_cmd[:rows]) > effort
     warnings = {
         name: int(count)
@@ -273,8 +274,6 @@ class _Loop:
         qpos, qvel, ctrl = data.qpos, data.qvel, data.ctrl
         warn = data.warning.number  # a live view of MuJoCo's warning counters
         clean = np.zeros_like(warn).tobytes()
-        hi = self.spec.effort_limits
-        lo = -hi
         # weighted |qd|^2 against the speed limit: one dot product catches NaN, inf
         # and runaway speed; the per-joint diagnosis runs only when it trips
         weights = 1.0 / self.speed_limits**2
@@ -309,10 +308,9 @@ class _Loop:
                     f"controller '{self.controller.name}' failed at t={self.times_s[k]:.4f} s "
                     f"(expected an array of {self.spec.dof} torques): {err}"
                 ) from err
-            ta = tau_app[k]
-            np.minimum(tc, hi, out=ta)
-            np.maximum(ta, lo, out=ta)
-            ctrl[:] = ta
+            # the motors' ctrlrange (= +-effort) clamps inside MuJoCo; tau_app gets the
+            # same clip for all rows at once after the loop (saves ~1 us per step)
+            ctrl[:] = tc
             if k == last:
                 break
             step(model, data, nstep)

@@ -25,16 +25,17 @@ from pipeline import __version__
 from pipeline.constants import FINAL_WINDOW_S
 from pipeline.errors import ParamsError, PipelineError
 from pipeline.params import Episode, Params, ScenarioParams
-from pipeline.planning import PlannedPath
+from pipeline.planning import PlannedPath, TimedTrajectory
 from pipeline.robots.spec import RobotSpec, load_spec
 
 
 @dataclass(frozen=True)
 class ScenarioPlan:
-    """A scenario's planned path, or why it could not be planned."""
+    """A scenario's planned path and its timing (shared by every controller), or the error."""
 
     scenario: str
     path: PlannedPath | None
+    trajectory: TimedTrajectory | None = None
     error: str = ""
 
 
@@ -150,8 +151,8 @@ def resolve_goal(
 
 
 def plan_scenario(name: str, scenario: ScenarioParams, source: str) -> ScenarioPlan:
-    """Plan one scenario; a planning failure is returned, not raised (it fails its episodes)."""
-    from pipeline.planning import plan_path
+    """Plan and time one scenario; a failure is returned, not raised (it fails its episodes)."""
+    from pipeline.planning import plan_path, time_parameterize
 
     try:
         spec = load_spec(scenario.robot)
@@ -165,9 +166,15 @@ def plan_scenario(name: str, scenario: ScenarioParams, source: str) -> ScenarioP
             simplify=scenario.planner.simplify,
             seed=scenario.planner.seed,
         )
+        trajectory = time_parameterize(
+            spec,
+            path,
+            velocity_scaling=scenario.timing.velocity_scaling,
+            acceleration_scaling=scenario.timing.acceleration_scaling,
+        )
     except PipelineError as err:
         return ScenarioPlan(name, None, error=str(err))
-    return ScenarioPlan(name, path)
+    return ScenarioPlan(name, path, trajectory)
 
 
 def _boxes(scenario: ScenarioParams) -> list[Any]:
@@ -197,10 +204,16 @@ def run_one(
     wall0 = time.perf_counter()
     bag_dir = out_dir / episode.name
     try:
-        if plan.path is None:
+        if plan.path is None or plan.trajectory is None:
             raise PipelineError(plan.error)
         outcome = _run_and_write(
-            episode, plan.path, bag_dir=bag_dir, force=force, commit=commit, progress=progress
+            episode,
+            plan.path,
+            plan.trajectory,
+            bag_dir=bag_dir,
+            force=force,
+            commit=commit,
+            progress=progress,
         )
     except PipelineError as err:
         return EpisodeOutcome(
@@ -213,6 +226,7 @@ def run_one(
 def _run_and_write(
     episode: Episode,
     path: PlannedPath,
+    trajectory: TimedTrajectory,
     *,
     bag_dir: Path,
     force: bool,
@@ -222,18 +236,11 @@ def _run_and_write(
     from pipeline.control import make_controller
     from pipeline.log.bag import write_episode_bag
     from pipeline.model.mjcf import PlantOptions
-    from pipeline.planning import time_parameterize
     from pipeline.sim.runner import run_episode
 
     scenario = episode.scenario
     spec = load_spec(scenario.robot)
     sim = episode.sim
-    trajectory = time_parameterize(
-        spec,
-        path,
-        velocity_scaling=scenario.timing.velocity_scaling,
-        acceleration_scaling=scenario.timing.acceleration_scaling,
-    )
     control_dt_s = sim.physics_dt_s * sim.control_period_steps
     controller = make_controller(
         episode.controller.type,
