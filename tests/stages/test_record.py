@@ -10,6 +10,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -125,3 +126,53 @@ def test_bad_params_exit_1_with_one_line(tmp_path):
     lines = [ln for ln in result.stderr.splitlines() if ln.strip()]
     assert any("unknown robot 'ur6'" in ln and "did you mean 'ur5'" in ln for ln in lines)
     assert "Traceback" not in result.stderr
+
+
+def test_cartesian_goal_becomes_the_ik_solution_nearest_the_start(ur5):
+    from pipeline.kinematics import make_solver
+    from pipeline.model import transforms as tf
+    from pipeline.model.dh import forward_kinematics
+    from pipeline.params import load_params
+    from pipeline.stages.record import resolve_goal
+
+    paper_goal = np.array([-0.15, -0.5, 0.785, -1.15, -0.3925, 0.0])
+    pose = forward_kinematics(ur5, paper_goal)
+    scenario = load_params(REPO / "params.yaml").scenarios["paper"]
+    goal = {
+        "pose": {
+            "position": pose[:3, 3].tolist(),
+            "quaternion_wxyz": tf.quat_wxyz(pose[:3, :3]).tolist(),
+        }
+    }
+    scenario = scenario.model_copy(update={"goal": type(scenario.goal).model_validate(goal)})
+    start, q = resolve_goal(ur5, scenario, name="paper", source="params.yaml")
+    assert np.abs(forward_kinematics(ur5, q) - pose).max() < 1e-9
+    every = make_solver("analytic", ur5).solve(pose).solutions
+    distances = np.linalg.norm(every - start, axis=1)
+    assert np.linalg.norm(q - start) == pytest.approx(distances.min(), abs=1e-9)
+    # the paper's goal is one of the 8 solutions, but elbow-down is nearer all-zeros
+    assert np.abs(every - paper_goal).max(axis=1).min() < 1e-9
+
+
+@pytest.mark.slow
+def test_diverging_episode_is_recorded_reported_and_fails_the_run(tmp_path):
+    data = yaml.safe_load((REPO / "params.yaml").read_text())
+    data["scenarios"]["paper"]["hold_s"] = 0.3
+    data["controllers"]["ctc"]["gains"] = {"kp": 1e9, "kd": 0.0}
+    params = tmp_path / "params.yaml"
+    params.write_text(yaml.safe_dump(data))
+    out = tmp_path / "rec"
+    result = _record(params, out)
+    assert result.returncode == 1
+    assert "Traceback" not in result.stderr
+    assert re.search(r"^error: paper-ctc: diverged at t=", result.stderr, re.MULTILINE)
+    assert sorted(p.name for p in out.iterdir()) == ["paper-ctc", "paper-pid"]
+    report = subprocess.run(
+        [*PIPELINE, "report", "--recordings", str(out), "--out", str(tmp_path / "rep")],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+    )
+    assert report.returncode == 0, report.stderr
+    text = (tmp_path / "rep" / "report.md").read_text()
+    assert re.search(r"\*\*paper-ctc\*\* \(ctc, paper\): diverged — diverged at t=", text)
