@@ -13,11 +13,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from pipeline.errors import ParamsError
 from pipeline.robots.spec import format_validation_error
+from pipeline.yamlio import parse_yaml
 
 GainValue = float | list[float]
 
@@ -210,9 +210,6 @@ def parse_params(data: Any, *, source: str) -> Params:
     )
 
 
-_Loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-
-
 def load_params(path: str | Path) -> Params:
     """Read and validate a params file.
 
@@ -223,11 +220,7 @@ def load_params(path: str | Path) -> Params:
     if not p.is_file():
         raise ParamsError(f"{p}: no such params file (pass --params PATH)")
     try:
-        data = yaml.load(p.read_text(encoding="utf-8"), Loader=_Loader)
+        text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as err:
         raise ParamsError(f"{p}: cannot read params file ({err})") from err
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise ParamsError(f"{p}: not valid YAML{where}") from err
-    return parse_params(data, source=str(p))
+    return parse_params(parse_yaml(text, source=str(p), error=ParamsError), source=str(p))

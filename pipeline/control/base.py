@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import difflib
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -179,6 +179,21 @@ def split_tuning(gains: Any, *, where: str) -> tuple[Tuning, Any]:
             tuning[key] = float(value)
     rest = {k: v for k, v in gains.items() if k not in TUNING_KEYS}
     return Tuning(**tuning), rest
+
+
+def resolve_tuned_gains(
+    controller: str,
+    spec: RobotSpec,
+    schema: Sequence[GainSpec],
+    default_gains: Callable[..., dict[str, Any]],
+    gains: Any,
+    *,
+    where: str = "gains",
+) -> tuple[Tuning, dict[str, Any]]:
+    """The tuning knobs in ``gains`` choose the defaults; explicit gains override them."""
+    tuning, explicit = split_tuning(gains, where=where)
+    defaults = default_gains(spec, omega_n_rad_s=tuning.omega_n_rad_s, zeta=tuning.zeta)
+    return tuning, resolve_gains(controller, spec, schema, defaults, explicit, where=where)
 
 
 def settings_of(gains: Mapping[str, Any]) -> dict[str, Any]:

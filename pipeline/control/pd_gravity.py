@@ -19,9 +19,8 @@ from pipeline.control.base import (
     GainSpec,
     check_tuning,
     nominal_mass_diagonal,
-    resolve_gains,
+    resolve_tuned_gains,
     settings_of,
-    split_tuning,
 )
 from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
@@ -51,14 +50,8 @@ class PdGravityController:
         self, spec: RobotSpec, gains: Mapping[str, Any] | None = None, *, where: str = "gains"
     ) -> None:
         spec.require_dynamics("the pd_gravity controller")
-        self._tuning, explicit = split_tuning(gains, where=where)
-        self._gains = resolve_gains(
-            NAME,
-            spec,
-            GAINS,
-            default_gains(spec, omega_n_rad_s=self._tuning.omega_n_rad_s, zeta=self._tuning.zeta),
-            explicit,
-            where=where,
+        self._tuning, self._gains = resolve_tuned_gains(
+            NAME, spec, GAINS, default_gains, gains, where=where
         )
         self._kp: F64 = self._gains["kp"]
         self._kd: F64 = self._gains["kd"]

@@ -28,9 +28,8 @@ from pipeline.control.base import (
     GainSpec,
     check_tuning,
     nominal_mass_diagonal,
-    resolve_gains,
+    resolve_tuned_gains,
     settings_of,
-    split_tuning,
 )
 from pipeline.errors import ParamsError
 from pipeline.robots.spec import RobotSpec
@@ -84,15 +83,7 @@ class PidController:
     def __init__(
         self, spec: RobotSpec, gains: Mapping[str, Any] | None = None, *, where: str = "gains"
     ) -> None:
-        self._tuning, explicit = split_tuning(gains, where=where)
-        g = resolve_gains(
-            NAME,
-            spec,
-            GAINS,
-            default_gains(spec, omega_n_rad_s=self._tuning.omega_n_rad_s, zeta=self._tuning.zeta),
-            explicit,
-            where=where,
-        )
+        self._tuning, g = resolve_tuned_gains(NAME, spec, GAINS, default_gains, gains, where=where)
         if (g["i_clamp_min"] > g["i_clamp_max"]).any():
             raise ParamsError(
                 f"{where}.i_clamp_min: must be <= i_clamp_max, got {g['i_clamp_min'].tolist()} "

@@ -16,10 +16,10 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from pipeline.errors import SpecError
+from pipeline.yamlio import parse_yaml
 
 Convention = Literal["standard", "modified"]
 
@@ -275,9 +275,6 @@ def parse_spec(data: Any, *, source: str) -> RobotSpec:
     return _to_spec(raw, source)
 
 
-_Loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml when present: ~20x faster
-
-
 def builtin_robot_names() -> list[str]:
     """Names of the robots shipped inside the package."""
     folder = resources.files("pipeline.robots")
@@ -325,10 +322,4 @@ def _load_builtin(name: str) -> RobotSpec:
 
 
 def _parse_text(content: str, source: str) -> RobotSpec:
-    try:
-        data = yaml.load(content, Loader=_Loader)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark is not None else ""
-        raise SpecError(f"{source}: not valid YAML{where}") from err
-    return parse_spec(data, source=source)
+    return parse_spec(parse_yaml(content, source=source, error=SpecError), source=source)
