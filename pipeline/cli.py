@@ -358,9 +358,10 @@ def record_cmd(
     """Plan, simulate and record every episode in PARAMS as a ROS 2 bag (MCAP).
 
     Each scenario is planned once (OMPL RRTConnect, seeded), time-parameterized
-    (TOPP-RA), then run in MuJoCo under each controller. Bags are written to
-    OUT/<scenario>-<controller>-s<seed>/ atomically. Exits 1 if any episode
-    failed, after writing the others.
+    (TOPP-RA), then run in MuJoCo under each controller. Each episode's bag is
+    written atomically to OUT/<episode>/ (the episode's key in PARAMS); an
+    existing one is kept unless --force. Exits 1 if any episode failed, after
+    writing the others.
     """
     from pathlib import Path
 

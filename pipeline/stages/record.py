@@ -54,7 +54,7 @@ class EpisodeOutcome:
 
 
 def git_commit() -> str:
-    """The checkout's commit hash (with ``-dirty`` if modified), or "" outside git."""
+    """The checkout's commit hash, or "" outside git (provenance in every recording)."""
     try:
         here = Path(__file__).resolve().parent
         sha = subprocess.run(
