@@ -54,6 +54,28 @@ def test_two_runs_give_byte_identical_recordings(tmp_path):
     for name in a:
         meta_a = (tmp_path / "a" / name / "metadata.yaml").read_bytes()
         assert meta_a == (tmp_path / "b" / name / "metadata.yaml").read_bytes()
+        final = _last_joint_state_by_rosbags(tmp_path / "a" / name)
+        # 0.3 s after the motion: PID is still settling (wrist 1 ~2 mrad), CTC has converged
+        tolerance = {"paper-pid": 5e-3, "paper-ctc": 1e-6}[name]
+        np.testing.assert_allclose(final, TABLE_2_GOAL, atol=tolerance)
+
+
+TABLE_2_GOAL = [-0.15, -0.5, 0.785, -1.15, -0.3925, 0.0]
+
+
+def _last_joint_state_by_rosbags(bag: Path) -> np.ndarray:
+    """Decode /joint_states with rosbags (independent of our reader), types from the bag."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    with AnyReader([bag], default_typestore=get_typestore(Stores.EMPTY)) as reader:
+        connections = [c for c in reader.connections if c.topic == "/joint_states"]
+        last = None
+        for connection, _, raw in reader.messages(connections=connections):
+            last = raw, connection
+        assert last is not None
+        msg = reader.deserialize(last[0], last[1].msgtype)
+    return np.asarray(msg.position)
 
 
 @pytest.mark.slow
