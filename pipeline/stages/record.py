@@ -54,15 +54,25 @@ class EpisodeOutcome:
 
 
 def git_commit() -> str:
-    """The checkout's commit hash, or "" outside git (provenance in every recording)."""
-    try:
-        here = Path(__file__).resolve().parent
-        sha = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, check=True
+    """The last commit that changed this package, ``-dirty`` if it has uncommitted changes.
+
+    Not HEAD: a commit that only adds results or docs must not change the bytes of
+    recordings made by the same code, or committed results could never be reproduced
+    from a clone. "" outside a git checkout.
+    """
+    package = Path(__file__).resolve().parents[1]
+
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", *args], cwd=package, capture_output=True, text=True, check=True
         ).stdout.strip()
+
+    try:
+        sha = git("log", "-1", "--format=%H", "--", ".")
+        dirty = git("status", "--porcelain", "--untracked-files=no", "--", ".")
     except (OSError, subprocess.CalledProcessError):
         return ""
-    return sha
+    return f"{sha}-dirty" if sha and dirty else sha
 
 
 def spec_as_dict(spec: RobotSpec) -> dict[str, Any]:
