@@ -89,3 +89,11 @@ def test_unknown_only_episode_lists_the_known_ones():
 def test_missing_params_file_says_how_to_fix(tmp_path):
     with pytest.raises(ParamsError, match=r"no such params file \(pass --params PATH\)"):
         load_params(tmp_path / "nope.yaml")
+
+
+@pytest.mark.parametrize("path", sorted((REPO / "examples").glob("*.yaml")), ids=lambda p: p.name)
+def test_shipped_example_params_are_valid_and_runnable(path):
+    from pipeline.stages.record import validate_episodes
+
+    params = load_params(path)
+    validate_episodes(params, params.episodes)
