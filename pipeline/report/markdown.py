@@ -105,7 +105,8 @@ def _intro(data: ReportData) -> list[str]:
         + f"; baseline controller: **{data.baseline}**. "
         f"Recorded by armlab-pipeline {', '.join(versions)} (git {', '.join(commits)}).",
         "",
-        "Interactive view: `rerun reports/recording.rrd` (per-joint time series, arm in 3D).",
+        "Interactive view: [`recording.rrd`](recording.rrd), next to this file: open it with "
+        "`rerun recording.rrd` (per-joint time series, the arm in 3D per controller).",
         "Numbers: [`metrics.json`](metrics.json); series for `dvc plots`: "
         "[`plots/errors.csv`](plots/errors.csv), [`plots/velocities.csv`](plots/velocities.csv).",
         "",
