@@ -327,6 +327,8 @@ def ik_check_cmd(
 def main() -> None:
     """Console-script entry point."""
     debug = "--debug" in sys.argv[1:]
+    if debug:  # accepted anywhere on the line, not only before the command
+        sys.argv = [sys.argv[0], "--debug", *(a for a in sys.argv[1:] if a != "--debug")]
     try:
         app()
     except PipelineError as err:
@@ -359,19 +361,19 @@ def record_cmd(
 
     Each scenario is planned once (OMPL RRTConnect, seeded), time-parameterized
     (TOPP-RA), then run in MuJoCo under each controller. Each episode's bag is
-    written atomically to OUT/<episode>/ (the episode's key in PARAMS); an
-    existing one is kept unless --force. Exits 1 if any episode failed, after
-    writing the others.
+    written atomically to OUT/<episode>/ (the episode's key in PARAMS). If a
+    selected episode's bag already exists, nothing runs unless --force (or pick
+    others with --only). Exits 1 if any episode failed, after writing the others.
     """
     from pathlib import Path
 
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from pipeline.params import load_params
-    from pipeline.stages.record import record
+    from pipeline.stages.record import prepare, record
 
     loaded = load_params(params)
-    selected = loaded.select(only)
+    selected = prepare(loaded, out_dir=Path(out), only=only, force=force)
     with Progress(
         TextColumn("{task.description:<32}"),
         BarColumn(),
@@ -379,6 +381,7 @@ def record_cmd(
         TimeElapsedColumn(),
         console=Console(stderr=True),
         transient=False,
+        disable=not sys.stderr.isatty(),  # no bar spam in logs (dvc repro, CI)
     ) as bars:
         tasks = {e.name: bars.add_task(e.name, total=1.0) for e in selected}
         plan_task = bars.add_task("planning", total=len({e.scenario_name for e in selected}))
@@ -390,7 +393,7 @@ def record_cmd(
                 bars.update(tasks[name], completed=value)
 
         outcomes = record(
-            loaded, out_dir=Path(out), only=only, jobs=jobs, force=force, on_event=on_event
+            loaded, selected, out_dir=Path(out), jobs=jobs, force=force, on_event=on_event
         )
     table = Table("episode", "status", "max |e| (rad)", "final |e| (rad)", "sim (s)", "wall (s)")
     for o in outcomes:

@@ -23,3 +23,6 @@ DEFAULT_REPORTS_DIR = "reports"
 
 # "Error at the target": mean |error| over the last min(FINAL_WINDOW_S, hold / 2) seconds.
 FINAL_WINDOW_S = 0.5
+
+# Seeds: OMPL seeds are 32-bit and must be non-zero, and the planner passes seed + 1.
+MAX_SEED = 2**32 - 2

@@ -11,15 +11,18 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from pipeline.constants import MAX_SEED
 from pipeline.errors import ParamsError
 from pipeline.robots.spec import format_validation_error
 from pipeline.yamlio import parse_yaml
 
-GainValue = float | list[float]
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+PerJoint = NonNegative | list[NonNegative]  # one value for every joint, or one per joint
+MAX_HOLD_S = 3600.0
 
 
 class _Strict(BaseModel):
@@ -67,7 +70,7 @@ class BoxParams(_Strict):
 class PlannerParams(_Strict):
     time_limit_s: float = Field(default=5.0, gt=0)
     simplify: bool = True
-    seed: int = Field(default=0, ge=0)
+    seed: int = Field(default=0, ge=0, le=MAX_SEED)
 
 
 class TimingParams(_Strict):
@@ -78,9 +81,9 @@ class TimingParams(_Strict):
 class PlantParams(_Strict):
     """How the simulated plant differs from the nominal model (zero = identical)."""
 
-    damping: GainValue = 0.0
-    frictionloss: GainValue = 0.0
-    armature: GainValue = 0.0
+    damping: PerJoint = 0.0
+    frictionloss: PerJoint = 0.0
+    armature: PerJoint = 0.0
     payload_kg: float = Field(default=0.0, ge=0)
     position_noise_std_rad: float = Field(default=0.0, ge=0)
     velocity_noise_std_rad_s: float = Field(default=0.0, ge=0)
@@ -94,12 +97,13 @@ class ScenarioParams(_Strict):
     planner: PlannerParams = PlannerParams()
     timing: TimingParams = TimingParams()
     plant: PlantParams = PlantParams()
-    hold_s: float = Field(default=1.0, ge=0)
+    hold_s: float = Field(default=1.0, ge=0, le=MAX_HOLD_S)
 
 
 class ControllerParams(_Strict):
     type: str = Field(min_length=1)
-    gains: dict[str, GainValue] = {}
+    # numbers, per-joint lists or flags (antiwindup): the controller validates each key
+    gains: dict[str, Any] = {}
 
 
 class EpisodeParams(_Strict):
@@ -172,6 +176,7 @@ class Params:
         """Episodes named in ``only`` (all when empty); unknown names are an error."""
         if not only:
             return self.episodes
+        only = list(dict.fromkeys(only))  # --only X --only X runs X once
         known = {e.name: e for e in self.episodes}
         missing = [n for n in only if n not in known]
         if missing:
@@ -217,6 +222,8 @@ def load_params(path: str | Path) -> Params:
         ParamsError: missing file, bad YAML, or invalid content (names the field).
     """
     p = Path(path)
+    if p.is_dir():
+        raise ParamsError(f"{p}: is a directory, expected a params YAML file")
     if not p.is_file():
         raise ParamsError(f"{p}: no such params file (pass --params PATH)")
     try:

@@ -97,3 +97,34 @@ def test_shipped_example_params_are_valid_and_runnable(path):
 
     params = load_params(path)
     validate_episodes(params, params.episodes)
+
+
+def test_pid_flag_gain_from_params_reaches_the_controller(tmp_path):
+    from pipeline.stages.record import validate_episodes
+
+    data = _default()
+    data["controllers"]["pid"]["gains"]["antiwindup"] = False
+    params = load_params(_write(tmp_path, data))
+    assert params.controllers["pid"].gains["antiwindup"] is False
+    validate_episodes(params, params.episodes)
+
+
+@pytest.mark.parametrize("key", ["damping", "frictionloss", "armature"])
+@pytest.mark.parametrize("value", [-1.0, [0.0, 0.0, -0.1, 0.0, 0.0, 0.0]])
+def test_negative_plant_mismatch_is_refused_with_the_field(tmp_path, key, value):
+    data = _default()
+    data["scenarios"]["paper"]["plant"][key] = value
+    with pytest.raises(
+        ParamsError, match=rf"scenarios\.paper\.plant\.{key}(\[2\])?: .*greater than or equal to 0"
+    ):
+        load_params(_write(tmp_path, data))
+
+
+def test_repeated_only_runs_the_episode_once():
+    params = load_params(REPO / "params.yaml")
+    assert [e.name for e in params.select(["paper-ctc", "paper-ctc"])] == ["paper-ctc"]
+
+
+def test_params_path_that_is_a_directory_says_so(tmp_path):
+    with pytest.raises(ParamsError, match=r"is a directory, expected a params YAML file"):
+        load_params(tmp_path)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import difflib
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -157,9 +157,11 @@ class Tuning:
 
     omega_n_rad_s: float = DEFAULT_OMEGA_N_RAD_S
     zeta: float = DEFAULT_ZETA
+    used: bool = True  # False when explicit gains overrode every tuned default
 
     def settings(self) -> dict[str, float]:
-        return {"omega_n_rad_s": self.omega_n_rad_s, "zeta": self.zeta}
+        """The knobs, if they chose any gain in effect (else they would mislead)."""
+        return {"omega_n_rad_s": self.omega_n_rad_s, "zeta": self.zeta} if self.used else {}
 
 
 def split_tuning(gains: Any, *, where: str) -> tuple[Tuning, Any]:
@@ -178,7 +180,13 @@ def split_tuning(gains: Any, *, where: str) -> tuple[Tuning, Any]:
                 raise ParamsError(f"{where}.{key}: expected a positive number, got {value!r}")
             tuning[key] = float(value)
     rest = {k: v for k, v in gains.items() if k not in TUNING_KEYS}
-    return Tuning(**tuning), rest
+    return (
+        Tuning(
+            omega_n_rad_s=tuning.get("omega_n_rad_s", DEFAULT_OMEGA_N_RAD_S),
+            zeta=tuning.get("zeta", DEFAULT_ZETA),
+        ),
+        rest,
+    )
 
 
 def resolve_tuned_gains(
@@ -193,7 +201,9 @@ def resolve_tuned_gains(
     """The tuning knobs in ``gains`` choose the defaults; explicit gains override them."""
     tuning, explicit = split_tuning(gains, where=where)
     defaults = default_gains(spec, omega_n_rad_s=tuning.omega_n_rad_s, zeta=tuning.zeta)
-    return tuning, resolve_gains(controller, spec, schema, defaults, explicit, where=where)
+    resolved = resolve_gains(controller, spec, schema, defaults, explicit, where=where)
+    overridden = isinstance(explicit, Mapping) and set(defaults) <= set(explicit)
+    return replace(tuning, used=not overridden), resolved
 
 
 def settings_of(gains: Mapping[str, Any]) -> dict[str, Any]:

@@ -25,6 +25,7 @@ from ompl import base as ob
 from ompl import geometric as og
 from ompl import util as ou
 
+from pipeline.constants import MAX_SEED
 from pipeline.errors import PlanningError
 from pipeline.model.mjcf import Box
 from pipeline.planning.collision import CollisionChecker, motion_check_step_rad
@@ -33,7 +34,6 @@ from pipeline.robots.spec import RobotSpec
 F64 = NDArray[np.float64]
 
 PLANNER_NAME = "RRTConnect"
-MAX_SEED = 2**32 - 2  # OMPL seeds are 32-bit and must be non-zero: we pass seed + 1
 _REFINE_ROUNDS = 3  # subdivide + shortcut rounds after simplifySolution (see _refine)
 
 

@@ -208,13 +208,27 @@ class _Robot(_Strict):
         return self
 
 
+_UNION_BRANCHES = {
+    "function-after",
+    "tagged-union",
+    "float",
+    "int",
+    "bool",
+    "str",
+    "list",
+    "constrained-float",
+    "constrained-int",
+    "constrained-str",
+}
+
+
 def _field_path(loc: tuple[int | str, ...]) -> str:
     out = ""
     for part in loc:
         if isinstance(part, int):
             out += f"[{part}]"
-        elif part in ("function-after", "tagged-union") or "[" in str(part):
-            continue
+        elif part in _UNION_BRANCHES or "[" in str(part):
+            continue  # pydantic names the union member it tried: not a YAML field
         else:
             out += ("." if out else "") + str(part)
     return out
@@ -222,7 +236,8 @@ def _field_path(loc: tuple[int | str, ...]) -> str:
 
 def format_validation_error(source: str, err: ValidationError) -> str:
     """Turn pydantic's error into one line: ``file: field.path: what was wrong``."""
-    first = err.errors()[0]
+    # the deepest location is the most specific (for a union, the branch that got furthest)
+    first = max(err.errors(), key=lambda e: len(e["loc"]))
     path = _field_path(tuple(first["loc"]))
     msg = first["msg"].removeprefix("Value error, ")
     given = first.get("input")
@@ -294,7 +309,11 @@ def load_spec(name_or_path: str | Path) -> RobotSpec:
     """
     text = str(name_or_path)
     path = Path(text)
-    if path.suffix in (".yaml", ".yml") or path.exists() or "/" in text:
+    # a path has a YAML suffix or a slash; anything else is a built-in name (a stray
+    # file or folder called "ur5" in the working directory must not hide the robot)
+    if path.suffix in (".yaml", ".yml") or "/" in text or "\\" in text:
+        if path.is_dir():
+            raise SpecError(f"{text}: is a directory, expected a robot YAML file")
         if not path.is_file():
             raise SpecError(f"{text}: no such robot file")
         source = str(path)

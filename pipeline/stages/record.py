@@ -53,12 +53,36 @@ class EpisodeOutcome:
     wall_s: float
 
 
-def git_commit() -> str:
-    """The last commit that changed this package, ``-dirty`` if it has uncommitted changes.
+# The code a recording depends on (relative to pipeline/): dvc.yaml's record deps list
+# the same paths (a test keeps them equal), and recordings carry the last commit that
+# changed them, so a commit that only touches the report, docs or results leaves the
+# recordings' bytes, and committed results, reproducible from a clone.
+RECORD_CODE = (
+    "__init__.py",
+    "cli.py",
+    "constants.py",
+    "errors.py",
+    "params.py",
+    "yamlio.py",
+    "robots",
+    "model",
+    "kinematics",
+    "planning",
+    "control",
+    "sim",
+    "log/__init__.py",
+    "log/bag.py",
+    "log/cdr.py",
+    "log/schemas.py",
+    "stages/__init__.py",
+    "stages/record.py",
+)
 
-    Not HEAD: a commit that only adds results or docs must not change the bytes of
-    recordings made by the same code, or committed results could never be reproduced
-    from a clone. "" outside a git checkout.
+
+def git_commit() -> str:
+    """Last commit that changed the record code, ``-dirty`` if it has local changes.
+
+    "" outside a git checkout.
     """
     package = Path(__file__).resolve().parents[1]
 
@@ -68,8 +92,8 @@ def git_commit() -> str:
         ).stdout.strip()
 
     try:
-        sha = git("log", "-1", "--format=%H", "--", ".")
-        dirty = git("status", "--porcelain", "--untracked-files=no", "--", ".")
+        sha = git("log", "-1", "--format=%H", "--", *RECORD_CODE)
+        dirty = git("status", "--porcelain", "--untracked-files=no", "--", *RECORD_CODE)
     except (OSError, subprocess.CalledProcessError):
         return ""
     return f"{sha}-dirty" if sha and dirty else sha
@@ -225,9 +249,15 @@ def run_one(
             commit=commit,
             progress=progress,
         )
-    except PipelineError as err:
+    except (PipelineError, OSError, MemoryError) as err:
+        if isinstance(err, OSError):
+            reason = f"{bag_dir}: cannot write the recording ({err.strerror or err})"
+        elif isinstance(err, MemoryError):
+            reason = "out of memory: shorten the episode (hold_s) or log less"
+        else:
+            reason = str(err)
         return EpisodeOutcome(
-            episode.name, "failed", str(err), "", float("nan"), float("nan"), 0.0,
+            episode.name, "failed", reason, "", float("nan"), float("nan"), 0.0,
             time.perf_counter() - wall0,
         )  # fmt: skip
     return EpisodeOutcome(**{**asdict(outcome), "wall_s": time.perf_counter() - wall0})
@@ -389,7 +419,15 @@ def _episode_worker(
 
 
 def check_outputs_free(episodes: Sequence[Episode], out_dir: Path, *, force: bool) -> None:
-    """Refuse up front (before any work) to overwrite an existing recording."""
+    """Refuse up front (before any work) a bad --out or to overwrite a recording."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise PipelineError(f"{out_dir}: --out is a file, expected a directory")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise PipelineError(
+            f"{out_dir}: cannot create the output directory ({err.strerror})"
+        ) from err
     if force:
         return
     taken = [e.name for e in episodes if (out_dir / e.name).exists()]
@@ -420,11 +458,8 @@ def validate_episodes(params: Params, episodes: Sequence[Episode]) -> None:
             ) from err
         spec.require_dynamics(f"recording scenario '{episode.scenario_name}' (simulation)")
         where = f"scenarios.{episode.scenario_name}"
-        _joint_vector(scenario.start, spec, source=params.source, path=f"{where}.start")
-        if scenario.goal.joints is not None:
-            _joint_vector(
-                scenario.goal.joints, spec, source=params.source, path=f"{where}.goal.joints"
-            )
+        # joint vectors and Cartesian goals (IK: reachable, solver known) once, up front
+        resolve_goal(spec, scenario, name=episode.scenario_name, source=params.source)
         for key in ("damping", "frictionloss", "armature"):
             value = getattr(scenario.plant, key)
             if isinstance(value, list) and len(value) not in (1, spec.dof):
@@ -477,24 +512,30 @@ def _run_pool(
     return outcomes
 
 
+def prepare(
+    params: Params, *, out_dir: Path, only: list[str] | None = None, force: bool = False
+) -> tuple[Episode, ...]:
+    """The selected episodes, validated, with --out usable: every input error, before work."""
+    episodes = params.select(only)
+    validate_episodes(params, episodes)
+    check_outputs_free(episodes, out_dir, force=force)
+    return episodes
+
+
 def record(
     params: Params,
+    episodes: Sequence[Episode],
     *,
     out_dir: Path,
-    only: list[str] | None = None,
     jobs: int = 1,
     force: bool = False,
     on_event: Callable[[str, str, float], None] | None = None,
 ) -> list[EpisodeOutcome]:
-    """Run the selected episodes; returns one outcome per episode (failures included).
+    """Run prepared episodes; returns one outcome per episode (failures included).
 
     ``on_event(kind, name, value)`` reports progress: kind is "plan" (value 0/1),
     "episode" (fraction done) or "done".
     """
-    episodes = params.select(only)
-    validate_episodes(params, episodes)
-    check_outputs_free(episodes, out_dir, force=force)
-    out_dir.mkdir(parents=True, exist_ok=True)
     emit = on_event or (lambda kind, name, value: None)
     commit = git_commit()
     plans: dict[str, ScenarioPlan] = {}

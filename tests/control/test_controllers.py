@@ -282,6 +282,12 @@ def test_tuning_knobs_choose_the_defaults_and_explicit_gains_override_them(ur5, 
     assert override["kd"] == pytest.approx(default_gains(ur5, name, omega_n_rad_s=60.0)["kd"])
 
 
+def test_tuning_knobs_are_not_reported_when_explicit_gains_override_them_all(ur5):
+    settings = make_controller("ctc", ur5, {"kp": 900.0, "kd": 60.0}).settings()
+    assert "omega_n_rad_s" not in settings and "zeta" not in settings
+    assert settings["kp"] == [900.0] * ur5.dof
+
+
 def test_bad_tuning_knob_names_the_key(ur5):
     with pytest.raises(ParamsError, match=r"controllers\.ctc\.gains\.zeta: expected a positive"):
         make_controller("ctc", ur5, {"zeta": -1.0}, source="controllers.ctc")

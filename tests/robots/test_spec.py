@@ -127,3 +127,11 @@ def test_not_yaml_and_not_a_mapping(tmp_path):
         load_spec(bad)
     with pytest.raises(SpecError, match="no such robot file"):
         load_spec(tmp_path / "missing.yaml")
+
+
+def test_a_folder_named_like_a_robot_does_not_hide_the_builtin(tmp_path, monkeypatch):
+    (tmp_path / "ur5").mkdir()
+    monkeypatch.chdir(tmp_path)
+    assert load_spec("ur5").name == "ur5"
+    with pytest.raises(SpecError, match=r"is a directory, expected a robot YAML file"):
+        load_spec("./ur5")

@@ -38,7 +38,12 @@ def _record(params: Path, out: Path, *extra: str) -> subprocess.CompletedProcess
 
 
 def _mcap_bytes(out: Path) -> dict[str, bytes]:
-    return {p.parent.name: p.read_bytes() for p in sorted(out.glob("*/*.mcap"))}
+    """Bags under their final names (hidden .partial directories are not recordings)."""
+    return {
+        p.parent.name: p.read_bytes()
+        for p in sorted(out.glob("*/*.mcap"))
+        if not p.parent.name.startswith(".")
+    }
 
 
 @pytest.mark.slow
@@ -107,7 +112,13 @@ def test_killed_run_leaves_no_partial_bag_and_keeps_earlier_ones(tmp_path):
         stderr=subprocess.DEVNULL,
         start_new_session=True,
     )
-    time.sleep(4.0)
+    # kill while the bag is being written: its partial directory exists (the 600 s
+    # hold first simulates for several seconds, then writes ~90 MB)
+    deadline = time.monotonic() + 120.0
+    while not list(out.glob(".paper-ctc.partial-*")):
+        assert proc.poll() is None, "the run ended before its bag was being written"
+        assert time.monotonic() < deadline, "no partial bag directory appeared"
+        time.sleep(0.01)
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
     finals = sorted(p.name for p in out.iterdir() if not p.name.startswith("."))
