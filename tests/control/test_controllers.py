@@ -19,6 +19,7 @@ from pipeline.control import (
 from pipeline.errors import ParamsError, PipelineError, SpecError
 from pipeline.model.mjcf import build_mujoco_model
 from pipeline.robots import load_spec
+from pipeline.sim.references import PAPER_GOAL_RAD
 
 DT_S = 0.001
 
@@ -142,7 +143,7 @@ def test_model_based_controllers_need_dynamics():
             make_controller(name, mdh)
 
 
-def test_default_gains_give_each_joint_the_same_natural_frequency_and_damping(ur5):
+def test_decoupled_design_scales_each_joint_by_its_own_inertia(ur5):
     """kp/m_jj = w^2 and kd/m_jj = 2 zeta w, with m_jj from MuJoCo (not Pinocchio)."""
     w, zeta = 25.0, 0.8
     mass, _ = _mujoco_mass_and_bias(ur5, np.zeros(6))
@@ -291,3 +292,40 @@ def test_tuning_knobs_are_not_reported_when_explicit_gains_override_them_all(ur5
 def test_bad_tuning_knob_names_the_key(ur5):
     with pytest.raises(ParamsError, match=r"controllers\.ctc\.gains\.zeta: expected a positive"):
         make_controller("ctc", ur5, {"zeta": -1.0}, source="controllers.ctc")
+
+
+def _closed_loop_poles(spec, name, q0):
+    """Eigenvalues of the MuJoCo plant + controller, linearized at rest at q0 (FD)."""
+    model = build_mujoco_model(spec)
+    data = mujoco.MjData(model)
+    ctl = make_controller(name, spec)
+    n = spec.dof
+    zero = np.zeros(n)
+
+    def flow(x):
+        q, qd = x[:n], x[n:]
+        data.qpos[:], data.qvel[:] = q, qd
+        data.ctrl[:] = ctl.compute(q, qd, q0, zero, zero, 0.001)
+        mujoco.mj_forward(model, data)
+        return np.concatenate([qd, data.qacc])
+
+    x0, h = np.concatenate([q0, zero]), 1e-6
+    jac = np.column_stack([(flow(x0 + h * e) - flow(x0 - h * e)) / (2 * h) for e in np.eye(2 * n)])
+    return np.linalg.eigvals(jac)
+
+
+@pytest.mark.parametrize("q0", [np.zeros(6), np.array(PAPER_GOAL_RAD)], ids=["zeros", "goal"])
+def test_ctc_places_every_closed_loop_pole_at_the_design_frequency_on_mujoco(ur5, q0):
+    poles = _closed_loop_poles(ur5, "ctc", q0)
+    np.testing.assert_allclose(poles.real, -DEFAULT_OMEGA_N_RAD_S, atol=0.01)
+    assert np.abs(poles.imag).max() < 0.01  # zeta = 1: critically damped
+
+
+def test_decentralized_pd_poles_spread_with_the_arms_coupling(ur5):
+    """The per-joint design targets -40 rad/s, but the shoulder/elbow coupling (that CTC
+    cancels) moves the real poles from about -20 to about -830 rad/s at q = 0; the fastest
+    bounds the control period (explicit-Euler-like bound T < 2 / 830 s ~ 2.4 ms)."""
+    poles = _closed_loop_poles(ur5, "pd_gravity", np.zeros(6))
+    assert poles.real.min() < -10 * DEFAULT_OMEGA_N_RAD_S
+    assert poles.real.max() > -0.6 * DEFAULT_OMEGA_N_RAD_S
+    assert (poles.real < 0).all()
