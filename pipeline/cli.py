@@ -466,22 +466,43 @@ def report_cmd(
             skip_bad=skip_bad,
             progress=on_progress,
         )
+    from rich import box
+    from rich.markup import escape
+
+    # Fits 80 columns: scenario as a heading row, names fold (never "…"), numbers whole.
     table = Table(
-        "episode", "scenario", "controller", "status", "max |e| [rad]", "RMS [rad]", "final [rad]"
+        box=box.SIMPLE_HEAD,
+        pad_edge=False,
+        padding=(0, 1, 0, 0),
+        caption="errors \\[rad]: max |e| and final = worst joint, RMS = mean over joints",
+        caption_justify="left",
     )
+    table.add_column("scenario / episode", overflow="fold")
+    table.add_column("controller", overflow="fold")
+    table.add_column("status", overflow="fold")
+    for header in ("max |e|", "RMS", "final"):
+        table.add_column(header, justify="right", no_wrap=True)
+    scenario = None
     for row in result.summary.iter_rows(named=True):
+        if row["scenario"] != scenario:
+            scenario = row["scenario"]
+            table.add_row(f"[bold]{escape(str(scenario))}[/bold]")
         cells = [row[k] for k in ("worst_max_abs_error", "mean_rms_error", "worst_final_error")]
+        status = escape(str(row["status"]))
         table.add_row(
-            row["episode"],
-            row["scenario"],
-            row["controller"],
-            row["status"] if row["status"] == "ok" else f"[red]{row['status']}[/red]",
+            "  " + escape(str(row["episode"])),
+            escape(str(row["controller"])),
+            status if row["status"] == "ok" else f"[red]{status}[/red]",
             *("n/a" if c is None else f"{c:.3e}" for c in cells),
         )
     console.print(table)
     for source, problem in result.skipped:
-        sys.stderr.write(f"skipped: {source}: {problem}\n")
+        # The problem names the file already ("<path>: ..."); say it once.
+        shown = problem if source in problem else f"{source}: {problem}"
+        sys.stderr.write(f"skipped: {shown}\n")
+    for episode, note in result.warnings:
+        sys.stderr.write(f"warning: {episode}: {note}\n")
     console.print(
         f"wrote {len(result.files)} file(s) to {result.out_dir}/ "
-        f"(report.md, metrics.json, recording.rrd); max |e|, final: worst joint, RMS: mean"
+        "(report.md, metrics.json, recording.rrd)"
     )

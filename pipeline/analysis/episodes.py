@@ -10,6 +10,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
 import polars as pl
 
 from pipeline.errors import SpecError
@@ -29,18 +30,45 @@ EPISODE_COLUMNS = (
     "samples",
     "source",
     "sha256",
+    "motion_completed",
+    "controller_samples",
 )
+
+
+def _period_s(rec: Recording) -> float:
+    """Median ``/controller_state`` period [s] (0 when there is one message)."""
+    n = max(len(rec.joint_names), 1)
+    t = rec.controller_states.get_column("time_s").to_numpy()[::n]
+    return float(np.median(np.diff(t))) if t.size > 1 else 0.0
+
+
+def motion_completed(rec: Recording, end_s: float | None) -> bool:
+    """Whether the episode ran through its motion: status "ok" and the recording does not
+    end before the motion end (half a control period of slack for the sample grid).
+    True when the motion end is unknown and the status is ok (nothing says otherwise)."""
+    if rec.status != "ok":
+        return False
+    motion_end = rec.motion_end_s
+    if motion_end is None:
+        return True
+    return end_s is not None and end_s >= motion_end - _period_s(rec) / 2
 
 
 def episode_table(recordings: Sequence[Recording]) -> pl.DataFrame:
     """One row per episode: identity, status, timing and provenance.
 
     ``motion_end_s`` is when the reference stops (null if unknown); ``end_s``
-    the last sample's time [s].
+    the last sample's time [s] (either control-rate topic), both from the recording's
+    start; ``motion_completed`` see :func:`motion_completed`; ``samples`` and
+    ``controller_samples`` count ``/joint_states`` and ``/controller_state`` messages.
     """
     rows: list[dict[str, Any]] = []
     for rec in recordings:
         times = rec.samples.get_column("time_s")
+        cs_times = rec.controller_states.get_column("time_s")
+        ends = [float(x.max()) for x in (times, cs_times) if x.len()]  # type: ignore[arg-type]
+        end_s = max(ends) if ends else None
+        n_joints = max(len(rec.joint_names), 1)
         rows.append(
             {
                 "episode": rec.episode,
@@ -51,10 +79,12 @@ def episode_table(recordings: Sequence[Recording]) -> pl.DataFrame:
                 "status": rec.status,
                 "reason": rec.reason,
                 "motion_end_s": rec.motion_end_s,
-                "end_s": float(times.max()) if times.len() else None,  # type: ignore[arg-type]
-                "samples": times.len() // max(len(rec.joint_names), 1),
+                "end_s": end_s,
+                "samples": times.len() // n_joints,
                 "source": str(rec.source),
                 "sha256": rec.sha256,
+                "motion_completed": motion_completed(rec, end_s),
+                "controller_samples": cs_times.len() // n_joints,
             }
         )
     schema = {
@@ -70,6 +100,8 @@ def episode_table(recordings: Sequence[Recording]) -> pl.DataFrame:
         "samples": pl.Int64,
         "source": pl.String,
         "sha256": pl.String,
+        "motion_completed": pl.Boolean,
+        "controller_samples": pl.Int64,
     }
     return pl.DataFrame(rows, schema=schema, orient="row").sort("episode")
 

@@ -2,7 +2,10 @@
 
 Definitions (also in docs/report.md and in every report):
 
-- error e(t) = reference - measured position [rad], as the controller recorded it.
+- error e(t) = reference - measured position [rad], as the controller recorded it on
+  ``/controller_state``. Every error-based metric (max, RMS, final, settling,
+  overshoot) uses every ``/controller_state`` message, at its full rate, even when
+  ``/joint_states`` is decimated; velocity and effort metrics use ``/joint_states``.
 - max_abs_error = max |e| over the whole episode; rms_error = sqrt(mean e^2).
 - final_error ("error at the target") = mean |e| over the last
   ``min(FINAL_WINDOW_S, hold/2)`` of the episode, hold = end - motion end
@@ -15,12 +18,17 @@ Definitions (also in docs/report.md and in every report):
 - overshoot = how far the measured position passes the goal in the direction
   of travel (max over the episode, clipped at 0) [rad]; null for a joint that
   does not move.
+- final_error, settling_time and overshoot are null for an episode that did not
+  complete its motion (status not "ok", or the recording ends before the motion
+  end): its last samples are not "at the target". Max and RMS use what exists.
 - peak_velocity = the measured velocity with the largest magnitude, with its sign.
 - rms_effort = sqrt(mean applied effort^2) [N m].
 - saturation_fraction = share of samples where |applied effort| is at the
   joint's effort limit (within 1e-6 relative) or |commanded| exceeds |applied|.
-- reduction % = (baseline - candidate) / baseline x 100; null when the
-  baseline value is 0 or missing.
+- Values not recorded (empty arrays, NaN) are nulls and take no part; a metric
+  of nothing recorded is null.
+- reduction % = (baseline - candidate) / baseline x 100; null when |baseline| is
+  below :data:`ERROR_FLOOR_RAD` (numerical noise) or missing.
 """
 
 from __future__ import annotations
@@ -35,6 +43,9 @@ from pipeline.errors import ReportError
 SETTLING_TOLERANCE_RAD = 1e-3
 SATURATION_REL_TOL = 1e-6
 MIN_TRAVEL_RAD = 1e-9
+# Below this a joint error is numerical noise (a perfect-model CTC settles to ~1e-13 rad);
+# a reduction relative to it would read 1e10 %, so none is given.
+ERROR_FLOOR_RAD = 1e-9
 
 METRIC_COLUMNS = (
     "max_abs_error",
@@ -48,31 +59,36 @@ METRIC_COLUMNS = (
     "saturation_fraction",
 )
 COMPARED_METRICS = ("max_abs_error", "rms_error", "final_error")
+# Which recorded topic each metric is computed from.
+METRIC_SOURCES = {
+    "max_abs_error": "/controller_state",
+    "rms_error": "/controller_state",
+    "final_error": "/controller_state",
+    "settling_time": "/controller_state",
+    "overshoot": "/controller_state",
+    "peak_velocity": "/joint_states",
+    "peak_velocity_time": "/joint_states",
+    "rms_effort": "/joint_states",
+    "saturation_fraction": "/joint_states + /controller_state",
+}
+
+_KEY = ["episode", "joint"]
 
 
-def joint_metrics(
-    samples: pl.DataFrame,
-    episodes: pl.DataFrame,
-    limits: pl.DataFrame | None = None,
-    *,
-    settling_tolerance_rad: float = SETTLING_TOLERANCE_RAD,
-    final_window_s: float = FINAL_WINDOW_S,
-) -> pl.DataFrame:
-    """Metrics per episode and joint (columns ``episode``, ``joint``, :data:`METRIC_COLUMNS`).
-
-    Args:
-        samples: tidy samples (:data:`pipeline.log.reader.SAMPLE_COLUMNS`), time-sorted per
-            episode and joint.
-        episodes: :func:`pipeline.analysis.episodes.episode_table` (``motion_end_s``, ``end_s``).
-        limits: ``episode, joint, effort_limit_nm`` (null where unknown); None = unknown.
-        settling_tolerance_rad: band |e| must stay in to count as settled [rad].
-        final_window_s: longest window at the end used for the final error [s].
-    """
-    if limits is None:
-        limits = pl.DataFrame(
-            schema={"episode": pl.String, "joint": pl.String, "effort_limit_nm": pl.Float64}
-        )
-    ep = episodes.select("episode", "motion_end_s", "end_s").with_columns(
+def _episode_columns(episodes: pl.DataFrame, final_window_s: float) -> pl.DataFrame:
+    completed = (
+        pl.col("motion_completed")
+        if "motion_completed" in episodes.columns
+        else (pl.col("status") == "ok")
+        if "status" in episodes.columns
+        else pl.lit(True)
+    )
+    return episodes.select(
+        "episode",
+        "motion_end_s",
+        "end_s",
+        completed.fill_null(False).alias("completed"),
+    ).with_columns(
         pl.when(pl.col("motion_end_s").is_null())
         .then(pl.lit(final_window_s))
         .otherwise(
@@ -83,62 +99,150 @@ def joint_metrics(
         )
         .alias("final_window_s")
     )
-    key = ["episode", "joint"]
+
+
+def _time_sorted(frame: pl.DataFrame) -> pl.DataFrame:
+    # Every order-dependent expression below (first/last, the settled flag, the peak's
+    # time) needs time order within an (episode, joint) group; a stable sort keeps the
+    # joints in recorded order.
+    return frame.sort("episode", "time_s", maintain_order=True)
+
+
+def error_metrics(
+    controller_states: pl.DataFrame,
+    episodes: pl.DataFrame,
+    *,
+    settling_tolerance_rad: float = SETTLING_TOLERANCE_RAD,
+    final_window_s: float = FINAL_WINDOW_S,
+) -> pl.DataFrame:
+    """Error-based metrics from ``/controller_state`` (every message, its full rate).
+
+    Args:
+        controller_states: tidy frame, :data:`pipeline.log.reader.CONTROLLER_STATE_COLUMNS`.
+        episodes: :func:`pipeline.analysis.episodes.episode_table`.
+        settling_tolerance_rad: band |e| must stay in to count as settled [rad].
+        final_window_s: longest window at the end used for the final error [s].
+
+    Returns:
+        ``episode, joint, max_abs_error, rms_error, final_error, settling_time, overshoot``.
+    """
     e = pl.col("error_rad")
+    t = pl.col("time_s")
+    ref = pl.col("reference_position_rad")
+    df = (
+        _time_sorted(controller_states)
+        .join(_episode_columns(episodes, final_window_s), on="episode", how="left")
+        .with_columns(
+            after_motion=(t >= pl.col("motion_end_s")),
+            in_final=(t >= pl.col("end_s") - pl.col("final_window_s") - 1e-9),
+        )
+        .with_columns(
+            violating=(pl.col("after_motion") & (e.abs() > settling_tolerance_rad)).fill_null(
+                False
+            ),
+        )
+        .with_columns(
+            # True where this and every later sample of the group is within tolerance.
+            settled=(
+                pl.col("violating").cast(pl.Int8).reverse().cum_max().reverse().over(_KEY) == 0
+            )
+        )
+    )
+    completed = pl.col("completed").first()
+    motion_end = pl.col("motion_end_s").first()
+    goal = ref.drop_nulls().last()
+    travel = goal - ref.drop_nulls().first()
+    direction = pl.when(travel > 0).then(1.0).otherwise(-1.0)
+    return df.group_by(_KEY, maintain_order=True).agg(
+        max_abs_error=e.abs().max(),
+        rms_error=(e * e).mean().sqrt(),
+        final_error=pl.when(completed).then(e.abs().filter(pl.col("in_final")).mean()),
+        settling_time=pl.when(motion_end.is_null() | ~completed)
+        .then(None)
+        .when(~pl.col("violating").any())
+        .then(0.0)
+        .otherwise(t.filter(pl.col("after_motion") & pl.col("settled")).min() - motion_end),
+        overshoot=pl.when(completed & (travel.abs() > MIN_TRAVEL_RAD)).then(
+            ((pl.col("feedback_position_rad") - goal) * direction).max().clip(lower_bound=0.0)
+        ),
+    )
+
+
+def state_metrics(
+    samples: pl.DataFrame,
+    limits: pl.DataFrame | None = None,
+) -> pl.DataFrame:
+    """Velocity and effort metrics from ``/joint_states`` (with the commanded effort of the
+    ``/controller_state`` at the same stamp for the saturation share).
+
+    Args:
+        samples: tidy samples, :data:`pipeline.log.reader.SAMPLE_COLUMNS`.
+        limits: ``episode, joint, effort_limit_nm`` (null where unknown); None = unknown.
+
+    Returns:
+        ``episode, joint, peak_velocity, peak_velocity_time, rms_effort, saturation_fraction``.
+    """
+    if limits is None:
+        limits = pl.DataFrame(
+            schema={"episode": pl.String, "joint": pl.String, "effort_limit_nm": pl.Float64}
+        )
     t = pl.col("time_s")
     v = pl.col("velocity_rad_s")
     eff = pl.col("effort_nm")
     cmd = pl.col("commanded_effort_nm")
     limit = pl.col("effort_limit_nm")
-    ref = pl.col("reference_position_rad")
+    at_limit = limit.is_not_null() & (eff.abs() >= limit * (1 - SATURATION_REL_TOL))
+    clipped = cmd.is_not_null() & (cmd.abs() > eff.abs() * (1 + SATURATION_REL_TOL) + 1e-9)
     df = (
-        samples.join(ep, on="episode", how="left")
-        .join(limits, on=key, how="left")
+        _time_sorted(samples)
+        .join(limits, on=_KEY, how="left", maintain_order="left")
         .with_columns(
-            after_motion=(t >= pl.col("motion_end_s")),
-            in_final=(t >= pl.col("end_s") - pl.col("final_window_s") - 1e-9),
-            saturated=(
-                (limit.is_not_null() & (eff.abs() >= limit * (1 - SATURATION_REL_TOL)))
-                | (
-                    cmd.is_not_null()
-                    & cmd.is_not_nan()
-                    & (cmd.abs() > eff.abs() * (1 + SATURATION_REL_TOL) + 1e-9)
-                )
-            ).fill_null(False),
-        )
-        .with_columns(
-            violating=(pl.col("after_motion") & (e.abs() > settling_tolerance_rad)),
-        )
-        .with_columns(
-            # True where this and every later sample of the group is within tolerance.
-            settled=(pl.col("violating").cast(pl.Int8).reverse().cum_max().reverse().over(key) == 0)
+            # Null (not counted) where no effort was recorded.
+            saturated=pl.when(eff.is_not_null()).then((at_limit | clipped).fill_null(False)),
         )
     )
-    goal = ref.last()
-    travel = goal - ref.first()
-    direction = pl.when(travel > 0).then(1.0).otherwise(-1.0)
-    peak = v.abs().arg_max()
-    out = df.group_by(key, maintain_order=True).agg(
-        max_abs_error=e.abs().max(),
-        rms_error=(e * e).mean().sqrt(),
-        final_error=e.abs().filter(pl.col("in_final")).mean(),
-        settling_time=pl.when(pl.col("motion_end_s").first().is_null())
-        .then(None)
-        .when(~pl.col("violating").any())
-        .then(0.0)
-        .otherwise(
-            t.filter(pl.col("after_motion") & pl.col("settled")).min()
-            - pl.col("motion_end_s").first()
-        ),
-        overshoot=pl.when(travel.abs() > MIN_TRAVEL_RAD)
-        .then(((pl.col("position_rad") - goal) * direction).max().clip(lower_bound=0.0))
-        .otherwise(None),
-        peak_velocity=v.get(peak),
-        peak_velocity_time=t.get(peak),
+    # First sample at the largest |v| (nulls never match: all-null gives null, not 0).
+    is_peak = v.abs() == v.abs().max()
+    return df.group_by(_KEY, maintain_order=True).agg(
+        peak_velocity=v.filter(is_peak).first(),
+        peak_velocity_time=t.filter(is_peak).first(),
         rms_effort=(eff * eff).mean().sqrt(),
         saturation_fraction=pl.col("saturated").cast(pl.Float64).mean(),
     )
-    return out.select(*key, *METRIC_COLUMNS)
+
+
+def joint_metrics(
+    samples: pl.DataFrame,
+    controller_states: pl.DataFrame,
+    episodes: pl.DataFrame,
+    limits: pl.DataFrame | None = None,
+    *,
+    settling_tolerance_rad: float = SETTLING_TOLERANCE_RAD,
+    final_window_s: float = FINAL_WINDOW_S,
+) -> pl.DataFrame:
+    """Metrics per episode and joint (columns ``episode``, ``joint``, :data:`METRIC_COLUMNS`).
+
+    Error-based metrics come from ``controller_states`` (full rate), velocity and effort
+    metrics from ``samples`` (``/joint_states``); see :data:`METRIC_SOURCES`.
+
+    Args:
+        samples: tidy samples (:data:`pipeline.log.reader.SAMPLE_COLUMNS`), any order.
+        controller_states: tidy frame (:data:`pipeline.log.reader.CONTROLLER_STATE_COLUMNS`).
+        episodes: :func:`pipeline.analysis.episodes.episode_table` (``motion_end_s``,
+            ``end_s``, ``motion_completed``).
+        limits: ``episode, joint, effort_limit_nm`` (null where unknown); None = unknown.
+        settling_tolerance_rad: band |e| must stay in to count as settled [rad].
+        final_window_s: longest window at the end used for the final error [s].
+    """
+    errors = error_metrics(
+        controller_states,
+        episodes,
+        settling_tolerance_rad=settling_tolerance_rad,
+        final_window_s=final_window_s,
+    )
+    states = state_metrics(samples, limits)
+    out = states.join(errors, on=_KEY, how="full", coalesce=True, maintain_order="left")
+    return out.select(*_KEY, *METRIC_COLUMNS)
 
 
 def check_baseline(episodes: pl.DataFrame, baseline: str) -> None:
@@ -172,8 +276,14 @@ def pairs(episodes: pl.DataFrame, *, baseline: str) -> list[tuple[str, str, str]
 
 
 def reduction_pct(baseline: pl.Expr, candidate: pl.Expr) -> pl.Expr:
-    """(baseline - candidate) / baseline x 100, null when the baseline is 0 or missing."""
-    valid = baseline.is_not_null() & baseline.is_not_nan() & (baseline != 0)
+    """(baseline - candidate) / baseline x 100; null when |baseline| < :data:`ERROR_FLOOR_RAD`
+    (numerical noise: the ratio would be meaningless) or either value is missing."""
+    valid = (
+        baseline.is_not_null()
+        & baseline.is_not_nan()
+        & (baseline.abs() >= ERROR_FLOOR_RAD)
+        & candidate.is_not_null()
+    )
     return pl.when(valid).then((baseline - candidate) / baseline * 100.0).otherwise(None)
 
 
@@ -194,8 +304,14 @@ def comparisons(
     cols = ["joint", *compared]
     b = metrics.select("episode", *cols).rename({m: f"{m}_baseline" for m in compared})
     c = metrics.select("episode", *cols).rename({m: f"{m}_candidate" for m in compared})
-    out = pair_df.join(b, left_on="baseline", right_on="episode", how="inner").join(
-        c, left_on=["candidate", "joint"], right_on=["episode", "joint"], how="inner"
+    out = pair_df.join(
+        b, left_on="baseline", right_on="episode", how="inner", maintain_order="left"
+    ).join(
+        c,
+        left_on=["candidate", "joint"],
+        right_on=["episode", "joint"],
+        how="inner",
+        maintain_order="left",
     )
     out = out.with_columns(
         [

@@ -75,6 +75,18 @@ SAMPLE_COLUMNS = (
     "error_rad",
     "commanded_effort_nm",
 )
+# Column names of the tidy /controller_state frame (every message, at its own rate).
+CONTROLLER_STATE_COLUMNS = (
+    "episode",
+    "stamp_ns",
+    "time_s",
+    "joint",
+    "reference_position_rad",
+    "reference_velocity_rad_s",
+    "feedback_position_rad",
+    "error_rad",
+    "commanded_effort_nm",
+)
 
 
 # --- public data ----------------------------------------------------------------------
@@ -108,7 +120,12 @@ class Recording:
         metadata: the ``armlab.episode`` metadata record (string key/values).
         settings: ``metadata["settings"]`` parsed from JSON ({} if absent).
         joint_names: joint order, as in ``/joint_states``.
-        samples: tidy frame, columns :data:`SAMPLE_COLUMNS`, sorted by time then joint order.
+        samples: tidy frame, columns :data:`SAMPLE_COLUMNS`, sorted by time then joint order:
+            one row per ``/joint_states`` message and joint, with the ``/controller_state``
+            of the same stamp. ``time_s`` counts from the first control-rate stamp.
+        controller_states: tidy frame, columns :data:`CONTROLLER_STATE_COLUMNS`: every
+            ``/controller_state`` message (its full rate, even when ``/joint_states`` is
+            decimated), same order and time origin.
         planned: the planned trajectory, if recorded.
         robot_description: the URDF on ``/robot_description``, if recorded.
         topic_counts: messages per topic in the file.
@@ -124,6 +141,7 @@ class Recording:
     settings: dict[str, Any]
     joint_names: tuple[str, ...]
     samples: pl.DataFrame
+    controller_states: pl.DataFrame
     planned: PlannedTrajectory | None
     robot_description: str | None
     topic_counts: dict[str, int]
@@ -166,8 +184,9 @@ class Recording:
 
     @property
     def motion_end_s(self) -> float | None:
-        """When the reference stops moving [s]: settings.planner.trajectory_duration_s,
-        else the last planned point's time_from_start, else None."""
+        """When the reference stops moving [s] from the recording's start (``time_s`` = 0):
+        settings.planner.trajectory_duration_s, else the last planned point's
+        time_from_start, else None."""
         planner = self.settings.get("planner")
         if isinstance(planner, dict):
             value = planner.get("trajectory_duration_s")
@@ -321,14 +340,24 @@ def _parse_fields(text: str, package: str) -> tuple[MsgField, ...]:
     return tuple(fields)
 
 
+def root_type_name(schema_name: str) -> str:
+    """The full name (``pkg/msg/Type``) a schema's root type is stored under.
+
+    MCAP schema names come as ``sensor_msgs/msg/JointState`` (ROS 2) or
+    ``sensor_msgs/JointState`` (older writers); both mean the same type.
+    """
+    return _normalize_type(schema_name, schema_name.split("/")[0])
+
+
 def parse_msgdef(root_type: str, text: str) -> MsgTypes:
     """Parse a ros2msg schema (the root definition plus ``MSG: pkg/Type`` sections).
 
     Returns:
-        Every type it defines by full name (``pkg/msg/Type``). ``Time`` and
-        ``Duration`` are added when the schema leaves them out.
+        Every type it defines by full name (``pkg/msg/Type``; the root under
+        :func:`root_type_name`). ``Time`` and ``Duration`` are added when the schema
+        leaves them out.
     """
-    root = _normalize_type(root_type, root_type.split("/")[0])
+    root = root_type_name(root_type)
     sections = _SECTION_RE.split(text)
     types: MsgTypes = {}
     for i, section in enumerate(sections):
@@ -457,6 +486,10 @@ def message_layout(types: MsgTypes, root: str, data: bytes | memoryview) -> Mess
     Raises:
         ValueError: the bytes do not fit the type (truncated or corrupt).
     """
+    if root not in types:
+        root = root_type_name(root)
+        if root not in types:
+            raise ValueError(f"type {root} is not defined by the schema")
     w = _Walk(types, data)
     w.walk(root)
     if w.pos > w.end:
@@ -489,10 +522,15 @@ class _Channel:
 
 @dataclass(frozen=True)
 class _Want:
-    """Fields to decode from a control-rate topic (first alias present wins)."""
+    """Fields to decode from a control-rate topic (first alias present wins).
+
+    ``required``: groups of field paths; the schema must have at least one path of
+    each group (besides ``header.stamp``), else the recording is refused.
+    """
 
     names: tuple[str, ...]
     arrays: dict[str, tuple[str, ...]]
+    required: tuple[tuple[str, ...], ...] = ()
 
 
 _WANT: dict[str, _Want] = {
@@ -503,15 +541,21 @@ _WANT: dict[str, _Want] = {
             "velocity": ("velocity",),
             "effort": ("effort",),
         },
+        required=(("position",),),
     ),
     TOPIC_CONTROLLER_STATE: _Want(
         names=("joint_names",),
         arrays={
             "reference_position": ("reference.positions", "desired.positions"),
             "reference_velocity": ("reference.velocities", "desired.velocities"),
+            "feedback_position": ("feedback.positions", "actual.positions"),
             "error": ("error.positions",),
             "commanded_effort": ("output.effort",),
         },
+        required=(
+            ("reference.positions", "desired.positions"),
+            ("error.positions", "feedback.positions", "actual.positions"),
+        ),
     ),
 }
 _STAMP_SEC = "header.stamp.sec"
@@ -816,7 +860,14 @@ class _McapScan:
             self.topic_counts[channel.topic] = self.topic_counts.get(channel.topic, 0) + len(starts)
             target = self._target(channel)
             if target is not None:
-                self._decode(target, buf, u8, starts)
+                try:
+                    self._decode(target, buf, u8, starts)
+                except RecordingError:
+                    raise
+                except Exception as err:  # a decoder bug or an input it did not foresee
+                    raise self._fail(
+                        f"cannot decode {channel.topic}: {type(err).__name__}: {err}"
+                    ) from err
             elif (
                 channel.topic in (TOPIC_PLANNED_TRAJECTORY, TOPIC_ROBOT_DESCRIPTION)
                 and channel.topic not in self.singles
@@ -850,7 +901,7 @@ class _McapScan:
                 "expected cdr/ros2msg (a ROS 2 recording)"
             )
         try:
-            return name, parse_msgdef(name, data.decode("utf-8"))
+            return root_type_name(name), parse_msgdef(name, data.decode("utf-8"))
         except (ValueError, UnicodeDecodeError) as err:
             raise self._fail(f"schema {name} of {channel.topic} cannot be parsed ({err})") from err
 
@@ -874,6 +925,7 @@ class _McapScan:
         data_len = lengths.astype(np.int64) - _MESSAGE_PREFIX
         if td.layout is None:
             td.layout = self._layout(td, buf, int(data_start[0]), int(data_len[0]))
+            self._check_fields(td, td.layout)
             td.names = self._names(td, td.layout)
         layout = td.layout
         fast = data_len == layout.size
@@ -920,6 +972,20 @@ class _McapScan:
             raise self._fail(
                 f"corrupt: a message on {td.topic} cannot be decoded as {td.type_name} ({err})"
             ) from err
+
+    def _check_fields(self, td: _TopicData, layout: MessageLayout) -> None:
+        """Refuse a schema that lacks a field the report cannot do without."""
+        missing = [p for p in (_STAMP_SEC, _STAMP_NSEC) if p not in layout.leaves]
+        missing += [
+            " or ".join(group)
+            for group in td.want.required
+            if not any(p in layout.leaves for p in group)
+        ]
+        if missing:
+            raise self._fail(
+                f"{td.topic} ({td.type_name}) has no field {', '.join(missing)}; "
+                "cannot read it as a control-rate topic"
+            )
 
     def _names(self, td: _TopicData, layout: MessageLayout) -> tuple[str, ...]:
         for path in td.want.names:
@@ -1143,12 +1209,41 @@ def _match_stamps(
 def read_recording(source: Path) -> Recording:
     """Read one recording (rosbag2 directory or bare ``.mcap``) into a :class:`Recording`.
 
+    Times (``time_s``) count from the recording's first control-rate stamp, so header
+    stamps may be simulated (from 0) or wall clock alike; ``stamp_ns`` stays as recorded.
+    NaN values and empty arrays (legal in ROS messages) become nulls: "not recorded".
+
     Raises:
-        RecordingError: missing, empty, not MCAP, truncated, corrupt (CRC), or
-            lacking ``/joint_states`` / ``/controller_state`` messages.
+        RecordingError: missing, empty, not MCAP, truncated, corrupt (CRC), lacking
+            ``/joint_states`` / ``/controller_state`` messages or a field the report
+            needs; any other failure while decoding is wrapped into one, naming the file.
     """
     source = Path(source)
-    mcap_path = _mcap_file_of(source)
+    try:
+        mcap_path = _mcap_file_of(source)
+    except OSError as err:
+        raise RecordingError(f"{source}: cannot read ({err.strerror or err})") from err
+    try:
+        return _read(source, mcap_path)
+    except RecordingError:
+        raise
+    except Exception as err:  # the boundary: nothing else may escape a per-recording read
+        raise RecordingError(
+            f"{mcap_path}: cannot decode the recording: {type(err).__name__}: {err}"
+        ) from err
+
+
+def _missing_array_notes(arrays: dict[str, F64], topic: str, fields: dict[str, str]) -> list[str]:
+    """Notes for optional arrays that are empty (or NaN) in every message of ``topic``."""
+    notes = []
+    for key, what in fields.items():
+        values = arrays.get(key)
+        if values is not None and values.size and np.isnan(values).all():
+            notes.append(f"{topic} carries no {what} values (empty arrays): {what} metrics are n/a")
+    return notes
+
+
+def _read(source: Path, mcap_path: Path) -> Recording:
     scan = _McapScan(mcap_path)
     scan.run()
     present = {c.topic for c in scan.channels.values()}
@@ -1179,6 +1274,9 @@ def read_recording(source: Path) -> Recording:
     dropped = js_t.size - rows_js.size
     if dropped:
         notes.append(f"{dropped} joint-state samples without a controller state were dropped")
+    notes += _missing_array_notes(
+        js_a, TOPIC_JOINT_STATES, {"velocity": "velocity", "effort": "effort"}
+    )
 
     raw_meta = scan.metadata.get(METADATA_EPISODE, {})
     settings: dict[str, Any] = {}
@@ -1188,36 +1286,82 @@ def read_recording(source: Path) -> Recording:
             if isinstance(parsed, dict):
                 settings = parsed
             else:
-                notes.append("settings is not a JSON object")
-        except json.JSONDecodeError:
-            notes.append("settings is not valid JSON")
+                notes.append(
+                    f"'{METADATA_EPISODE}' settings is not a JSON object: settings are n/a"
+                )
+        except json.JSONDecodeError as err:
+            notes.append(
+                f"'{METADATA_EPISODE}' settings is not valid JSON ({err.msg} at char {err.pos}): "
+                "settings are n/a"
+            )
     elif METADATA_EPISODE not in scan.metadata:
-        notes.append(f"no '{METADATA_EPISODE}' metadata record")
+        notes.append(
+            f"no '{METADATA_EPISODE}' metadata record: episode name from the file name, "
+            "settings n/a"
+        )
 
-    stamps = js_t[rows_js]
-    n, m = len(names), stamps.size
+    # Relative times: wall-clock header stamps (1.7e9 s) would otherwise swamp float64
+    # resolution and put the motion end (a duration from the start) 50 years early.
+    t0_ns = int(min(js_t[0], cs_t[0]))
+    n = len(names)
+    episode = _episode_name(raw_meta, source)
 
     def flat(a: F64) -> F64:
         return np.ascontiguousarray(a).reshape(-1)
 
-    cs_rows = {k: v[rows_cs][:, perm] for k, v in cs_a.items()}
-    episode = _episode_name(raw_meta, source)
-    samples = pl.DataFrame(
+    def tidy(stamps: NDArray[np.int64], columns: dict[str, F64]) -> pl.DataFrame:
+        m = stamps.size
+        frame = pl.DataFrame(
+            {
+                "stamp_ns": np.repeat(stamps, n),
+                "time_s": np.repeat((stamps - t0_ns).astype(np.float64) * 1e-9, n),
+                "joint": pl.Series("joint", names, dtype=pl.String).gather(
+                    np.tile(np.arange(n, dtype=np.int64), m)
+                ),
+                **{k: flat(v) for k, v in columns.items()},
+            }
+        )
+        return frame.select(
+            pl.lit(episode, dtype=pl.String).alias("episode"),
+            pl.col("stamp_ns", "time_s", "joint"),
+            pl.col(*columns).fill_nan(None),
+        )
+
+    cs_all = {k: v[:, perm] for k, v in cs_a.items()}
+    # error = reference - feedback: whichever of the two the controller left out.
+    error = np.where(
+        np.isnan(cs_all["error"]),
+        cs_all["reference_position"] - cs_all["feedback_position"],
+        cs_all["error"],
+    )
+    feedback = np.where(
+        np.isnan(cs_all["feedback_position"]),
+        cs_all["reference_position"] - error,
+        cs_all["feedback_position"],
+    )
+    cs_rows = {k: v[rows_cs] for k, v in cs_all.items()}
+    samples = tidy(
+        js_t[rows_js],
         {
-            "stamp_ns": np.repeat(stamps, n),
-            "time_s": np.repeat(stamps.astype(np.float64) * 1e-9, n),
-            "joint": pl.Series("joint", names, dtype=pl.String).gather(
-                np.tile(np.arange(n, dtype=np.int64), m)
-            ),
-            "position_rad": flat(js_a["position"][rows_js]),
-            "velocity_rad_s": flat(js_a["velocity"][rows_js]),
-            "effort_nm": flat(js_a["effort"][rows_js]),
-            "reference_position_rad": flat(cs_rows["reference_position"]),
-            "reference_velocity_rad_s": flat(cs_rows["reference_velocity"]),
-            "error_rad": flat(cs_rows["error"]),
-            "commanded_effort_nm": flat(cs_rows["commanded_effort"]),
-        }
-    ).select(pl.lit(episode, dtype=pl.String).alias("episode"), pl.all())
+            "position_rad": js_a["position"][rows_js],
+            "velocity_rad_s": js_a["velocity"][rows_js],
+            "effort_nm": js_a["effort"][rows_js],
+            "reference_position_rad": cs_rows["reference_position"],
+            "reference_velocity_rad_s": cs_rows["reference_velocity"],
+            "error_rad": error[rows_cs],
+            "commanded_effort_nm": cs_rows["commanded_effort"],
+        },
+    )
+    controller_states = tidy(
+        cs_t,
+        {
+            "reference_position_rad": cs_all["reference_position"],
+            "reference_velocity_rad_s": cs_all["reference_velocity"],
+            "feedback_position_rad": feedback,
+            "error_rad": error,
+            "commanded_effort_nm": cs_all["commanded_effort"],
+        },
+    )
     return Recording(
         source=source,
         mcap_path=mcap_path,
@@ -1227,6 +1371,7 @@ def read_recording(source: Path) -> Recording:
         settings=settings,
         joint_names=names,
         samples=samples,
+        controller_states=controller_states,
         planned=_planned(scan),
         robot_description=_robot_description(scan),
         topic_counts=dict(scan.topic_counts),

@@ -6,7 +6,9 @@ One set per scenario, one line per episode. Long series are thinned to at most
 
 from __future__ import annotations
 
+import hashlib
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -21,7 +23,7 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from pipeline.log.reader import Recording
-from pipeline.report.inputs import ReportData, times_s, wide
+from pipeline.report.inputs import ReportData, cs_times_s, cs_wide, times_s, wide
 
 FIGURES_DIR = "figures"
 MAX_PLOT_POINTS = 4000
@@ -41,6 +43,26 @@ class FigureFile:
 def slug(name: str) -> str:
     """A file-name-safe form of a scenario name."""
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "scenario"
+
+
+def scenario_slugs(names: Iterable[str]) -> dict[str, str]:
+    """A distinct file-name stem per scenario name.
+
+    :func:`slug` alone maps "a b" and "a/b" (and, on case-insensitive file systems,
+    "A" and "a") to one name, so their figures would overwrite each other: names
+    whose slugs collide get a short hash of the full name appended.
+    """
+    names = sorted(set(names))
+    by_slug: dict[str, list[str]] = {}
+    for name in names:
+        by_slug.setdefault(slug(name).lower(), []).append(name)
+    out = {}
+    for name in names:
+        stem = slug(name)
+        if len(by_slug[stem.lower()]) > 1:
+            stem = f"{stem}-{hashlib.sha256(name.encode('utf-8')).hexdigest()[:8]}"
+        out[name] = stem
+    return out
 
 
 def _thin(t: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[NDArray[Any], NDArray[Any]]:
@@ -88,6 +110,7 @@ def _per_joint(
     title: str,
     *,
     limits: bool = False,
+    controller_state: bool = False,
 ) -> Figure:
     joints = recs[0].joint_names
     rows, cols = _grid(len(joints))
@@ -99,7 +122,10 @@ def _per_joint(
             if joint not in rec.joint_names:
                 continue
             j = rec.joint_names.index(joint)
-            t, y = _thin(times_s(rec), wide(rec, column)[:, j])
+            if controller_state:
+                t, y = _thin(cs_times_s(rec), cs_wide(rec, column)[:, j])
+            else:
+                t, y = _thin(times_s(rec), wide(rec, column)[:, j])
             ax.plot(
                 t, y, lw=1.0, color=_rgb(data.color(rec.episode)), label=data.label(rec.episode)
             )
@@ -142,16 +168,26 @@ def _effort_limit(data: ReportData, rec: Recording, joint: str) -> float | None:
     return effort_limits(rec, robot_spec(rec)).get(joint)
 
 
-def scenario_figures(data: ReportData, scenario: str, out_dir: Path) -> list[FigureFile]:
-    """Draw and write the figure set of one scenario; return what was written."""
+def scenario_figures(
+    data: ReportData, scenario: str, out_dir: Path, *, stem: str | None = None
+) -> list[FigureFile]:
+    """Draw and write the figure set of one scenario; return what was written.
+
+    Errors and the reference are drawn from ``/controller_state`` (its full rate),
+    measured positions, velocities and efforts from ``/joint_states``.
+
+    Args:
+        stem: file-name stem (default :func:`slug` of the scenario; pass the one from
+            :func:`scenario_slugs` when drawing several scenarios).
+    """
     recs = data.in_scenario(scenario)
-    stem = slug(scenario)
+    stem = stem or slug(scenario)
     first_joint = recs[0].joint_names[0]
     out: list[FigureFile] = []
 
     # Fig. 5: joint 1 reference vs each controller.
     fig, ax = _single()
-    t_ref, y_ref = _thin(times_s(recs[0]), wide(recs[0], "reference_position_rad")[:, 0])
+    t_ref, y_ref = _thin(cs_times_s(recs[0]), cs_wide(recs[0], "reference_position_rad")[:, 0])
     ax.plot(t_ref, y_ref, color="k", lw=1.4, ls="--", label="reference")
     for rec in recs:
         t, y = _thin(times_s(rec), wide(rec, "position_rad")[:, 0])
@@ -172,7 +208,7 @@ def scenario_figures(data: ReportData, scenario: str, out_dir: Path) -> list[Fig
     # Fig. 6: joint 1 error.
     fig, ax = _single()
     for rec in recs:
-        t, y = _thin(times_s(rec), wide(rec, "error_rad")[:, 0])
+        t, y = _thin(cs_times_s(rec), cs_wide(rec, "error_rad")[:, 0])
         ax.plot(t, y, lw=1.0, color=_rgb(data.color(rec.episode)), label=data.label(rec.episode))
     _motion_end(ax, recs)
     ax.set_xlabel("time [s]")
@@ -214,6 +250,14 @@ def scenario_figures(data: ReportData, scenario: str, out_dir: Path) -> list[Fig
         ),
     )
     for column, ylabel, title, name, caption, limits in panels:
-        fig = _per_joint(data, recs, column, ylabel, f"{scenario}: {title}", limits=limits)
+        fig = _per_joint(
+            data,
+            recs,
+            column,
+            ylabel,
+            f"{scenario}: {title}",
+            limits=limits,
+            controller_state=column == "error_rad",
+        )
         out.append(FigureFile(_save(fig, out_dir, f"{stem}_{name}.png"), caption))
     return out

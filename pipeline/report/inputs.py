@@ -11,6 +11,11 @@ import numpy as np
 import polars as pl
 from numpy.typing import NDArray
 
+from pipeline.analysis.aggregate import (
+    metric_aggregates,
+    reduction_aggregates,
+    runs_per_controller,
+)
 from pipeline.log.reader import Recording
 
 # Matplotlib's tab10, as RGB bytes: one colour per episode within a scenario.
@@ -59,6 +64,29 @@ class ReportData:
     recordings_dir: Path
 
     @cached_property
+    def metric_summary(self) -> pl.DataFrame:
+        """:func:`pipeline.analysis.aggregate.metric_aggregates` of these episodes."""
+        return metric_aggregates(self.metrics, self.episodes)
+
+    @cached_property
+    def reduction_summary(self) -> pl.DataFrame:
+        """:func:`pipeline.analysis.aggregate.reduction_aggregates` of these comparisons."""
+        return reduction_aggregates(self.comparisons, self.episodes)
+
+    @cached_property
+    def runs(self) -> dict[tuple[str, str], int]:
+        """Completed episodes per (scenario, controller)."""
+        return runs_per_controller(self.episodes)
+
+    def repeated(self, scenario: str) -> bool:
+        """Whether some controller ran this scenario more than once (e.g. several seeds)."""
+        return any(n > 1 for (sc, _), n in self.runs.items() if sc == scenario)
+
+    def warnings(self) -> list[tuple[str, str]]:
+        """(episode, note) for every non-fatal oddity the reader noted."""
+        return [(rec.episode, note) for rec in self.recordings for note in rec.notes]
+
+    @cached_property
     def _metric_rows(self) -> dict[tuple[str, str], dict[str, Any]]:
         return {(r["episode"], r["joint"]): r for r in self.metrics.iter_rows(named=True)}
 
@@ -94,7 +122,8 @@ class ReportData:
 
 
 def wide(rec: Recording, column: str) -> NDArray[np.float64]:
-    """(N, n) array of one sample column, joints in the recording's order."""
+    """(N, n) array of one sample column, joints in the recording's order (NaN where not
+    recorded)."""
     n = len(rec.joint_names)
     values = rec.samples.get_column(column).to_numpy()
     return np.asarray(values, dtype=np.float64).reshape(-1, n)
@@ -104,4 +133,18 @@ def times_s(rec: Recording) -> NDArray[np.float64]:
     """(N,) sample times [s]."""
     n = len(rec.joint_names)
     values = rec.samples.get_column("time_s").to_numpy()[::n]
+    return np.asarray(values, dtype=np.float64)
+
+
+def cs_wide(rec: Recording, column: str) -> NDArray[np.float64]:
+    """(M, n) array of one ``/controller_state`` column (full rate), NaN where not recorded."""
+    n = len(rec.joint_names)
+    values = rec.controller_states.get_column(column).to_numpy()
+    return np.asarray(values, dtype=np.float64).reshape(-1, n)
+
+
+def cs_times_s(rec: Recording) -> NDArray[np.float64]:
+    """(M,) ``/controller_state`` times [s]."""
+    n = len(rec.joint_names)
+    values = rec.controller_states.get_column("time_s").to_numpy()[::n]
     return np.asarray(values, dtype=np.float64)

@@ -7,11 +7,10 @@ from typing import Any
 
 import polars as pl
 
+from pipeline.analysis.aggregate import CONFIDENCE, MeanCI, mean_ci
 from pipeline.analysis.episodes import setting
-from pipeline.analysis.metrics import (
-    SETTLING_TOLERANCE_RAD,
-)
-from pipeline.constants import FINAL_WINDOW_S
+from pipeline.analysis.metrics import ERROR_FLOOR_RAD, SETTLING_TOLERANCE_RAD, pairs
+from pipeline.constants import FINAL_WINDOW_S, TOPIC_CONTROLLER_STATE, TOPIC_JOINT_STATES
 from pipeline.log.reader import Recording
 from pipeline.report import paper
 from pipeline.report.figures import FigureFile
@@ -19,6 +18,9 @@ from pipeline.report.inputs import ReportData
 
 REPORT_FILE = "report.md"
 NA = "n/a"
+NOT_RECORDED = "n/a (not recorded)"
+ENDED_EARLY = "n/a (episode ended before the motion did)"
+_FLOOR = f"{ERROR_FLOOR_RAD:.0e}".replace("e-0", "e-")  # "1e-9"
 
 
 # --- formatting ------------------------------------------------------------------------------
@@ -42,6 +44,30 @@ def _pct(x: Any) -> str:
     if x is None:
         return "— (divisor ≈ 0)"
     return f"{float(x):.1f} %" if abs(float(x)) < 1e4 else f"{float(x):.3g} %"
+
+
+def _signed(x: float, digits: int) -> str:
+    """``+1.234`` / ``-1.234``; a value that rounds to zero is ``0.000`` (never ``-0.000``)."""
+    text = f"{x:+.{digits}f}"
+    return text[1:] if float(text) == 0.0 else text
+
+
+def _ci(ci: MeanCI, fmt: Any, hw_fmt: Any = None) -> str:
+    """``mean ± half width (n = k)``; ``fmt`` formats the mean (and, unless ``hw_fmt`` is
+    given, the half width)."""
+    if ci.mean is None:
+        return NA
+    if ci.half_width is None:
+        return f"{fmt(ci.mean)} (n = {ci.n})"
+    return f"{fmt(ci.mean)} ± {(hw_fmt or fmt)(ci.half_width)} (n = {ci.n})"
+
+
+def _ci_pct(ci: MeanCI) -> str:
+    if ci.mean is None:
+        return "— (divisor ≈ 0)"
+    if ci.half_width is None:
+        return f"{ci.mean:.1f} % (n = {ci.n})"
+    return f"{ci.mean:.1f} ± {ci.half_width:.1f} % (n = {ci.n})"
 
 
 def _value(x: Any) -> str:
@@ -87,7 +113,42 @@ def _pairs_in(data: ReportData, scenario: str) -> list[tuple[str, str]]:
 
 def _head(data: ReportData, rec: Recording) -> str:
     label = data.label(rec.episode)
-    return f"{label} (diverged)" if rec.status != "ok" else label
+    return f"{label} ({rec.status})" if rec.status != "ok" else label
+
+
+def _completed(data: ReportData, episode: str) -> bool:
+    frame = data.episodes.filter(pl.col("episode") == episode)
+    return bool(frame.height and frame.get_column("motion_completed")[0])
+
+
+def _incomplete(data: ReportData, rec: Recording) -> str:
+    """Why final error, settling time and overshoot are n/a for an episode that did not
+    complete its motion."""
+    end = data.episodes.filter(pl.col("episode") == rec.episode).get_column("end_s")[0]
+    motion_end = rec.motion_end_s
+    if motion_end is not None and (end is None or end < motion_end):
+        return ENDED_EARLY
+    return f"n/a (episode {rec.status})"
+
+
+def _missing(data: ReportData, rec: Recording, metric: str) -> str:
+    """The text for a null metric value of one episode."""
+    if metric in ("final_error", "settling_time", "overshoot") and not _completed(
+        data, rec.episode
+    ):
+        return _incomplete(data, rec)
+    if metric in ("peak_velocity", "rms_effort", "saturation_fraction"):
+        return NOT_RECORDED
+    if metric == "settling_time":
+        return "n/a (motion end unknown)" if rec.motion_end_s is None else "never settles"
+    return NA
+
+
+def _samples(joint_states: int, controller_states: int) -> str:
+    """Message count; both topics' when /joint_states is decimated."""
+    if joint_states == controller_states:
+        return str(joint_states)
+    return f"{joint_states} (/joint_states), {controller_states} (/controller_state)"
 
 
 # --- sections -----------------------------------------------------------------------------------
@@ -125,7 +186,7 @@ def _intro(data: ReportData) -> list[str]:
                 row["status"],
                 _num(row["motion_end_s"], ".3f"),
                 _num(row["end_s"], ".3f"),
-                str(row["samples"]),
+                _samples(row["samples"], row["controller_samples"]),
             ]
         )
     lines.append(
@@ -156,6 +217,14 @@ def _intro(data: ReportData) -> list[str]:
     if data.skipped:
         lines += ["", "### Skipped recordings (--skip-bad)", ""]
         lines += [f"- `{s.source}`: {s.problem}" for s in data.skipped]
+    warnings = data.warnings()
+    if warnings:
+        lines += ["", "## Warnings", ""]
+        lines += [
+            "Read from the recordings; the numbers below are affected where they say n/a.",
+            "",
+        ]
+        lines += [f"- **{episode}**: {note}" for episode, note in warnings]
     return lines
 
 
@@ -184,9 +253,44 @@ def _settings_line(node: Any, first: Sequence[str], *, skip: Sequence[str] = ())
     """``key = value`` for a settings dict: the known keys first, then the rest."""
     if not isinstance(node, dict) or not node:
         return NA
-    keys = [k for k in first if k in node]
+    keys = [k for k in first if k in node and k not in skip]
     keys += [k for k in node if k not in keys and k not in skip]
-    return "; ".join(f"{k} = {_value(node[k])}" for k in keys)
+    return "; ".join(f"{k} = {_value(node[k])}" for k in keys) or NA
+
+
+# Planner settings that the planner line states in words.
+_PATH_KEYS = ("planner", "direct", "simplify", "n_waypoints", "n_states_before_simplify")
+
+
+def _planner_line(planner: Any) -> str:
+    """What the planner did, in words, then its settings.
+
+    ``direct`` = the straight joint-space segment start -> goal was collision-free, so it
+    is the path: RRTConnect did not search and there was nothing to simplify.
+    """
+    if not isinstance(planner, dict) or not planner:
+        return NA
+    skip: tuple[str, ...] = ("start", "goal")
+    head = None
+    direct = planner.get("direct")
+    if direct is True:
+        head = "direct joint-space segment start → goal (collision-free; RRTConnect not needed)"
+        skip += _PATH_KEYS
+    elif direct is False:
+        name = _value(planner.get("planner", "RRTConnect"))
+        n = _value(planner.get("n_waypoints"))
+        raw = planner.get("n_states_before_simplify")
+        if planner.get("simplify"):
+            head = f"{name}, {n} waypoints after simplification" + (
+                f" (from {_value(raw)} states)" if raw is not None else ""
+            )
+        else:
+            head = f"{name}, {n} waypoints (not simplified)"
+        skip += _PATH_KEYS
+    rest = _settings_line(planner, _PLANNER_KEYS, skip=skip)
+    if head is None:
+        return rest
+    return head if rest == NA else f"{head}; {rest}"
 
 
 def _setup(data: ReportData, scenario: str) -> list[str]:
@@ -212,7 +316,7 @@ def _setup(data: ReportData, scenario: str) -> list[str]:
         f"- Start [rad]: {pose('start')}; goal [rad]: {pose('goal')}; "
         f"obstacles: {len(obstacles) if isinstance(obstacles, list) else NA}; "
         f"hold after the motion: {_value(setting(sc, 'hold_s'))} s.",
-        f"- Planner: {_settings_line(planner, _PLANNER_KEYS, skip=('start', 'goal'))}.",
+        f"- Planner: {_planner_line(planner)}.",
         f"- Plant: {_settings_line(setting(s, 'plant', default={}), _PLANT_KEYS)}.",
         "",
         "Controllers:",
@@ -228,33 +332,104 @@ def _setup(data: ReportData, scenario: str) -> list[str]:
     return lines
 
 
+_ERROR_TITLES = (
+    ("max_abs_error", "Max |error| [rad]"),
+    ("rms_error", "RMS error [rad]"),
+    (
+        "final_error",
+        f"Error at the target [rad] (mean |e| over the final window, ≤ {FINAL_WINDOW_S} s)",
+    ),
+)
+
+
+def _aggregate_tables(data: ReportData, scenario: str) -> list[str]:
+    """Mean ± 95 % CI over the repeated runs of each controller, and reductions per pair."""
+    recs = data.in_scenario(scenario)
+    joints = recs[0].joint_names
+    controllers = list(dict.fromkeys(r.controller for r in recs if r.status == "ok"))
+    summary = data.metric_summary.filter(pl.col("scenario") == scenario)
+    reductions = data.reduction_summary.filter(pl.col("scenario") == scenario)
+    candidates = list(dict.fromkeys(reductions.get_column("controller").to_list()))
+    pairing = dict(
+        zip(reductions["controller"].to_list(), reductions["pairing"].to_list(), strict=True)
+    )
+
+    def cell(frame: pl.DataFrame) -> MeanCI:
+        if not frame.height:
+            return MeanCI(0, None, None, None)
+        r = frame.row(0, named=True)
+        return MeanCI(r["n"], r["mean"], r["std"], r["ci95_half_width"])
+
+    runs = data.runs
+    lines = [
+        f"#### Over repeated runs: mean ± {CONFIDENCE * 100:.0f} % confidence interval (Student t)",
+        "",
+        "Runs per controller (completed episodes): "
+        + ", ".join(f"{c}: {runs.get((scenario, c), 0)}" for c in controllers)
+        + ". Reductions are computed per pair — baseline and candidate of the same seed "
+        "where the scenario has such pairs, else every baseline run against every candidate "
+        "run — and then averaged.",
+        "",
+    ]
+    for metric, title in _ERROR_TITLES:
+        header = ["joint", *controllers]
+        header += [
+            f"{c} vs {data.baseline} (per {'seed ' if pairing[c] == 'seed' else ''}pair)"
+            for c in candidates
+        ]
+        rows = []
+        for k, joint in enumerate(joints):
+            row = [f"{k + 1} {joint}"]
+            for c in controllers:
+                ci = cell(
+                    summary.filter(
+                        (pl.col("controller") == c)
+                        & (pl.col("joint") == joint)
+                        & (pl.col("metric") == metric)
+                    )
+                )
+                row.append(_ci(ci, lambda x: f"{x:.3e}", lambda x: f"{x:.1e}"))
+            for c in candidates:
+                ci = cell(
+                    reductions.filter(
+                        (pl.col("controller") == c)
+                        & (pl.col("joint") == joint)
+                        & (pl.col("metric") == f"{metric}_reduction_pct")
+                    )
+                )
+                row.append(_ci_pct(ci))
+            rows.append(row)
+        lines += [f"##### {title}", "", _table(header, rows), ""]
+    return lines
+
+
 def _error_tables(data: ReportData, scenario: str) -> list[str]:
     recs = data.in_scenario(scenario)
     joints = recs[0].joint_names
-    pairs = _pairs_in(data, scenario)
-    lines: list[str] = []
-    titles = (
-        ("max_abs_error", "Max |error| [rad]"),
-        ("rms_error", "RMS error [rad]"),
-        (
-            "final_error",
-            f"Error at the target [rad] (mean |e| over the final window, ≤ {FINAL_WINDOW_S} s)",
-        ),
-    )
-    for metric, title in titles:
+    repeated = data.repeated(scenario)
+    # With repeated runs the per-pair reductions are summarised above, not listed.
+    pairs = [] if repeated else _pairs_in(data, scenario)
+    lines: list[str] = _aggregate_tables(data, scenario) if repeated else []
+    level = "#####" if repeated else "####"
+    if repeated:
+        lines += ["#### Per episode", ""]
+    for metric, title in _ERROR_TITLES:
         header = ["joint", *[_head(data, r) for r in recs]]
         header += [f"{data.label(c)} vs {data.label(b)}" for b, c in pairs]
         rows = []
         for k, joint in enumerate(joints):
             row = [f"{k + 1} {joint}"]
-            row += [_sci(_metric(data, r.episode, joint, metric)) for r in recs]
+            for r in recs:
+                v = _metric(data, r.episode, joint, metric)
+                row.append(_missing(data, r, metric) if v is None else _sci(v))
             row += [_pct(_reduction(data, b, c, joint, metric)) for b, c in pairs]
             rows.append(row)
-        lines += [f"#### {title}", "", _table(header, rows), ""]
-    if pairs:
+        lines += [f"{level} {title}", "", _table(header, rows), ""]
+    if pairs or repeated:
         lines.append(
             "Reduction = (baseline − candidate) / baseline × 100 (positive: the candidate "
-            "has the smaller error)."
+            f"has the smaller error); '—' when |baseline| < {_FLOOR} rad "
+            "(numerical noise)."
         )
         lines.append("")
     return lines
@@ -269,7 +444,10 @@ def _other_tables(data: ReportData, scenario: str) -> list[str]:
         for r in recs:
             v = _metric(data, r.episode, joint, "peak_velocity")
             t = _metric(data, r.episode, joint, "peak_velocity_time")
-            row.append(NA if v is None else f"{v:+.3f} (t = {t:.2f} s)")
+            if v is None:
+                row.append(_missing(data, r, "peak_velocity"))
+            else:
+                row.append(f"{_signed(v, 3)} (t = {t:.2f} s)")
         rows.append(row)
     lines = [
         "#### Peak velocity [rad/s] (signed value at the largest |velocity|)",
@@ -292,30 +470,27 @@ def _other_tables(data: ReportData, scenario: str) -> list[str]:
             row = [f"{k + 1} {joint}"]
             for r in recs:
                 v = _metric(data, r.episode, joint, metric)
-                row.append(
-                    ("never settles" if metric == "settling_time" else NA)
-                    if v is None
-                    else format(v, fmt)
-                )
+                row.append(_missing(data, r, metric) if v is None else format(v + 0.0, fmt))
             rows.append(row)
         lines += [f"#### {title}", "", _table(["joint", *[_head(data, r) for r in recs]], rows), ""]
     return lines
 
 
-def _paper_pair(data: ReportData) -> tuple[Recording, Recording] | None:
-    """(PID, CTC) episodes to put beside the paper: scenario "paper" first."""
+def _paper_pairs(data: ReportData) -> tuple[str, list[tuple[str, str]]] | None:
+    """(scenario, [(PID episode, CTC episode), ...]) to put beside the paper.
+
+    Scenario "paper" first, else the first with both controllers completed. Pairs as in
+    the comparisons: a CTC run with the PID run of its seed when there is one, else
+    with every PID run.
+    """
+    eps = data.episodes.with_columns(pl.col("controller").str.to_lowercase())
+    eps = eps.filter(pl.col("controller").is_in([paper.PAPER_BASELINE, paper.PAPER_CANDIDATE]))
+    found = pairs(eps, baseline=paper.PAPER_BASELINE)
     for scenario in sorted(data.scenarios(), key=lambda s: (s != "paper", s)):
-        recs = [r for r in data.in_scenario(scenario) if r.status == "ok"]
-        pid = [r for r in recs if r.controller.lower() == paper.PAPER_BASELINE]
-        ctc = [r for r in recs if r.controller.lower() == paper.PAPER_CANDIDATE]
-        if pid and ctc:
-            return pid[0], ctc[0]
+        chosen = [(b, c) for sc, b, c in found if sc == scenario]
+        if chosen:
+            return scenario, chosen
     return None
-
-
-# Below this a joint error is numerical noise (a perfect-model CTC settles to ~1e-13 rad);
-# dividing by it gives meaningless percentages like 1e10 %, so such ratios are not shown.
-ERROR_FLOOR_RAD = 1e-9
 
 
 def _red(base: Any, cand: Any, by: Any) -> Any:
@@ -326,19 +501,61 @@ def _red(base: Any, cand: Any, by: Any) -> Any:
 
 def _versus_paper(data: ReportData) -> list[str]:
     lines = ["## Versus the paper", ""]
-    pair = _paper_pair(data)
-    if pair is None:
+    found = _paper_pairs(data)
+    if found is None:
         return [
             *lines,
             "No scenario has both a `pid` and a `ctc` episode that completed, so there is "
             "nothing to put beside the paper.",
             "",
         ]
-    pid, ctc = pair
-    joints = pid.joint_names
+    scenario, pair_list = found
+    pid_eps = list(dict.fromkeys(b for b, _ in pair_list))
+    ctc_eps = list(dict.fromkeys(c for _, c in pair_list))
+    joints = data.recording(pid_eps[0]).joint_names
+    n_pairs = len(pair_list)
+
+    def per_episode(episodes: list[str], joint: str | None, metric: str) -> MeanCI:
+        if joint is None:
+            return MeanCI(0, None, None, None)
+        return mean_ci(_metric(data, e, joint, metric) for e in episodes)
+
+    def per_pair(joint: str | None, metric: str, divide_by: str) -> MeanCI:
+        """(PID − CTC) / (PID or CTC) × 100 of each pair, summarised."""
+        if joint is None:
+            return MeanCI(0, None, None, None)
+        values = []
+        for b, c in pair_list:
+            vp, vc = _metric(data, b, joint, metric), _metric(data, c, joint, metric)
+            values.append(_red(vp, vc, vp if divide_by == "pid" else vc))
+        return mean_ci(values)
+
+    def pct(ci: MeanCI) -> str:
+        return _pct(ci.mean) if n_pairs == 1 else _ci_pct(ci)
+
+    def val(ci: MeanCI, fmt: Any, hw_fmt: Any = None) -> str:
+        if ci.mean is None:
+            return NA
+        return fmt(ci.mean) if n_pairs == 1 else _ci(ci, fmt, hw_fmt)
+
+    def vel(x: float) -> str:
+        return _signed(x, 2)
+
+    def vel_hw(x: float) -> str:
+        return f"{x:.2f}"
+
+    if n_pairs == 1:
+        ((pid, ctc),) = pair_list
+        ours = f"episodes `{pid}` (PID) and `{ctc}` (CTC)"
+    else:
+        seeds = sorted({data.recording(c).meta("seed") for c in ctc_eps}, key=lambda x: (len(x), x))
+        ours = (
+            f"{n_pairs} PID/CTC pairs ({len(pid_eps)} PID and {len(ctc_eps)} CTC runs, "
+            f"seeds {', '.join(seeds)}): mean ± {CONFIDENCE * 100:.0f} % confidence interval "
+            "(Student t) over the runs, reductions per pair"
+        )
     lines += [
-        f"Ours: scenario **{pid.scenario}**, episodes `{pid.episode}` (PID) and "
-        f"`{ctc.episode}` (CTC). Paper: {paper.PAPER_SOURCE}.",
+        f"Ours: scenario **{scenario}**, {ours}. Paper: {paper.PAPER_SOURCE}.",
         "",
         "Two reduction formulas appear in the paper: the joint-1 figure (45.9 %) is "
         "(PID − CTC) / PID × 100, while Table 3's percentages are (PID − CTC) / CTC × 100. "
@@ -349,28 +566,32 @@ def _versus_paper(data: ReportData) -> list[str]:
         "",
     ]
     j1 = joints[0]
-    ours_pid = _metric(data, pid.episode, j1, "max_abs_error")
-    ours_ctc = _metric(data, ctc.episode, j1, "max_abs_error")
     pp, pc = paper.PAPER_JOINT1_MAX_ERROR_RAD["pid"], paper.PAPER_JOINT1_MAX_ERROR_RAD["ctc"]
     rows = [
-        ["CTC max |e| [rad]", _sci(pc), _sci(ours_ctc)],
-        ["PID max |e| [rad]", _sci(pp), _sci(ours_pid)],
+        ["CTC max |e| [rad]", _sci(pc), val(per_episode(ctc_eps, j1, "max_abs_error"), _sci)],
+        ["PID max |e| [rad]", _sci(pp), val(per_episode(pid_eps, j1, "max_abs_error"), _sci)],
         [
             "(PID − CTC) / PID",
             f"{paper.PAPER_JOINT1_MAX_ERROR_REDUCTION_PCT:.1f} % (printed)",
-            _pct(_red(ours_pid, ours_ctc, ours_pid)),
+            pct(per_pair(j1, "max_abs_error", "pid")),
         ],
-        ["(PID − CTC) / CTC", _pct(_red(pp, pc, pc)), _pct(_red(ours_pid, ours_ctc, ours_ctc))],
+        [
+            "(PID − CTC) / CTC",
+            _pct(_red(pp, pc, pc)),
+            pct(per_pair(j1, "max_abs_error", "ctc")),
+        ],
     ]
     lines += [_table(["joint 1", "paper", "ours"], rows), ""]
     lines += ["#### Error at the target (paper Table 3), ×1e-5 rad", ""]
+
+    def e5(x: float) -> str:
+        return f"{x * 1e5:.4f}"
+
     rows = []
     for k in range(len(paper.PAPER_FINAL_ERROR_REDUCTION_PCT)):
         joint = joints[k] if k < len(joints) else None
         pc_k = paper.PAPER_FINAL_ERROR_RAD["ctc"][k]
         pp_k = paper.PAPER_FINAL_ERROR_RAD["pid"][k]
-        oc = _metric(data, ctc.episode, joint, "final_error") if joint else None
-        op = _metric(data, pid.episode, joint, "final_error") if joint else None
         rows.append(
             [
                 str(k + 1),
@@ -378,10 +599,10 @@ def _versus_paper(data: ReportData) -> list[str]:
                 f"{pp_k * 1e5:.4f}",
                 f"{paper.PAPER_FINAL_ERROR_REDUCTION_PCT[k]:.1f} %",
                 _pct(_red(pp_k, pc_k, pp_k)),
-                NA if oc is None else f"{oc * 1e5:.4f}",
-                NA if op is None else f"{op * 1e5:.4f}",
-                _pct(_red(op, oc, oc)),
-                _pct(_red(op, oc, op)),
+                val(per_episode(ctc_eps, joint, "final_error"), e5),
+                val(per_episode(pid_eps, joint, "final_error"), e5),
+                pct(per_pair(joint, "final_error", "ctc")),
+                pct(per_pair(joint, "final_error", "pid")),
             ]
         )
     lines += [
@@ -409,15 +630,13 @@ def _versus_paper(data: ReportData) -> list[str]:
     rows = []
     for number in sorted(paper.PAPER_PEAK_VELOCITY_RAD_S["ctc"]):
         joint = joints[number - 1] if number - 1 < len(joints) else None
-        oc = _metric(data, ctc.episode, joint, "peak_velocity") if joint else None
-        op = _metric(data, pid.episode, joint, "peak_velocity") if joint else None
         rows.append(
             [
                 f"{number} {joint or ''}".strip(),
                 f"{paper.PAPER_PEAK_VELOCITY_RAD_S['ctc'][number]:+.2f}",
-                NA if oc is None else f"{oc:+.2f}",
+                val(per_episode(ctc_eps, joint, "peak_velocity"), vel, vel_hw),
                 f"{paper.PAPER_PEAK_VELOCITY_RAD_S['pid'][number]:+.2f}",
-                NA if op is None else f"{op:+.2f}",
+                val(per_episode(pid_eps, joint, "peak_velocity"), vel, vel_hw),
             ]
         )
     lines += [_table(["joint", "paper CTC", "ours CTC", "paper PID", "ours PID"], rows), ""]
@@ -425,24 +644,37 @@ def _versus_paper(data: ReportData) -> list[str]:
 
 
 def _definitions() -> list[str]:
+    cs, js = f"`{TOPIC_CONTROLLER_STATE}`", f"`{TOPIC_JOINT_STATES}`"
     return [
         "## Definitions",
         "",
-        "- error e(t) = reference − measured joint position [rad] (as recorded on "
-        "`/controller_state`).",
+        f"- error e(t) = reference − measured joint position [rad], as recorded on {cs} "
+        "(`error.positions`). Every error-based number (max, RMS, at the target, settling, "
+        f"overshoot) uses every {cs} message, at its full rate; velocities and efforts come "
+        f"from {js} (which may be decimated). Times count from the recording's first sample.",
         "- max |error|: largest |e| over the episode; RMS error: sqrt(mean e²) over the episode.",
         f"- error at the target: mean |e| over the last min({FINAL_WINDOW_S} s, hold / 2) of the "
         "episode, hold = episode end − motion end (motion end = the planned trajectory's "
         "duration); the last sample alone when there is no hold.",
         f"- settling time: from the motion end until |e| stays within {SETTLING_TOLERANCE_RAD:g} "
         "rad for the rest of the episode; 'never settles' when the last sample is outside.",
-        "- overshoot: how far the measured position passes the goal in the direction of travel "
-        "(n/a for a joint that does not move).",
-        "- peak velocity: the measured velocity of largest magnitude, with its sign.",
-        "- RMS effort: sqrt(mean applied effort²); saturation: share of samples where |applied "
-        "effort| is at the joint's effort limit or |commanded| exceeds |applied|.",
-        "- reduction % = (baseline − candidate) / baseline × 100; shown as '—' when the "
-        "divisor is 0 (in the paper comparison: below 1e-9 rad, i.e. numerical noise).",
+        "- overshoot: how far the measured position (`feedback.positions`) passes the goal in "
+        "the direction of travel (n/a for a joint that does not move).",
+        f"- '{ENDED_EARLY}': the episode failed or its recording stops before the motion end, "
+        "so its last samples are not at the target: error at the target, settling time and "
+        "overshoot are not given (max and RMS are, over what was recorded).",
+        f"- peak velocity: the measured velocity of largest magnitude, with its sign ({js}).",
+        f"- RMS effort: sqrt(mean applied effort²) ({js} `effort`); saturation: share of "
+        f"{js} samples where |applied effort| is at the joint's effort limit or |commanded| "
+        f"({cs} `output.effort`) exceeds |applied|.",
+        f"- '{NOT_RECORDED}': the recording carries no such values (empty arrays are legal "
+        "in ROS messages); they are never read as zeros.",
+        "- reduction % = (baseline − candidate) / baseline × 100; shown as '—' when "
+        f"|divisor| < {_FLOOR} rad (numerical noise: a perfect-model CTC settles "
+        "to ~1e-13 rad), the same in metrics.json (null) and every table.",
+        f"- repeated runs (several seeds of a scenario and controller): mean ± "
+        f"{CONFIDENCE * 100:.0f} % confidence interval, t(0.975, n − 1) · s / √n with the sample "
+        "standard deviation s, and n; reductions are computed per seed pair first.",
         "",
     ]
 

@@ -10,18 +10,25 @@ from typing import Any
 import numpy as np
 import polars as pl
 
+from pipeline.analysis.aggregate import CONFIDENCE
 from pipeline.analysis.metrics import (
     COMPARED_METRICS,
+    ERROR_FLOOR_RAD,
+    METRIC_SOURCES,
     SETTLING_TOLERANCE_RAD,
 )
 from pipeline.constants import FINAL_WINDOW_S
-from pipeline.report.inputs import ReportData, times_s, wide
+from pipeline.report.inputs import ReportData, cs_times_s, cs_wide, times_s, wide
 
 METRICS_FILE = "metrics.json"
 PLOTS_DIR = "plots"
 # Series CSVs are thinned to at most this many samples per episode and joint.
 MAX_CSV_POINTS = 1000
 SIGNIFICANT_DIGITS = 9
+# Times are rounded to a fixed number of decimals (1 ns), not significant digits: 9 digits
+# of a 1.7e9 s wall-clock time would be whole seconds.
+TIME_DECIMALS = 9
+_FLOOR = f"{ERROR_FLOOR_RAD:.0e}".replace("e-0", "e-")  # "1e-9"
 
 # metrics.json key -> metric column (and its unit, documented in docs/report.md).
 JOINT_KEYS = (
@@ -47,6 +54,58 @@ def number(value: Any) -> float | None:
     return float(f"{x:.{SIGNIFICANT_DIGITS}g}") + 0.0  # + 0.0 turns -0.0 into 0.0
 
 
+def seconds(value: Any) -> float | None:
+    """A time [s] rounded to :data:`TIME_DECIMALS` decimals; None for null/NaN/inf."""
+    if value is None:
+        return None
+    x = float(value)
+    if not math.isfinite(x):
+        return None
+    return round(x, TIME_DECIMALS) + 0.0
+
+
+# Metrics that are times [s] (rounded to decimals, not significant digits).
+TIME_KEYS = frozenset({"settling_time", "peak_velocity_time"})
+
+
+def _rounded(key: str, value: Any) -> float | None:
+    return seconds(value) if key in TIME_KEYS else number(value)
+
+
+def _aggregates(data: ReportData) -> dict[str, Any]:
+    """Scenarios with repeated runs (a controller run more than once, e.g. several seeds):
+    scenario -> {"controllers": controller -> joint -> metric -> stats,
+    "reductions": "<candidate> vs <baseline>" -> {"pairing", "joints": joint ->
+    <metric>_reduction_pct -> stats}}. Single runs are in "episodes" / "comparisons"."""
+
+    def stats(row: dict[str, Any]) -> dict[str, Any]:
+        mean, hw = row["mean"], row["ci95_half_width"]
+        return {
+            "n": row["n"],
+            "mean": number(mean),
+            "std": number(row["std"]),
+            "ci95_half_width": number(hw),
+            "ci95_low": number(None if mean is None or hw is None else mean - hw),
+            "ci95_high": number(None if mean is None or hw is None else mean + hw),
+        }
+
+    out: dict[str, Any] = {}
+    repeated = {sc for sc in data.scenarios() if data.repeated(sc)}
+    for row in data.metric_summary.filter(pl.col("scenario").is_in(repeated)).iter_rows(named=True):
+        node = out.setdefault(row["scenario"], {"controllers": {}, "reductions": {}})
+        joint = node["controllers"].setdefault(row["controller"], {}).setdefault(row["joint"], {})
+        joint[row["metric"]] = stats(row)
+    for row in data.reduction_summary.filter(pl.col("scenario").is_in(repeated)).iter_rows(
+        named=True
+    ):
+        node = out.setdefault(row["scenario"], {"controllers": {}, "reductions": {}})
+        pair = node["reductions"].setdefault(
+            f"{row['controller']} vs {row['baseline']}", {"pairing": row["pairing"], "joints": {}}
+        )
+        pair["joints"].setdefault(row["joint"], {})[row["metric"]] = stats(row)
+    return out
+
+
 def metrics_document(data: ReportData) -> dict[str, Any]:
     """The metrics.json content as plain data (see docs/report.md for every key)."""
     episodes: dict[str, Any] = {}
@@ -60,7 +119,7 @@ def metrics_document(data: ReportData) -> dict[str, Any]:
         joints: dict[str, Any] = {}
         if group is not None:
             for m in group.iter_rows(named=True):
-                joints[m["joint"]] = {key: number(m[col]) for key, col in JOINT_KEYS}
+                joints[m["joint"]] = {key: _rounded(key, m[col]) for key, col in JOINT_KEYS}
         episodes[ep] = {
             "controller": row["controller"],
             "scenario": row["scenario"],
@@ -68,8 +127,10 @@ def metrics_document(data: ReportData) -> dict[str, Any]:
             "seed": row["seed"],
             "status": row["status"],
             "reason": row["reason"],
-            "motion_end_s": number(row["motion_end_s"]),
-            "end_s": number(row["end_s"]),
+            "motion_end_s": seconds(row["motion_end_s"]),
+            "end_s": seconds(row["end_s"]),
+            "motion_completed": row["motion_completed"],
+            "warnings": list(rec.notes),
             "recording": {
                 "path": _relative(rec.source, data.recordings_dir),
                 "sha256": rec.sha256,
@@ -95,10 +156,17 @@ def metrics_document(data: ReportData) -> dict[str, Any]:
             "baseline_controller": data.baseline,
             "final_window_s": FINAL_WINDOW_S,
             "settling_tolerance_rad": SETTLING_TOLERANCE_RAD,
-            "reduction": "(baseline - candidate) / baseline * 100; null when baseline is 0",
+            "reduction": (
+                "(baseline - candidate) / baseline * 100; null when |baseline| < "
+                f"{_FLOOR} (reduction_floor_rad)"
+            ),
+            "reduction_floor_rad": ERROR_FLOOR_RAD,
+            "confidence": CONFIDENCE,
+            "metric_sources": dict(METRIC_SOURCES),
         },
         "episodes": episodes,
         "comparisons": comparisons,
+        "aggregates": _aggregates(data),
         "skipped": [{"path": s.source, "problem": s.problem} for s in data.skipped],
     }
 
@@ -121,14 +189,19 @@ def write_metrics(data: ReportData, out_dir: Path) -> str:
     return METRICS_FILE
 
 
-def series_frame(data: ReportData, column: str) -> pl.DataFrame:
-    """Long form ``time_s, episode, joint, value`` of one sample column (thinned)."""
+def series_frame(data: ReportData, column: str, *, controller_state: bool = False) -> pl.DataFrame:
+    """Long form ``time_s, episode, joint, value`` of one sample column (thinned).
+
+    Args:
+        controller_state: take the column from ``/controller_state`` (full rate) instead
+            of the ``/joint_states`` samples.
+    """
     parts = []
     for rec in data.recordings:
-        t = times_s(rec)
+        t = cs_times_s(rec) if controller_state else times_s(rec)
         step = max(1, int(np.ceil(t.size / MAX_CSV_POINTS)))
         idx = np.arange(0, t.size, step)
-        values = wide(rec, column)[idx]
+        values = (cs_wide(rec, column) if controller_state else wide(rec, column))[idx]
         n = len(rec.joint_names)
         parts.append(
             pl.DataFrame(
@@ -139,7 +212,7 @@ def series_frame(data: ReportData, column: str) -> pl.DataFrame:
                     # + 0.0 writes -0.0 as 0.0
                     "value": values.reshape(-1) + 0.0,
                 }
-            )
+            ).with_columns(pl.col("value").fill_nan(None))  # not recorded: an empty cell
         )
     return pl.concat(parts) if parts else pl.DataFrame()
 
@@ -149,8 +222,11 @@ def write_series_csvs(data: ReportData, out_dir: Path) -> list[str]:
     folder = out_dir / PLOTS_DIR
     folder.mkdir(parents=True, exist_ok=True)
     written = []
-    for name, column in (("errors.csv", "error_rad"), ("velocities.csv", "velocity_rad_s")):
-        frame = series_frame(data, column)
+    for name, column, cs in (
+        ("errors.csv", "error_rad", True),
+        ("velocities.csv", "velocity_rad_s", False),
+    ):
+        frame = series_frame(data, column, controller_state=cs)
         frame.write_csv(folder / name)
         written.append(f"{PLOTS_DIR}/{name}")
     return written

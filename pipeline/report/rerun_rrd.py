@@ -21,7 +21,7 @@ from pipeline.log.reader import Recording
 from pipeline.model.chain import chain
 from pipeline.model.dh import link_frames
 from pipeline.report import entities as ent
-from pipeline.report.inputs import ReportData, times_s, wide
+from pipeline.report.inputs import ReportData, cs_times_s, cs_wide, times_s, wide
 from pipeline.robots import RobotSpec
 
 RRD_FILE = "recording.rrd"
@@ -156,8 +156,8 @@ def write_rrd(data: ReportData, path: Path) -> list[str]:
     for scenario in data.scenarios():
         recs = data.in_scenario(scenario)
         ref = recs[0]
-        t_ref = times_s(ref)
-        q_ref = wide(ref, "reference_position_rad")
+        t_ref = cs_times_s(ref)
+        q_ref = cs_wide(ref, "reference_position_rad")
         for j, joint in enumerate(ref.joint_names):
             _send_series(
                 stream,
@@ -173,12 +173,14 @@ def write_rrd(data: ReportData, path: Path) -> list[str]:
             color = data.color(rec.episode)
             label = f"{data.label(rec.episode)} [{scenario}]"
             for quantity, column in _COLUMNS.items():
-                values = wide(rec, column)
+                # The error at the /controller_state rate, as the metrics use it.
+                full_rate = quantity == "error"
+                values = cs_wide(rec, column) if full_rate else wide(rec, column)
                 for j, joint in enumerate(rec.joint_names):
                     _send_series(
                         stream,
                         ent.series_path(joint, quantity, rec.episode),
-                        t,
+                        cs_times_s(rec) if full_rate else t,
                         values[:, j],
                         name=label,
                         color=color,

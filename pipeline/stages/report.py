@@ -2,11 +2,15 @@
 
 Everything is written into a fresh staging folder beside ``out`` and moved into
 place only when all of it succeeded, so a failed or killed run never leaves a
-half-written file under a final name or destroys an earlier report.
+half-written file under a final name or destroys an earlier report. Moving in
+replaces files one by one inside the existing folders: files the report does not
+produce (``plots/.gitignore``, notes) stay; only stale figures (``figures/*.png``
+of an earlier run) are removed.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import tempfile
@@ -20,7 +24,13 @@ from pipeline.analysis.episodes import episode_table, limits_table
 from pipeline.analysis.metrics import check_baseline, comparisons, joint_metrics
 from pipeline.errors import RecordingError, ReportError
 from pipeline.log.reader import Recording, find_recordings, read_recording
-from pipeline.report.figures import MAX_FIGURE_SCENARIOS, FigureFile, scenario_figures
+from pipeline.report.figures import (
+    FIGURES_DIR,
+    MAX_FIGURE_SCENARIOS,
+    FigureFile,
+    scenario_figures,
+    scenario_slugs,
+)
 from pipeline.report.inputs import ReportData, Skipped
 from pipeline.report.markdown import REPORT_FILE, render_report
 from pipeline.report.metrics_json import write_metrics, write_series_csvs
@@ -41,6 +51,7 @@ class ReportResult:
             worst max |e|, mean RMS error, worst final error).
         skipped: (recording, problem) for recordings left out with skip_bad.
         decoded_messages: messages decoded from all recordings.
+        warnings: (episode, note) for non-fatal oddities of the recordings read.
     """
 
     out_dir: Path
@@ -48,6 +59,7 @@ class ReportResult:
     summary: pl.DataFrame
     skipped: tuple[tuple[str, str], ...]
     decoded_messages: int
+    warnings: tuple[tuple[str, str], ...] = ()
 
 
 def _noop(step: str, done: int, total: int) -> None:
@@ -100,19 +112,69 @@ def read_all(
     return sorted(good, key=lambda r: r.episode), bad
 
 
-def _commit(staging: Path, out_dir: Path, names: list[str]) -> None:
-    """Move staged outputs into ``out_dir``: files replaced atomically, folders swapped."""
+def _stale(out_dir: Path, produced: set[str]) -> list[str]:
+    """Earlier outputs this run does not produce and that would mislead: figures only.
+
+    Hidden files and anything that is not a ``.png`` directly in ``figures/`` are not
+    ours to delete (``.gitignore``, a README someone put there).
+    """
+    folder = out_dir / FIGURES_DIR
+    if not folder.is_dir():
+        return []
+    return [
+        f"{FIGURES_DIR}/{p.name}"
+        for p in sorted(folder.iterdir())
+        if p.is_file()
+        and p.suffix == ".png"
+        and not p.name.startswith(".")
+        and f"{FIGURES_DIR}/{p.name}" not in produced
+    ]
+
+
+def _commit(staging: Path, out_dir: Path, files: list[str]) -> None:
+    """Move the staged ``files`` (paths relative to ``staging``) into ``out_dir``.
+
+    Each file replaces its namesake atomically (``os.replace``; staging is on the same
+    file system); every file it replaces and every stale figure is first moved aside into
+    ``staging``. If any move fails, everything moved so far is put back, so ``out_dir``
+    holds either all of the new outputs or exactly what it held before.
+
+    Raises:
+        OSError: a move failed (after the rollback).
+    """
     out_dir.mkdir(parents=True, exist_ok=True)
-    trash = staging / ".previous"
-    trash.mkdir()
-    for name in names:
-        src, dst = staging / name, out_dir / name
-        if src.is_dir():
-            if dst.exists():
-                os.replace(dst, trash / name)
-            os.replace(src, dst)
-        else:
-            os.replace(src, dst)
+    backup = staging / ".previous"
+    backup.mkdir()
+    made_dirs: list[Path] = []
+    moved_aside: list[str] = []  # rel paths now in backup/
+    moved_in: list[str] = []  # rel paths now in out_dir (new)
+    try:
+        for rel in [*files, *_stale(out_dir, set(files))]:
+            dst = out_dir / rel
+            if dst.is_file() or dst.is_symlink():
+                (backup / rel).parent.mkdir(parents=True, exist_ok=True)
+                os.replace(dst, backup / rel)
+                moved_aside.append(rel)
+        for rel in files:
+            dst = out_dir / rel
+            for parent in reversed(dst.relative_to(out_dir).parents):
+                folder = out_dir / parent
+                if not folder.exists():
+                    folder.mkdir()
+                    made_dirs.append(folder)
+            os.replace(staging / rel, dst)
+            moved_in.append(rel)
+    except OSError:
+        for rel in reversed(moved_in):
+            with contextlib.suppress(OSError):
+                os.replace(out_dir / rel, staging / rel)
+        for rel in reversed(moved_aside):
+            with contextlib.suppress(OSError):
+                os.replace(backup / rel, out_dir / rel)
+        for folder in reversed(made_dirs):
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
 
 
 def run_report(
@@ -131,8 +193,12 @@ def run_report(
     recordings, bad = read_all(recordings_dir, skip_bad=skip_bad, progress=progress)
     episodes = episode_table(recordings)
     check_baseline(episodes, baseline)
-    samples = pl.concat([r.samples for r in recordings], how="vertical")
-    metrics = joint_metrics(samples, episodes, limits_table(recordings))
+    metrics = joint_metrics(
+        pl.concat([r.samples for r in recordings], how="vertical"),
+        pl.concat([r.controller_states for r in recordings], how="vertical"),
+        episodes,
+        limits_table(recordings),
+    )
     data = ReportData(
         recordings=tuple(recordings),
         episodes=episodes,
@@ -152,10 +218,11 @@ def run_report(
         files = [write_metrics(data, staging), *write_series_csvs(data, staging)]
         scenarios = data.scenarios()
         drawn = scenarios[:MAX_FIGURE_SCENARIOS]
+        stems = scenario_slugs(scenarios)
         figures: dict[str, list[FigureFile]] = {}
         for k, scenario in enumerate(drawn):
             progress("drawing figures", k, len(drawn))
-            figures[scenario] = scenario_figures(data, scenario, staging)
+            figures[scenario] = scenario_figures(data, scenario, staging, stem=stems[scenario])
         progress("drawing figures", len(drawn), len(drawn))
         files += [f.relpath for figs in figures.values() for f in figs]
         progress("writing recording.rrd", 0, 1)
@@ -165,8 +232,7 @@ def run_report(
         text = render_report(data, figures, omitted_figures=scenarios[len(drawn) :])
         (staging / REPORT_FILE).write_text(text, encoding="utf-8")
         files.append(REPORT_FILE)
-        top = sorted({f.split("/", 1)[0] for f in files})
-        _commit(staging, out_dir, top)
+        _commit(staging, out_dir, files)
     except OSError as err:
         raise ReportError(
             f"{out_dir}: writing the report failed ({err}); earlier reports are untouched"
@@ -179,6 +245,7 @@ def run_report(
         summary=_summary(data),
         skipped=tuple(bad),
         decoded_messages=sum(r.decoded_messages for r in recordings),
+        warnings=tuple(data.warnings()),
     )
 
 

@@ -129,6 +129,12 @@ class Episode:
     frame_ids: Sequence[str] | None = None  # per-sample header.frame_id (varies -> slow path)
     raw_settings: str | None = None  # written verbatim instead of JSON(settings)
     extra: dict[str, Any] = field(default_factory=dict)
+    # /joint_states arrays written empty (legal in ROS: "not recorded"), e.g. ("effort",).
+    empty_joint_state_fields: Sequence[str] = ()
+    joint_state_every: int = 1  # write /joint_states every k-th sample (decimation)
+    # Schema text and name for /joint_states instead of the Humble sensor_msgs/msg/JointState.
+    joint_state_msgdef: tuple[str, str] | None = None
+    episode_metadata: bool = True  # False: no armlab.episode metadata record
 
 
 def default_settings(ep: Episode) -> dict[str, Any]:
@@ -213,13 +219,17 @@ def write_bag(
         sch = {
             t: w.register_msgdef(t, msgdef(t))
             for t in (
-                "sensor_msgs/msg/JointState",
                 JTCS,
                 "trajectory_msgs/msg/JointTrajectory",
                 "std_msgs/msg/String",
                 "tf2_msgs/msg/TFMessage",
             )
         }
+        js_name, js_text = ep.joint_state_msgdef or (
+            "sensor_msgs/msg/JointState",
+            msgdef("sensor_msgs/msg/JointState"),
+        )
+        sch["sensor_msgs/msg/JointState"] = w.register_msgdef(js_name, js_text)
         if "/robot_description" in topics:
             w.write_message(
                 "/robot_description",
@@ -251,18 +261,18 @@ def write_bag(
         for k, t_ns in enumerate(ep.stamp_ns.tolist()):
             frame = ep.frame_ids[k] if ep.frame_ids is not None else ""
             header = {"stamp": _stamp(t_ns), "frame_id": frame}
-            if "/joint_states" in topics:
+            if "/joint_states" in topics and k % ep.joint_state_every == 0:
+                js_msg: dict[str, Any] = {
+                    "header": header,
+                    "name": names,
+                    "position": ep.q[k].tolist(),
+                    "velocity": ep.qd[k].tolist(),
+                    "effort": ep.effort[k].tolist(),
+                }
+                for key in ep.empty_joint_state_fields:
+                    js_msg[key] = []
                 w.write_message(
-                    "/joint_states",
-                    sch["sensor_msgs/msg/JointState"],
-                    {
-                        "header": header,
-                        "name": names,
-                        "position": ep.q[k].tolist(),
-                        "velocity": ep.qd[k].tolist(),
-                        "effort": ep.effort[k].tolist(),
-                    },
-                    log_time=t_ns,
+                    "/joint_states", sch["sensor_msgs/msg/JointState"], js_msg, log_time=t_ns
                 )
                 counts["/joint_states"] = counts.get("/joint_states", 0) + 1
             if "/controller_state" in topics:
@@ -306,19 +316,20 @@ def write_bag(
                     "/tf", sch["tf2_msgs/msg/TFMessage"], {"transforms": tfs}, log_time=t_ns
                 )
                 counts["/tf"] = counts.get("/tf", 0) + 1
-        w.add_metadata(
-            "armlab.episode",
-            {
-                "episode": ep.episode,
-                "scenario": ep.scenario,
-                "controller": ep.controller,
-                "robot": ep.robot,
-                "seed": str(ep.seed),
-                "settings": ep.raw_settings
-                if ep.raw_settings is not None
-                else json.dumps(settings),
-            },
-        )
+        if ep.episode_metadata:
+            w.add_metadata(
+                "armlab.episode",
+                {
+                    "episode": ep.episode,
+                    "scenario": ep.scenario,
+                    "controller": ep.controller,
+                    "robot": ep.robot,
+                    "seed": str(ep.seed),
+                    "settings": ep.raw_settings
+                    if ep.raw_settings is not None
+                    else json.dumps(settings),
+                },
+            )
         w.finish()
     if as_directory:
         _write_metadata_yaml(mcap_path, counts, int(ep.stamp_ns[-1]) if len(ep.stamp_ns) else 0)

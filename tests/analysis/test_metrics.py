@@ -33,7 +33,12 @@ def _episode(name: str, controller: str, stamp_ns: np.ndarray, **signals: np.nda
 
 def _metrics(recs: list[Recording]) -> pl.DataFrame:
     eps = episode_table(recs)
-    return joint_metrics(pl.concat([r.samples for r in recs]), eps, limits_table(recs))
+    return joint_metrics(
+        pl.concat([r.samples for r in recs]),
+        pl.concat([r.controller_states for r in recs]),
+        eps,
+        limits_table(recs),
+    )
 
 
 def _value(m: pl.DataFrame, episode: str, joint: int, column: str) -> float | None:

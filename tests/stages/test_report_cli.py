@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -14,7 +15,9 @@ from pipeline.errors import ReportError
 from pipeline.stages import report as report_stage
 from tests.analysis.bagfactory import damage, paper_like, write_bag
 
-KINDS = ("truncated", "bitflip", "empty", "not_mcap", "no_joint_states")
+KINDS = ("truncated", "bitflip", "empty", "not_mcap", "no_joint_states", "no_stamp")
+# A /joint_states schema without a header: legal MCAP, but no time stamps to read.
+NO_STAMP_JOINT_STATE = "string[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort\n"
 
 
 def _good(root: Path) -> None:
@@ -26,6 +29,9 @@ def _bad(root: Path, kind: str) -> Path:
     ep = paper_like(f"bad_{kind}", "pid", duration_s=0.5, scenario="broken")
     if kind == "no_joint_states":
         return write_bag(root, ep, topics=("/controller_state", "/planned_trajectory"))
+    if kind == "no_stamp":
+        ep.joint_state_msgdef = ("sensor_msgs/msg/JointState", NO_STAMP_JOINT_STATE)
+        return write_bag(root, ep)
     path = write_bag(root, ep)
     damage(path, kind)
     return path
@@ -85,8 +91,14 @@ def test_skip_bad_reports_the_rest_and_lists_what_was_skipped(
     for path in bad:
         assert path.name in text
         assert path.name in out.err
-    # The stale figure of the earlier report is gone with the folder it was in.
+    # The stale figure of the earlier report is gone.
     assert not (tmp_path / "reports" / "figures" / "old.png").exists()
+    # Each skipped recording is one line naming its file once.
+    skipped = [line for line in out.err.splitlines() if line.startswith("skipped: ")]
+    assert len(skipped) == len(KINDS)
+    for line in skipped:
+        name = next(p for p in bad if p.name in line).name
+        assert line.count(f"recordings/{name}") == 1, line
 
 
 def test_two_recordings_of_one_episode_name_are_refused(
@@ -167,3 +179,108 @@ def test_successful_run_prints_a_summary_table(
     assert "pid_ok" in out and "ctc_ok" in out and "wrote" in out
     for name in ("report.md", "metrics.json", "recording.rrd", "plots/errors.csv"):
         assert (tmp_path / "reports" / name).is_file()
+
+
+# --- replacing outputs in place --------------------------------------------------------------
+
+
+def _tracked_extras(out: Path) -> dict[str, bytes]:
+    """Files a user or git keeps in the reports folder; the report must leave them alone."""
+    extras = {
+        "plots/.gitignore": b"/errors.csv\n/velocities.csv\n",
+        "figures/.gitignore": b"*.png\n",
+        ".hidden": b"keep\n",
+        "figures/README.txt": b"figures are generated\n",
+        "notes.md": b"my notes\n",
+    }
+    for rel, data in extras.items():
+        (out / rel).parent.mkdir(parents=True, exist_ok=True)
+        (out / rel).write_bytes(data)
+    return extras
+
+
+def test_report_keeps_files_it_does_not_produce_and_removes_stale_figures(
+    tmp_path: Path,
+) -> None:
+    _good(tmp_path / "recordings")
+    _old_reports(tmp_path)
+    out = tmp_path / "reports"
+    extras = _tracked_extras(out)
+    result = report_stage.run_report(recordings_dir=tmp_path / "recordings", out_dir=out)
+    for rel, data in extras.items():
+        assert (out / rel).read_bytes() == data, rel
+    assert not (out / "figures" / "old.png").exists()
+    pngs = sorted(f"figures/{p.name}" for p in (out / "figures").glob("*.png"))
+    assert pngs == sorted(f for f in result.files if f.endswith(".png"))
+    assert (out / "report.md").read_text(encoding="utf-8").startswith("# Tracking report")
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_failure_while_moving_outputs_in_restores_the_earlier_report(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _good(tmp_path / "recordings")
+    _old_reports(tmp_path)
+    out = tmp_path / "reports"
+    _tracked_extras(out)
+    before = _snapshot(out)
+    real_replace = report_stage.os.replace
+    calls = {"n": 0}
+
+    def failing_replace(src: object, dst: object) -> None:
+        calls["n"] += 1
+        if calls["n"] == 9:  # some files moved aside and some new ones in already
+            raise OSError(28, "No space left on device")
+        real_replace(src, dst)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(report_stage.os, "replace", failing_replace)
+    with pytest.raises(ReportError, match="earlier reports are untouched"):
+        report_stage.run_report(recordings_dir=tmp_path / "recordings", out_dir=out)
+    assert calls["n"] >= 9
+    assert _snapshot(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["recordings", "reports"]
+
+
+# --- the command line at 80 columns ------------------------------------------------------------
+
+
+def test_summary_fits_80_columns_without_cutting_names_or_numbers(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from rich.console import Console
+
+    import pipeline.cli as cli
+
+    long_names = ("mismatch-payload-pd_gravity-seed-12", "mismatch-payload-pid-seed-12")
+    for name, ctrl in zip(long_names, ("pd_gravity", "pid"), strict=True):
+        ep = paper_like(name, ctrl, duration_s=0.6, motion_end_s=0.4, scenario="mismatch-payload")
+        write_bag(tmp_path / "recordings", ep)
+    bad = _bad(tmp_path / "recordings", "truncated")
+    monkeypatch.setattr(cli, "console", Console(width=80, force_terminal=False))
+    assert _run(monkeypatch, tmp_path, "--skip-bad") == 0
+    out, err = capsys.readouterr()
+    lines = out.splitlines()
+    assert all(len(line) <= 80 for line in lines)
+    assert "…" not in out
+    assert "[rad]" in out  # the unit, not eaten as markup
+    header = next(line for line in lines if "controller" in line)
+    first_column = "".join(line[: header.index("controller")].strip() for line in lines)
+    for name in long_names:
+        assert name in first_column  # folded onto the next line, never cut
+    numbers = re.findall(r"\d\.\d{3}e-\d\d", out)
+    assert len(numbers) == 6
+    (skipped,) = [line for line in err.splitlines() if line.startswith("skipped: ")]
+    assert skipped.count(f"recordings/{bad.name}") == 1
+
+
+def test_reader_warnings_are_printed_on_stderr(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    _good(tmp_path / "recordings")
+    ep = paper_like("odd_settings", "pid", duration_s=0.6, motion_end_s=0.4, scenario="odd")
+    ep.raw_settings = "{not json"
+    write_bag(tmp_path / "recordings", ep)
+    assert _run(monkeypatch, tmp_path) == 0
+    err = capsys.readouterr().err
+    (line,) = [x for x in err.splitlines() if x.startswith("warning: ")]
+    assert line.startswith("warning: odd_settings: ") and "not valid JSON" in line

@@ -1,0 +1,189 @@
+"""Repeated runs: distributions over seeds instead of single numbers.
+
+A scenario run under one controller with several seeds gives several values of each
+metric; they are summarised as the mean with a Student-t confidence interval
+(:data:`CONFIDENCE`), with n. Reductions are computed per seed pair (baseline and
+candidate of the same seed, when the scenario has such pairs) and summarised the
+same way, so a seed-to-seed spread that both controllers share cancels out.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from typing import Any, NamedTuple
+
+import polars as pl
+from scipy import stats
+
+from pipeline.analysis.metrics import COMPARED_METRICS
+
+CONFIDENCE = 0.95
+
+AGGREGATE_SCHEMA: dict[str, pl.DataType | type[pl.DataType]] = {
+    "scenario": pl.String,
+    "controller": pl.String,
+    "joint": pl.String,
+    "metric": pl.String,
+    "n": pl.Int64,
+    "mean": pl.Float64,
+    "std": pl.Float64,
+    "ci95_half_width": pl.Float64,
+}
+REDUCTION_SCHEMA: dict[str, pl.DataType | type[pl.DataType]] = {
+    "scenario": pl.String,
+    "baseline": pl.String,
+    "controller": pl.String,
+    "pairing": pl.String,
+    "joint": pl.String,
+    "metric": pl.String,
+    "n": pl.Int64,
+    "mean": pl.Float64,
+    "std": pl.Float64,
+    "ci95_half_width": pl.Float64,
+}
+
+
+class MeanCI(NamedTuple):
+    """Mean of n values with a two-sided Student-t confidence interval.
+
+    Attributes:
+        n: finite values used.
+        mean: their mean (None when n = 0).
+        std: sample standard deviation, ddof = 1 (None when n < 2).
+        half_width: t(1 - (1 - confidence) / 2, n - 1) * std / sqrt(n) (None when n < 2).
+    """
+
+    n: int
+    mean: float | None
+    std: float | None
+    half_width: float | None
+
+    @property
+    def low(self) -> float | None:
+        return None if self.mean is None or self.half_width is None else self.mean - self.half_width
+
+    @property
+    def high(self) -> float | None:
+        return None if self.mean is None or self.half_width is None else self.mean + self.half_width
+
+
+def mean_ci(values: Iterable[Any], *, confidence: float = CONFIDENCE) -> MeanCI:
+    """Mean and Student-t confidence interval of the finite values (None/NaN skipped)."""
+    xs = [float(v) for v in values if v is not None and math.isfinite(float(v))]
+    n = len(xs)
+    if n == 0:
+        return MeanCI(0, None, None, None)
+    mean = math.fsum(xs) / n
+    if n < 2:
+        return MeanCI(n, mean, None, None)
+    std = math.sqrt(math.fsum((x - mean) ** 2 for x in xs) / (n - 1))
+    t = float(stats.t.ppf(1.0 - (1.0 - confidence) / 2.0, n - 1))
+    return MeanCI(n, mean, std, t * std / math.sqrt(n))
+
+
+def _ok(episodes: pl.DataFrame) -> pl.DataFrame:
+    return episodes.filter(pl.col("status") == "ok")
+
+
+def runs_per_controller(episodes: pl.DataFrame) -> dict[tuple[str, str], int]:
+    """Completed ("ok") episodes per (scenario, controller)."""
+    counts = _ok(episodes).group_by("scenario", "controller").len()
+    return {(r["scenario"], r["controller"]): int(r["len"]) for r in counts.iter_rows(named=True)}
+
+
+def metric_aggregates(
+    metrics: pl.DataFrame,
+    episodes: pl.DataFrame,
+    *,
+    compared: Sequence[str] = COMPARED_METRICS,
+) -> pl.DataFrame:
+    """Per (scenario, controller, joint, metric) over the "ok" episodes: n, mean, std and
+    the 95 % half width (columns :data:`AGGREGATE_SCHEMA`)."""
+    joined = metrics.join(
+        _ok(episodes).select("episode", "scenario", "controller"),
+        on="episode",
+        how="inner",
+        maintain_order="left",
+    )
+    rows: list[dict[str, Any]] = []
+    for (scenario, controller, joint), group in joined.group_by(
+        "scenario", "controller", "joint", maintain_order=True
+    ):
+        for metric in compared:
+            ci = mean_ci(group.get_column(metric).to_list())
+            rows.append(
+                {
+                    "scenario": scenario,
+                    "controller": controller,
+                    "joint": joint,
+                    "metric": metric,
+                    "n": ci.n,
+                    "mean": ci.mean,
+                    "std": ci.std,
+                    "ci95_half_width": ci.half_width,
+                }
+            )
+    return pl.DataFrame(rows, schema=AGGREGATE_SCHEMA, orient="row")
+
+
+def seed_pairs(comparisons: pl.DataFrame, episodes: pl.DataFrame) -> pl.DataFrame:
+    """The comparison rows a repeated-run summary uses, with a ``pairing`` column.
+
+    Per (scenario, candidate controller): the pairs whose baseline and candidate share a
+    seed ("seed") when there are any; else every pair (``pairing`` "all": the runs cannot
+    be matched, so each candidate is compared with every baseline run).
+    """
+    info = episodes.select("episode", "controller", "seed")
+    rows = comparisons.join(
+        info.rename({"episode": "baseline", "controller": "baseline_controller", "seed": "bs"}),
+        on="baseline",
+        how="left",
+        maintain_order="left",
+    ).join(
+        info.rename({"episode": "candidate", "seed": "cs"}),
+        on="candidate",
+        how="left",
+        maintain_order="left",
+    )
+    rows = rows.with_columns(same_seed=(pl.col("bs") == pl.col("cs")).fill_null(False))
+    any_matched = pl.col("same_seed").any().over("scenario", "controller")
+    return (
+        rows.filter(pl.col("same_seed") | ~any_matched)
+        .with_columns(pairing=pl.when(any_matched).then(pl.lit("seed")).otherwise(pl.lit("all")))
+        .drop("bs", "cs", "same_seed")
+    )
+
+
+def reduction_aggregates(
+    comparisons: pl.DataFrame,
+    episodes: pl.DataFrame,
+    *,
+    compared: Sequence[str] = COMPARED_METRICS,
+) -> pl.DataFrame:
+    """Per (scenario, candidate controller, joint, metric): the reduction % of each seed pair
+    (see :func:`seed_pairs`) summarised as n, mean, std, 95 % half width (columns
+    :data:`REDUCTION_SCHEMA`; ``metric`` is e.g. ``max_abs_error_reduction_pct``)."""
+    rows: list[dict[str, Any]] = []
+    pairs = seed_pairs(comparisons, episodes)
+    for (scenario, base, controller, pairing, joint), group in pairs.group_by(
+        "scenario", "baseline_controller", "controller", "pairing", "joint", maintain_order=True
+    ):
+        for metric in compared:
+            key = f"{metric}_reduction_pct"
+            ci = mean_ci(group.get_column(key).to_list())
+            rows.append(
+                {
+                    "scenario": scenario,
+                    "baseline": base,
+                    "controller": controller,
+                    "pairing": pairing,
+                    "joint": joint,
+                    "metric": key,
+                    "n": ci.n,
+                    "mean": ci.mean,
+                    "std": ci.std,
+                    "ci95_half_width": ci.half_width,
+                }
+            )
+    return pl.DataFrame(rows, schema=REDUCTION_SCHEMA, orient="row")
