@@ -13,7 +13,7 @@ import difflib
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, Protocol
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -232,3 +232,37 @@ def check_tuning(omega_n_rad_s: float, zeta: float) -> None:
     for name, value in (("omega_n_rad_s", omega_n_rad_s), ("zeta", zeta)):
         if not (_is_number(value) and math.isfinite(value) and value > 0):
             raise ParamsError(f"{name}: expected a positive number, got {value!r}")
+
+
+class NominalPDController:
+    """Plumbing of the stateless ``kp``/``kd`` laws on the nominal Pinocchio model.
+
+    A subclass names itself (``NAME``), points at its ``default_gains`` and
+    writes ``compute``; gains, settings and the model are handled here.
+    """
+
+    NAME: ClassVar[str]
+    GAINS: ClassVar[tuple[GainSpec, ...]] = (GainSpec("kp"), GainSpec("kd"))
+    DEFAULT_GAINS: ClassVar[Callable[..., dict[str, Any]]]
+
+    def __init__(
+        self, spec: RobotSpec, gains: Mapping[str, Any] | None = None, *, where: str = "gains"
+    ) -> None:
+        spec.require_dynamics(f"the {self.NAME} controller")
+        self._tuning, self._gains = resolve_tuned_gains(
+            self.NAME, spec, self.GAINS, type(self).DEFAULT_GAINS, gains, where=where
+        )
+        self._kp: F64 = self._gains["kp"]
+        self._kd: F64 = self._gains["kd"]
+        self._model = build_pinocchio_model(spec)
+        self._data = self._model.createData()
+
+    @property
+    def name(self) -> str:
+        return self.NAME
+
+    def settings(self) -> dict[str, Any]:
+        return {**self._tuning.settings(), **settings_of(self._gains)}
+
+    def reset(self) -> None:
+        """Stateless: nothing to forget."""

@@ -10,7 +10,7 @@ per joint (eq. 17).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import pinocchio as pin
@@ -20,11 +20,9 @@ from pipeline.control.base import (
     DEFAULT_ZETA,
     F64,
     GainSpec,
+    NominalPDController,
     check_tuning,
-    resolve_tuned_gains,
-    settings_of,
 )
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
 
 NAME = "ctc"
@@ -47,30 +45,12 @@ def default_gains(
     return {"kp": [w**2] * spec.dof, "kd": [2.0 * zeta * w] * spec.dof}
 
 
-class ComputedTorqueController:
+class ComputedTorqueController(NominalPDController):
     """Model-based CTC; the model is always the nominal one built from the YAML."""
 
-    def __init__(
-        self, spec: RobotSpec, gains: Mapping[str, Any] | None = None, *, where: str = "gains"
-    ) -> None:
-        spec.require_dynamics("the computed-torque controller")
-        self._tuning, self._gains = resolve_tuned_gains(
-            NAME, spec, GAINS, default_gains, gains, where=where
-        )
-        self._kp: F64 = self._gains["kp"]
-        self._kd: F64 = self._gains["kd"]
-        self._model = build_pinocchio_model(spec)
-        self._data = self._model.createData()
-
-    @property
-    def name(self) -> str:
-        return NAME
-
-    def settings(self) -> dict[str, Any]:
-        return {**self._tuning.settings(), **settings_of(self._gains)}
-
-    def reset(self) -> None:
-        """Stateless: nothing to forget."""
+    NAME = NAME
+    GAINS = GAINS
+    DEFAULT_GAINS = staticmethod(default_gains)
 
     def compute(self, q: F64, qd: F64, q_ref: F64, qd_ref: F64, qdd_ref: F64, dt_s: float) -> F64:
         a = qdd_ref + self._kd * (qd_ref - qd) + self._kp * (q_ref - q)

@@ -7,7 +7,7 @@ but neither feeds forward the inertial torques nor decouples the joints.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import pinocchio as pin
@@ -17,12 +17,10 @@ from pipeline.control.base import (
     DEFAULT_ZETA,
     F64,
     GainSpec,
+    NominalPDController,
     check_tuning,
     nominal_mass_diagonal,
-    resolve_tuned_gains,
-    settings_of,
 )
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
 
 NAME = "pd_gravity"
@@ -43,30 +41,12 @@ def default_gains(
     return {"kp": (m * w**2).tolist(), "kd": (m * 2.0 * zeta * w).tolist()}
 
 
-class PdGravityController:
+class PdGravityController(NominalPDController):
     """Joint PD plus the nominal gravity torque ``g_n(q)``."""
 
-    def __init__(
-        self, spec: RobotSpec, gains: Mapping[str, Any] | None = None, *, where: str = "gains"
-    ) -> None:
-        spec.require_dynamics("the pd_gravity controller")
-        self._tuning, self._gains = resolve_tuned_gains(
-            NAME, spec, GAINS, default_gains, gains, where=where
-        )
-        self._kp: F64 = self._gains["kp"]
-        self._kd: F64 = self._gains["kd"]
-        self._model = build_pinocchio_model(spec)
-        self._data = self._model.createData()
-
-    @property
-    def name(self) -> str:
-        return NAME
-
-    def settings(self) -> dict[str, Any]:
-        return {**self._tuning.settings(), **settings_of(self._gains)}
-
-    def reset(self) -> None:
-        """Stateless: nothing to forget."""
+    NAME = NAME
+    GAINS = GAINS
+    DEFAULT_GAINS = staticmethod(default_gains)
 
     def compute(self, q: F64, qd: F64, q_ref: F64, qd_ref: F64, qdd_ref: F64, dt_s: float) -> F64:
         gravity: F64 = pin.computeGeneralizedGravity(self._model, self._data, q)
