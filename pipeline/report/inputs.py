@@ -121,30 +121,31 @@ class ReportData:
         return rec.controller if len(same) == 1 else f"{rec.controller} ({episode})"
 
 
+def _columns(frame: pl.DataFrame, n_joints: int, column: str) -> NDArray[np.float64]:
+    """(rows / n, n) array of a tidy one-row-per-joint frame's column, NaN where missing."""
+    values = frame.get_column(column).to_numpy()
+    return np.asarray(values, dtype=np.float64).reshape(-1, n_joints)
+
+
+def _times(frame: pl.DataFrame, n_joints: int) -> NDArray[np.float64]:
+    return np.asarray(frame.get_column("time_s").to_numpy()[::n_joints], dtype=np.float64)
+
+
 def wide(rec: Recording, column: str) -> NDArray[np.float64]:
-    """(N, n) array of one sample column, joints in the recording's order (NaN where not
-    recorded)."""
-    n = len(rec.joint_names)
-    values = rec.samples.get_column(column).to_numpy()
-    return np.asarray(values, dtype=np.float64).reshape(-1, n)
+    """(N, n) array of one ``/joint_states`` sample column, joints in the recording's order."""
+    return _columns(rec.samples, len(rec.joint_names), column)
 
 
 def times_s(rec: Recording) -> NDArray[np.float64]:
-    """(N,) sample times [s]."""
-    n = len(rec.joint_names)
-    values = rec.samples.get_column("time_s").to_numpy()[::n]
-    return np.asarray(values, dtype=np.float64)
+    """(N,) ``/joint_states`` sample times [s]."""
+    return _times(rec.samples, len(rec.joint_names))
 
 
 def cs_wide(rec: Recording, column: str) -> NDArray[np.float64]:
-    """(M, n) array of one ``/controller_state`` column (full rate), NaN where not recorded."""
-    n = len(rec.joint_names)
-    values = rec.controller_states.get_column(column).to_numpy()
-    return np.asarray(values, dtype=np.float64).reshape(-1, n)
+    """(M, n) array of one ``/controller_state`` column (full rate)."""
+    return _columns(rec.controller_states, len(rec.joint_names), column)
 
 
 def cs_times_s(rec: Recording) -> NDArray[np.float64]:
     """(M,) ``/controller_state`` times [s]."""
-    n = len(rec.joint_names)
-    values = rec.controller_states.get_column("time_s").to_numpy()[::n]
-    return np.asarray(values, dtype=np.float64)
+    return _times(rec.controller_states, len(rec.joint_names))
