@@ -17,7 +17,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import PlanningError
-from pipeline.model.mjcf import Box, build_mujoco_model
+from pipeline.model.mjcf import build_mujoco_model
+from pipeline.model.scene import Box
 from pipeline.robots.spec import RobotSpec
 
 F64 = NDArray[np.float64]

@@ -27,7 +27,7 @@ from ompl import util as ou
 
 from pipeline.constants import MAX_SEED
 from pipeline.errors import PlanningError
-from pipeline.model.mjcf import Box
+from pipeline.model.scene import Box
 from pipeline.planning.collision import CollisionChecker, motion_check_step_rad
 from pipeline.robots.spec import RobotSpec
 

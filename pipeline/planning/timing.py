@@ -41,11 +41,11 @@ import toppra.constraint as toppra_constraint
 from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import PlanningError
-from pipeline.model.mjcf import Box
+from pipeline.model.scene import Box
 from pipeline.planning.collision import CollisionChecker, motion_check_step_rad
 from pipeline.planning.planner import PlannedPath
 from pipeline.robots.spec import RobotSpec
-from pipeline.sim.result import TrajectorySamples
+from pipeline.trajectory import TrajectorySamples
 
 F64 = NDArray[np.float64]
 Interpolation = Literal["spline", "stop_and_go"]

@@ -13,7 +13,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from pipeline.sim.result import F64, Reference
+from pipeline.trajectory import F64, Reference
 
 PAPER_START_RAD = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 """The paper's start pose (Table 2) [rad]."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.model.dh import forward_kinematics
-from pipeline.model.mjcf import Box
+from pipeline.model.scene import Box
 from pipeline.robots import RobotSpec
 
 # The paper's scenario (seeds/000, Table 2): start at zero, this goal [rad].

@@ -8,7 +8,8 @@ import pytest
 
 from pipeline.errors import PlanningError
 from pipeline.model.dh import forward_kinematics, link_frames
-from pipeline.model.mjcf import FLOOR_Z_M, Box
+from pipeline.model.mjcf import FLOOR_Z_M
+from pipeline.model.scene import Box
 from pipeline.planning import (
     CollisionChecker,
     default_padding_m,

@@ -14,7 +14,7 @@ import pytest
 
 from pipeline.errors import PlanningError
 from pipeline.model.dh import forward_kinematics
-from pipeline.model.mjcf import Box
+from pipeline.model.scene import Box
 from pipeline.planning import CollisionChecker, plan_path, seed_ompl, time_parameterize
 from tests.planning.scenarios import PAPER_GOAL, START, blocking_box
 

@@ -12,7 +12,7 @@ from pipeline.planning import (
     TimedTrajectory,
     time_parameterize,
 )
-from pipeline.sim.result import Reference
+from pipeline.trajectory import Reference
 from tests.planning.scenarios import PAPER_GOAL, START, blocking_box
 
 DT_S = 1e-3
