@@ -19,26 +19,12 @@ import numpy as np
 from pipeline.errors import ModelError
 from pipeline.model import transforms as tf
 from pipeline.model.chain import BASE_LINK, FLANGE, chain, link_name
+from pipeline.model.scene import Box
 from pipeline.robots.spec import RobotSpec
 
 ROBOT_BIT, GROUND_BIT, OBSTACLE_BIT = 1, 2, 4
 FLOOR_Z_M = -0.4  # the arm stands on a pedestal: UR arms hang below their base plane at q = 0
 _COLOURS = ("0.3 0.5 0.8 1", "0.8 0.8 0.8 1", "0.3 0.5 0.8 1", "0.8 0.8 0.8 1", "0.3 0.5 0.8 1")
-
-
-@dataclass(frozen=True)
-class Box:
-    """An axis-aligned box obstacle in the robot base frame.
-
-    Attributes:
-        name: geom name.
-        center: centre [m].
-        half_size: half extents [m].
-    """
-
-    name: str
-    center: tuple[float, float, float]
-    half_size: tuple[float, float, float]
 
 
 @dataclass(frozen=True)
@@ -48,7 +34,8 @@ class PlantOptions:
     Attributes:
         damping: joint viscous damping per joint [N m s/rad].
         frictionloss: joint Coulomb friction per joint [N m].
-        armature: rotor armature (reflected inertia) per joint [kg m^2].
+        armature: rotor armature (reflected inertia) per joint [kg m^2], added to the
+            spec's own ``armature`` (which the nominal model has too).
         payload_kg: point-like mass at the flange [kg].
     """
 
@@ -95,7 +82,12 @@ def build_mjcf(
     links = chain(spec)
     damping = _per_joint(plant.damping, spec.dof, "damping")
     friction = _per_joint(plant.frictionloss, spec.dof, "frictionloss")
-    armature = _per_joint(plant.armature, spec.dof, "armature")
+    armature = [
+        j.armature + extra
+        for j, extra in zip(
+            spec.joints, _per_joint(plant.armature, spec.dof, "armature"), strict=True
+        )
+    ]
     out = [
         f"<mujoco model={quoteattr(spec.name)}>",
         '  <compiler angle="radian" autolimits="true" inertiafromgeom="auto"/>',

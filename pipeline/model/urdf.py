@@ -100,4 +100,7 @@ def build_pinocchio_model(spec: RobotSpec) -> pin.Model:
         raise ModelError(f"{spec.source}: Pinocchio rejected the generated URDF: {err}") from err
     if not math.isclose(model.gravity.linear[2], -9.81):
         model.gravity.linear[:] = (0.0, 0.0, -9.81)
+    # URDF has no rotor inertia; Pinocchio adds ``armature`` to M's diagonal (CRBA) and
+    # ``armature * qdd`` to RNEA, as MuJoCo does with the MJCF joint armature.
+    model.armature[:] = spec.armature
     return model

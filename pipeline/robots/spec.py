@@ -77,6 +77,8 @@ class JointSpec:
     limits: JointLimits
     inertial: Inertial | None
     collision_radius: float
+    armature: float = 0.0
+    """Rotor (reflected) inertia about the joint axis [kg m^2]: gear ratio^2 x rotor inertia."""
 
 
 @dataclass(frozen=True)
@@ -119,6 +121,11 @@ class RobotSpec:
     @property
     def effort_limits(self) -> np.ndarray:
         return np.array([j.limits.effort for j in self.joints])
+
+    @property
+    def armature(self) -> np.ndarray:
+        """Rotor (reflected) inertia per joint [kg m^2]."""
+        return np.array([j.armature for j in self.joints])
 
     def require_dynamics(self, what: str) -> None:
         """Raise a clear error if ``what`` needs link inertias this robot lacks."""
@@ -190,6 +197,7 @@ class _Joint(_Strict):
     limits: _Limits
     inertial: _Inertial | None = None
     collision: _Collision = _Collision(radius=0.04)
+    armature: float = Field(default=0.0, ge=0, le=1e3, allow_inf_nan=False)
 
 
 class _Robot(_Strict):
@@ -274,6 +282,7 @@ def _to_spec(raw: _Robot, source: str) -> RobotSpec:
                 ),
                 inertial=inertial,
                 collision_radius=j.collision.radius,
+                armature=j.armature,
             )
         )
     return RobotSpec(name=raw.name, convention=raw.convention, joints=tuple(joints), source=source)
