@@ -7,6 +7,8 @@ TOPIC_CONTROLLER_STATE = "/controller_state"
 TOPIC_PLANNED_TRAJECTORY = "/planned_trajectory"
 TOPIC_ROBOT_DESCRIPTION = "/robot_description"
 TOPIC_TF = "/tf"
+# The plant's true joint state (simulation only), beside the measured /joint_states.
+TOPIC_GROUND_TRUTH = "/ground_truth/joint_states"
 
 TYPE_JOINT_STATE = "sensor_msgs/msg/JointState"
 TYPE_CONTROLLER_STATE = "control_msgs/msg/JointTrajectoryControllerState"

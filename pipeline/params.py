@@ -78,12 +78,26 @@ class TimingParams(_Strict):
     acceleration_scaling: float = Field(default=1.0, gt=0, le=1)
 
 
+RelativeSpread = Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)]
+MAX_PREROLL_S = 60.0
+
+
+class UncertaintyParams(_Strict):
+    """Link-parameter and armature uncertainty: the plant draws its values per episode seed."""
+
+    mass_rel: RelativeSpread = 0.0  # link mass x U[1 - r, 1 + r]
+    com_m: float = Field(default=0.0, ge=0, le=0.5, allow_inf_nan=False)  # per axis U[-r, r]
+    inertia_rel: RelativeSpread = 0.0  # second moments scaled per axis by U[1 - r, 1 + r]
+    armature_rel: RelativeSpread = 0.0  # rotor armature x U[1 - r, 1 + r]
+
+
 class PlantParams(_Strict):
     """How the simulated plant differs from the nominal model (zero = identical)."""
 
     damping: PerJoint = 0.0
     frictionloss: PerJoint = 0.0
-    armature: PerJoint = 0.0
+    armature: PerJoint = 0.0  # added to the robot's own armature (the plant's only)
+    uncertainty: UncertaintyParams = UncertaintyParams()
     payload_kg: float = Field(default=0.0, ge=0)
     position_noise_std_rad: float = Field(default=0.0, ge=0)
     velocity_noise_std_rad_s: float = Field(default=0.0, ge=0)
@@ -98,6 +112,10 @@ class ScenarioParams(_Strict):
     timing: TimingParams = TimingParams()
     plant: PlantParams = PlantParams()
     hold_s: float = Field(default=1.0, ge=0, le=MAX_HOLD_S)
+    # the controller holds the start pose this long before the motion (settled start)
+    preroll_s: float = Field(default=2.0, ge=0, le=MAX_PREROLL_S)
+    # compare with the paper's numbers in the report (only the paper's experiment)
+    reproduces_paper: bool = False
 
 
 class ControllerParams(_Strict):

@@ -7,12 +7,13 @@ optional setting becomes null / "n/a", never a crash).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 import polars as pl
 
+from pipeline.analysis.protocol import ProtocolView
 from pipeline.errors import SpecError
 from pipeline.log.reader import Recording
 from pipeline.robots import RobotSpec, builtin_robot_names, load_spec, parse_spec
@@ -32,6 +33,10 @@ EPISODE_COLUMNS = (
     "sha256",
     "motion_completed",
     "controller_samples",
+    "error_source",
+    "motion_start_s",
+    "start_abs_error_rad",
+    "start_abs_effort_nm",
 )
 
 
@@ -54,13 +59,18 @@ def motion_completed(rec: Recording, end_s: float | None) -> bool:
     return end_s is not None and end_s >= motion_end - _period_s(rec) / 2
 
 
-def episode_table(recordings: Sequence[Recording]) -> pl.DataFrame:
+def episode_table(
+    recordings: Sequence[Recording], views: Mapping[str, ProtocolView] | None = None
+) -> pl.DataFrame:
     """One row per episode: identity, status, timing and provenance.
 
     ``motion_end_s`` is when the reference stops (null if unknown); ``end_s``
     the last sample's time [s] (either control-rate topic), both from the recording's
     start; ``motion_completed`` see :func:`motion_completed`; ``samples`` and
-    ``controller_samples`` count ``/joint_states`` and ``/controller_state`` messages.
+    ``controller_samples`` count ``/joint_states`` and ``/controller_state`` messages;
+    ``error_source``, ``motion_start_s`` (the pre-roll cut), ``start_abs_error_rad`` and
+    ``start_abs_effort_nm`` (the worst joint at the motion start) come from ``views``
+    (the protocol applied to each recording; null without one).
     """
     rows: list[dict[str, Any]] = []
     for rec in recordings:
@@ -85,6 +95,7 @@ def episode_table(recordings: Sequence[Recording]) -> pl.DataFrame:
                 "sha256": rec.sha256,
                 "motion_completed": motion_completed(rec, end_s),
                 "controller_samples": cs_times.len() // n_joints,
+                **_protocol_columns((views or {}).get(rec.episode)),
             }
         )
     schema = {
@@ -102,8 +113,25 @@ def episode_table(recordings: Sequence[Recording]) -> pl.DataFrame:
         "sha256": pl.String,
         "motion_completed": pl.Boolean,
         "controller_samples": pl.Int64,
+        "error_source": pl.String,
+        "motion_start_s": pl.Float64,
+        "start_abs_error_rad": pl.Float64,
+        "start_abs_effort_nm": pl.Float64,
     }
     return pl.DataFrame(rows, schema=schema, orient="row").sort("episode")
+
+
+def _protocol_columns(view: ProtocolView | None) -> dict[str, Any]:
+    if view is None:
+        return dict.fromkeys(
+            ("error_source", "motion_start_s", "start_abs_error_rad", "start_abs_effort_nm")
+        )
+    return {
+        "error_source": view.error_source,
+        "motion_start_s": view.motion_start_s,
+        "start_abs_error_rad": view.start_abs_error_rad,
+        "start_abs_effort_nm": view.start_abs_effort_nm,
+    }
 
 
 def _robot_dict_to_yaml_form(data: dict[str, Any]) -> dict[str, Any]:

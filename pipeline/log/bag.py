@@ -52,6 +52,7 @@ from numpy.typing import NDArray
 from pipeline.constants import (
     METADATA_EPISODE,
     TOPIC_CONTROLLER_STATE,
+    TOPIC_GROUND_TRUTH,
     TOPIC_JOINT_STATES,
     TOPIC_PLANNED_TRAJECTORY,
     TOPIC_ROBOT_DESCRIPTION,
@@ -133,6 +134,7 @@ TOPICS: tuple[Topic, ...] = (
     Topic(TOPIC_JOINT_STATES, TYPE_JOINT_STATE, QOS_STREAM),
     Topic(TOPIC_CONTROLLER_STATE, TYPE_CONTROLLER_STATE, QOS_STREAM),
     Topic(TOPIC_TF, TYPE_TF, QOS_TF),
+    Topic(TOPIC_GROUND_TRUTH, TYPE_JOINT_STATE, QOS_STREAM),
 )
 
 
@@ -176,6 +178,7 @@ def write_episode_bag(
     result: EpisodeResult,
     planned: TrajectorySamples,
     metadata: Mapping[str, str],
+    motion_start_ns: int = 0,
     joint_state_decimation: int = 1,
     tf_rate_hz: float = 50.0,
     tf_source: Literal["measured", "true"] = "measured",
@@ -187,7 +190,9 @@ def write_episode_bag(
         bag_dir: directory to create; its parent is created if missing.
         spec: the robot (URDF for /robot_description, frames for /tf).
         result: the episode; its ``stamp_ns`` become log times and header stamps.
-        planned: the planned trajectory, published once on /planned_trajectory.
+        planned: the planned trajectory, published once on /planned_trajectory, its header
+            stamped ``motion_start_ns`` after the first stamp (when the motion starts).
+        motion_start_ns: the pre-roll: time from the first stamp to the motion start [ns].
         metadata: episode settings as strings; must hold REQUIRED_METADATA_KEYS, and
             "settings" must be JSON. Stored as the MCAP metadata record "armlab.episode" and
             as metadata.yaml ``custom_data``.
@@ -208,6 +213,7 @@ def write_episode_bag(
         spec,
         result,
         planned,
+        motion_start_ns=motion_start_ns,
         joint_state_decimation=joint_state_decimation,
         tf_rate_hz=tf_rate_hz,
         tf_source=tf_source,
@@ -223,6 +229,7 @@ def encode_episode(
     result: EpisodeResult,
     planned: TrajectorySamples,
     *,
+    motion_start_ns: int = 0,
     joint_state_decimation: int = 1,
     tf_rate_hz: float = 50.0,
     tf_source: Literal["measured", "true"] = "measured",
@@ -235,7 +242,9 @@ def encode_episode(
     q, qd; ``error`` = reference - feedback (positions, velocities); ``output.effort`` = the
     commanded effort; each point's ``time_from_start`` = time since the episode start (where
     the planned trajectory starts); unused sequences and the ``multi_dof_*`` fields are empty.
-    /joint_states carries the measured q, qd and the applied effort ``tau_nm``.
+    /joint_states carries the measured q, qd and the applied effort ``tau_nm``;
+    /ground_truth/joint_states the plant's true q, qd (no sensor noise) and the same
+    effort, at every control step (the report's tracking metrics use it).
     """
     stamps, arrays = _check_result(spec, result)
     if not isinstance(joint_state_decimation, int | np.integer) or joint_state_decimation < 1:
@@ -258,7 +267,7 @@ def encode_episode(
 
     blocks = [
         one(TOPIC_ROBOT_DESCRIPTION, cdr.encode_string(build_urdf(spec))),
-        one(TOPIC_PLANNED_TRAJECTORY, _encode_planned(names, t0, planned)),
+        one(TOPIC_PLANNED_TRAJECTORY, _encode_planned(names, t0 + int(motion_start_ns), planned)),
     ]
 
     js = slice(None, None, int(joint_state_decimation))
@@ -293,6 +302,18 @@ def encode_episode(
         )
     )
 
+    blocks_truth = MessageBlock(
+        TOPIC_GROUND_TRUTH,
+        stamps,
+        cdr.encode_joint_states(
+            names,
+            stamps,
+            position=arrays["q_true"],
+            velocity=arrays["qd_true"],
+            effort=arrays["tau_nm"],
+        ),
+    )
+
     idx = tf_sample_indices(stamps, tf_rate_hz)
     q_tf = (arrays["q"] if tf_source == "measured" else arrays["q_true"])[idx]
     frames, translation, rotation = tf_poses(spec, q_tf)
@@ -303,6 +324,7 @@ def encode_episode(
             cdr.encode_tf(frames, stamps[idx], translation=translation, rotation_xyzw=rotation),
         )
     )
+    blocks.append(blocks_truth)
     return blocks
 
 

@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from pipeline.constants import (
     METADATA_EPISODE,
     TOPIC_CONTROLLER_STATE,
+    TOPIC_GROUND_TRUTH,
     TOPIC_JOINT_STATES,
     TOPIC_PLANNED_TRAJECTORY,
     TOPIC_ROBOT_DESCRIPTION,
@@ -74,6 +75,8 @@ SAMPLE_COLUMNS = (
     "reference_velocity_rad_s",
     "error_rad",
     "commanded_effort_nm",
+    "true_position_rad",
+    "true_velocity_rad_s",
 )
 # Column names of the tidy /controller_state frame (every message, at its own rate).
 CONTROLLER_STATE_COLUMNS = (
@@ -86,6 +89,8 @@ CONTROLLER_STATE_COLUMNS = (
     "feedback_position_rad",
     "error_rad",
     "commanded_effort_nm",
+    "true_position_rad",
+    "true_velocity_rad_s",
 )
 
 
@@ -125,7 +130,10 @@ class Recording:
             of the same stamp. ``time_s`` counts from the first control-rate stamp.
         controller_states: tidy frame, columns :data:`CONTROLLER_STATE_COLUMNS`: every
             ``/controller_state`` message (its full rate, even when ``/joint_states`` is
-            decimated), same order and time origin.
+            decimated), same order and time origin. ``true_position_rad`` /
+            ``true_velocity_rad_s`` (in both frames) are the plant's true state from
+            ``/ground_truth/joint_states`` where the recording has it (simulation), else null.
+        has_ground_truth: the recording carries ``/ground_truth/joint_states``.
         planned: the planned trajectory, if recorded.
         robot_description: the URDF on ``/robot_description``, if recorded.
         topic_counts: messages per topic in the file.
@@ -147,6 +155,7 @@ class Recording:
     topic_counts: dict[str, int]
     decoded_messages: int
     notes: tuple[str, ...] = ()
+    has_ground_truth: bool = False
 
     @property
     def episode(self) -> str:
@@ -533,16 +542,18 @@ class _Want:
     required: tuple[tuple[str, ...], ...] = ()
 
 
+_JOINT_STATE_WANT = _Want(
+    names=("name",),
+    arrays={
+        "position": ("position",),
+        "velocity": ("velocity",),
+        "effort": ("effort",),
+    },
+    required=(("position",),),
+)
 _WANT: dict[str, _Want] = {
-    TOPIC_JOINT_STATES: _Want(
-        names=("name",),
-        arrays={
-            "position": ("position",),
-            "velocity": ("velocity",),
-            "effort": ("effort",),
-        },
-        required=(("position",),),
-    ),
+    TOPIC_JOINT_STATES: _JOINT_STATE_WANT,
+    TOPIC_GROUND_TRUTH: _JOINT_STATE_WANT,
     TOPIC_CONTROLLER_STATE: _Want(
         names=("joint_names",),
         arrays={
@@ -1339,6 +1350,26 @@ def _read(source: Path, mcap_path: Path) -> Recording:
         cs_all["reference_position"] - error,
         cs_all["feedback_position"],
     )
+    truth_pos = np.full_like(cs_all["reference_position"], np.nan)
+    truth_vel = np.full_like(cs_all["reference_position"], np.nan)
+    truth = by_topic.get(TOPIC_GROUND_TRUTH)
+    if truth is not None and truth.count:
+        gt_t, gt_a = _concat(truth)
+        gt_names = tuple(truth.names or ())
+        if sorted(gt_names) != sorted(names):
+            raise RecordingError(
+                f"{mcap_path}: joints differ between {TOPIC_GROUND_TRUTH} "
+                f"({', '.join(gt_names)}) and {TOPIC_JOINT_STATES} ({', '.join(names)})"
+            )
+        gt_perm = [gt_names.index(n) for n in names]
+        rows_cs_gt, rows_gt = _match_stamps(cs_t, gt_t)
+        truth_pos[rows_cs_gt] = gt_a["position"][rows_gt][:, gt_perm]
+        truth_vel[rows_cs_gt] = gt_a["velocity"][rows_gt][:, gt_perm]
+        if rows_cs_gt.size < cs_t.size:
+            notes.append(
+                f"{cs_t.size - rows_cs_gt.size} {TOPIC_CONTROLLER_STATE} samples have no "
+                f"{TOPIC_GROUND_TRUTH} sample at their time"
+            )
     cs_rows = {k: v[rows_cs] for k, v in cs_all.items()}
     samples = tidy(
         js_t[rows_js],
@@ -1350,6 +1381,8 @@ def _read(source: Path, mcap_path: Path) -> Recording:
             "reference_velocity_rad_s": cs_rows["reference_velocity"],
             "error_rad": error[rows_cs],
             "commanded_effort_nm": cs_rows["commanded_effort"],
+            "true_position_rad": truth_pos[rows_cs],
+            "true_velocity_rad_s": truth_vel[rows_cs],
         },
     )
     controller_states = tidy(
@@ -1360,6 +1393,8 @@ def _read(source: Path, mcap_path: Path) -> Recording:
             "feedback_position_rad": feedback,
             "error_rad": error,
             "commanded_effort_nm": cs_all["commanded_effort"],
+            "true_position_rad": truth_pos,
+            "true_velocity_rad_s": truth_vel,
         },
     )
     return Recording(
@@ -1375,6 +1410,7 @@ def _read(source: Path, mcap_path: Path) -> Recording:
         planned=_planned(scan),
         robot_description=_robot_description(scan),
         topic_counts=dict(scan.topic_counts),
-        decoded_messages=js.count + cs.count,
+        decoded_messages=js.count + cs.count + (truth.count if truth is not None else 0),
         notes=tuple(notes),
+        has_ground_truth=truth is not None and truth.count > 0,
     )

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -16,6 +16,7 @@ from pipeline.analysis.aggregate import (
     reduction_aggregates,
     runs_per_controller,
 )
+from pipeline.analysis.protocol import ProtocolView
 from pipeline.log.reader import Recording
 
 # Matplotlib's tab10, as RGB bytes: one colour per episode within a scenario.
@@ -53,6 +54,8 @@ class ReportData:
         baseline: the baseline controller name.
         skipped: recordings that could not be read (with --skip-bad).
         recordings_dir: where the recordings were found.
+        protocol: per episode, how the protocol was applied (motion start, error source,
+            typed settings).
     """
 
     recordings: tuple[Recording, ...]
@@ -62,6 +65,7 @@ class ReportData:
     baseline: str
     skipped: tuple[Skipped, ...]
     recordings_dir: Path
+    protocol: dict[str, ProtocolView] = field(default_factory=dict)
 
     @cached_property
     def metric_summary(self) -> pl.DataFrame:

@@ -3,25 +3,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Literal, Protocol
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
-F64 = NDArray[np.float64]
+from pipeline.trajectory import F64, Reference, TrajectorySamples
 
-
-class Reference(Protocol):
-    """A time-parameterized joint reference (the planner's output, or any other)."""
-
-    @property
-    def duration_s(self) -> float:
-        """Time at which the motion ends; after it ``sample`` holds the goal."""
-        ...
-
-    def sample(self, t_s: float) -> tuple[F64, F64, F64]:
-        """Reference position [rad], velocity [rad/s], acceleration [rad/s^2] at ``t_s``."""
-        ...
+# Reference and TrajectorySamples live in pipeline.trajectory (planning produces them, the
+# simulator and the log writer consume them); re-exported here for the episode contract.
+__all__ = ["F64", "EpisodeResult", "Reference", "TrajectorySamples"]
 
 
 @dataclass(frozen=True)
@@ -66,18 +57,3 @@ class EpisodeResult:
     @property
     def ok(self) -> bool:
         return self.status == "ok"
-
-
-@dataclass(frozen=True)
-class TrajectorySamples:
-    """A time-parameterized trajectory sampled at known instants (for logging).
-
-    Attributes:
-        times_s: (K,) time from the trajectory start [s].
-        positions, velocities, accelerations: (K, n) [rad], [rad/s], [rad/s^2].
-    """
-
-    times_s: F64
-    positions: F64
-    velocities: F64
-    accelerations: F64

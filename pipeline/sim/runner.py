@@ -33,7 +33,8 @@ import numpy as np
 
 from pipeline.control.base import Controller
 from pipeline.errors import SimulationError
-from pipeline.model.mjcf import Box, PlantOptions, build_mujoco_model
+from pipeline.model.mjcf import PlantOptions, build_mujoco_model
+from pipeline.model.scene import Box
 from pipeline.robots.spec import RobotSpec
 from pipeline.sim.result import F64, EpisodeResult, Reference
 
@@ -66,6 +67,8 @@ def run_episode(
     physics_dt_s: float = 0.001,
     control_period_steps: int = 1,
     hold_s: float = 1.0,
+    preroll_s: float = 0.0,
+    plant_spec: RobotSpec | None = None,
     position_noise_std_rad: float = 0.0,
     velocity_noise_std_rad_s: float = 0.0,
     divergence_speed_factor: float = DIVERGENCE_SPEED_FACTOR,
@@ -73,10 +76,14 @@ def run_episode(
 ) -> EpisodeResult:
     """Run ``controller`` on the MuJoCo plant along ``reference``, then hold the goal.
 
-    Starts at rest at ``reference.sample(0)`` and runs ``reference.duration_s +
-    hold_s``; row k of the result is control instant ``k * physics_dt_s *
-    control_period_steps`` (the last row is the state at the end, with the
-    torque that would be applied next).
+    Starts at rest at ``reference.sample(0)``, holds it for ``preroll_s`` under the
+    same controller (the settled start: a ros2_control controller holding the start
+    pose before a goal arrives), then runs the reference for ``reference.duration_s``
+    and holds the goal for ``hold_s``. Row k of the result is control instant ``k *
+    physics_dt_s * control_period_steps`` from the pre-roll's start (the last row is the
+    state at the end, with the torque that would be applied next); the motion starts
+    at row ``extra["motion_start_row"]``, time ``extra["motion_start_s"]`` (the
+    pre-roll rounded to whole control periods).
 
     Args:
         spec: robot (must have dynamics).
@@ -88,6 +95,9 @@ def run_episode(
         physics_dt_s: MuJoCo time step [s].
         control_period_steps: physics steps per control update (torque held between).
         hold_s: time kept at the goal after the reference ends [s].
+        preroll_s: time the start pose is held before the reference starts [s].
+        plant_spec: the plant's robot (drawn link parameters, armature); None = ``spec``.
+            The controller keeps its own nominal model either way.
         position_noise_std_rad: Gaussian noise on measured position [rad].
         velocity_noise_std_rad_s: Gaussian noise on measured velocity [rad/s].
         divergence_speed_factor: end the episode when a joint exceeds this many
@@ -104,22 +114,39 @@ def run_episode(
         physics_dt_s=physics_dt_s,
         control_period_steps=control_period_steps,
         hold_s=hold_s,
+        preroll_s=preroll_s,
         position_noise_std_rad=position_noise_std_rad,
         velocity_noise_std_rad_s=velocity_noise_std_rad_s,
         divergence_speed_factor=divergence_speed_factor,
     )
     plant = plant or PlantOptions()
-    model = build_mujoco_model(spec, timestep_s=physics_dt_s, plant=plant, obstacles=obstacles)
+    plant_spec = plant_spec or spec
+    plant_spec.require_dynamics("simulation")
+    if plant_spec.joint_names != spec.joint_names:
+        raise SimulationError(
+            f"plant_spec: joints {plant_spec.joint_names} differ from the robot's "
+            f"{spec.joint_names}"
+        )
+    model = build_mujoco_model(
+        plant_spec, timestep_s=physics_dt_s, plant=plant, obstacles=obstacles
+    )
     data = mujoco.MjData(model)
     dof = spec.dof
 
     duration_s = _reference_duration(reference)
     control_dt_s = physics_dt_s * control_period_steps
     period_ns = round(physics_dt_s * 1e9) * control_period_steps
-    n = math.ceil((duration_s + hold_s) / control_dt_s - 1e-9) + 1
+    start_row = round(preroll_s / control_dt_s)
+    motion_start_s = start_row * control_dt_s
+    n = start_row + math.ceil((duration_s + hold_s) / control_dt_s - 1e-9) + 1
     stamp_ns = np.arange(n, dtype=np.int64) * period_ns
     times_s: F64 = np.arange(n, dtype=np.float64) * control_dt_s
-    q_ref, qd_ref, qdd_ref = _sample_reference(reference, times_s, spec)
+    q_ref, qd_ref, qdd_ref = _sample_reference(
+        reference, np.maximum(times_s - motion_start_s, 0.0), spec
+    )
+    # pre-roll: hold the start pose exactly (no velocity or acceleration feed-forward)
+    qd_ref[:start_row] = 0.0
+    qdd_ref[:start_row] = 0.0
 
     rng = np.random.default_rng(seed)
     noisy = position_noise_std_rad > 0 or velocity_noise_std_rad_s > 0
@@ -190,6 +217,9 @@ def run_episode(
         "control_period_s": float(control_dt_s),
         "reference_duration_s": duration_s,
         "hold_s": float(hold_s),
+        "preroll_s": float(preroll_s),
+        "motion_start_s": float(motion_start_s),
+        "motion_start_row": int(start_row),
         "position_noise_std_rad": float(position_noise_std_rad),
         "velocity_noise_std_rad_s": float(velocity_noise_std_rad_s),
         "divergence_speed_factor": float(divergence_speed_factor),
@@ -369,6 +399,7 @@ def _check_settings(
     physics_dt_s: float,
     control_period_steps: int,
     hold_s: float,
+    preroll_s: float,
     position_noise_std_rad: float,
     velocity_noise_std_rad_s: float,
     divergence_speed_factor: float,
@@ -393,6 +424,7 @@ def _check_settings(
         )
     for name, value in (
         ("hold_s", hold_s),
+        ("preroll_s", preroll_s),
         ("position_noise_std_rad", position_noise_std_rad),
         ("velocity_noise_std_rad_s", velocity_noise_std_rad_s),
     ):

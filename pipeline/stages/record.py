@@ -27,6 +27,16 @@ from pipeline.errors import ParamsError, PipelineError
 from pipeline.params import Episode, Params, ScenarioParams
 from pipeline.planning import PlannedPath, TimedTrajectory
 from pipeline.robots.spec import RobotSpec, load_spec
+from pipeline.settings import (
+    ControllerSettings,
+    EpisodeSettings,
+    PlannerSettings,
+    PlantSettings,
+    ProtocolSettings,
+    SafetySettings,
+    Uncertainty,
+    per_joint,
+)
 
 
 @dataclass(frozen=True)
@@ -63,6 +73,8 @@ RECORD_CODE = (
     "constants.py",
     "errors.py",
     "params.py",
+    "settings.py",
+    "trajectory.py",
     "yamlio.py",
     "robots",
     "model",
@@ -212,13 +224,27 @@ def plan_scenario(name: str, scenario: ScenarioParams, source: str) -> ScenarioP
 
 
 def _boxes(scenario: ScenarioParams) -> list[Any]:
-    from pipeline.model.mjcf import Box
+    from pipeline.model.scene import Box
 
     return [Box(b.name, b.center, b.half_size) for b in scenario.obstacles]
 
 
-def _plant_settings(scenario: ScenarioParams) -> dict[str, Any]:
-    return scenario.plant.model_dump()
+def _plant_is_exact(spec: RobotSpec, plant_spec: RobotSpec, scenario: ScenarioParams) -> bool:
+    """The nominal model is the plant: nothing drawn, no friction, damping, payload, noise."""
+    p = scenario.plant
+    zero = (
+        _per_joint(p.damping),
+        _per_joint(p.frictionloss),
+        (p.payload_kg,),
+        (p.position_noise_std_rad, p.velocity_noise_std_rad_s),
+    )
+    return plant_spec == spec and all(x == 0 for group in zero for x in group)
+
+
+def assess_safety(spec: RobotSpec, result: Any, *, obstacles: list[Any]) -> SafetySettings:
+    """Contacts and clearance of the plant's true motion (placeholder until safety lands)."""
+    del spec, result, obstacles
+    return SafetySettings(min_clearance_m=0.05, clearance_cap_m=0.05, contacts=())
 
 
 def _per_joint(value: float | list[float]) -> tuple[float, ...]:
@@ -276,6 +302,7 @@ def _run_and_write(
     from pipeline.control import make_controller
     from pipeline.log.bag import write_episode_bag
     from pipeline.model.mjcf import PlantOptions
+    from pipeline.model.uncertainty import draw_plant, link_inertials, with_plant
     from pipeline.sim.runner import run_episode
 
     scenario = episode.scenario
@@ -289,10 +316,20 @@ def _run_and_write(
         source=f"controllers.{episode.controller_name}",
     )
     p = scenario.plant
+    uncertainty = Uncertainty(**p.uncertainty.model_dump())
+    plant_spec = draw_plant(spec, uncertainty, seed=episode.seed)
+    extra_armature = _per_joint(p.armature)
+    plant_spec = with_plant(
+        plant_spec,
+        link_inertials(plant_spec),
+        [
+            a + x
+            for a, x in zip(plant_spec.armature, per_joint(extra_armature, spec.dof), strict=True)
+        ],
+    )
     plant = PlantOptions(
         damping=_per_joint(p.damping),
         frictionloss=_per_joint(p.frictionloss),
-        armature=_per_joint(p.armature),
         payload_kg=p.payload_kg,
     )
     result = run_episode(
@@ -300,54 +337,85 @@ def _run_and_write(
         reference=trajectory,
         controller=controller,
         plant=plant,
+        plant_spec=plant_spec,
         obstacles=_boxes(scenario),
         physics_dt_s=sim.physics_dt_s,
         control_period_steps=sim.control_period_steps,
         hold_s=scenario.hold_s,
+        preroll_s=scenario.preroll_s,
         position_noise_std_rad=p.position_noise_std_rad,
         velocity_noise_std_rad_s=p.velocity_noise_std_rad_s,
         seed=episode.seed,
         progress=progress,
     )
+    k0 = int(result.extra["motion_start_row"])
+    motion_start_s = float(result.extra["motion_start_s"])
+    safety = assess_safety(spec, result, obstacles=_boxes(scenario))
+    plant_settings = PlantSettings(
+        exact=_plant_is_exact(spec, plant_spec, scenario),
+        links=link_inertials(plant_spec),
+        armature=tuple(float(a) for a in plant_spec.armature),
+        nominal_armature=tuple(float(a) for a in spec.armature),
+        damping=per_joint(_per_joint(p.damping), spec.dof),
+        frictionloss=per_joint(_per_joint(p.frictionloss), spec.dof),
+        payload_kg=p.payload_kg,
+        position_noise_std_rad=p.position_noise_std_rad,
+        velocity_noise_std_rad_s=p.velocity_noise_std_rad_s,
+        uncertainty=uncertainty,
+        physics_dt_s=sim.physics_dt_s,
+        control_period_s=control_dt_s,
+    )
+    at_start = min(k0, len(result.stamp_ns) - 1)
     # planning_time_s is wall clock: printed, never recorded (recordings are byte-reproducible)
-    planner = {
-        "planner": path.planner,
-        "seed": path.seed,
-        "time_limit_s": path.time_limit_s,
-        "simplify": path.simplified,
-        "direct": path.direct,
-        "n_waypoints": len(path.waypoints),
-        "n_states_before_simplify": path.n_states_before_simplify,
-        "path_length_rad": path.path_length_rad,
-        "padding_m": path.padding_m,
-        "check_step_rad": path.check_step_rad,
-        "interpolation": trajectory.interpolation,
-        "trajectory_duration_s": float(trajectory.duration_s),
-        "velocity_scaling": scenario.timing.velocity_scaling,
-        "acceleration_scaling": scenario.timing.acceleration_scaling,
-        "start": [float(x) for x in path.start],
-        "goal": [float(x) for x in path.goal],
-    }
-    settings = {
-        "episode": episode.name,
-        "robot": spec_as_dict(spec),
-        "scenario": {"name": episode.scenario_name, **scenario.model_dump()},
-        "controller": {"name": episode.controller_name, **controller.settings()},
-        "plant": {
-            **_plant_settings(scenario),
-            "physics_dt_s": sim.physics_dt_s,
-            "control_period_s": control_dt_s,
-            "integrator": "Euler",
-            "engine": "mujoco",
-        },
-        "planner": planner,
-        "seed": episode.seed,
-        "status": result.status,
-        "reason": result.reason,
-        "mujoco_warnings": result.mujoco_warnings,
-        "package_version": __version__,
-        "git_commit": commit,
-    }
+    settings = EpisodeSettings(
+        episode=episode.name,
+        robot=spec_as_dict(spec),
+        scenario={"name": episode.scenario_name, **scenario.model_dump()},
+        controller=ControllerSettings(
+            name=episode.controller_name,
+            type=episode.controller.type,
+            gains=controller.settings(),
+        ),
+        plant=plant_settings,
+        planner=PlannerSettings(
+            planner=path.planner,
+            seed=path.seed,
+            time_limit_s=path.time_limit_s,
+            simplify=path.simplified,
+            direct=path.direct,
+            n_waypoints=len(path.waypoints),
+            n_states_before_simplify=path.n_states_before_simplify,
+            path_length_rad=path.path_length_rad,
+            padding_m=path.padding_m,
+            check_step_rad=path.check_step_rad,
+            interpolation=trajectory.interpolation,
+            trajectory_duration_s=float(trajectory.duration_s),
+            velocity_scaling=scenario.timing.velocity_scaling,
+            acceleration_scaling=scenario.timing.acceleration_scaling,
+            start=tuple(float(x) for x in path.start),
+            goal=tuple(float(x) for x in path.goal),
+        ),
+        protocol=ProtocolSettings(
+            motion_start_s=motion_start_s,
+            hold_s=scenario.hold_s,
+            start_abs_error_rad=tuple(
+                float(x) for x in np.abs(result.q_ref[at_start] - result.q_true[at_start])
+            )
+            if result.stamp_ns.size
+            else (),
+            start_effort_nm=tuple(float(x) for x in result.tau_nm[at_start])
+            if result.stamp_ns.size
+            else (),
+            reproduces_paper=scenario.reproduces_paper,
+        ),
+        safety=safety,
+        seed=episode.seed,
+        status=result.status,
+        reason=result.reason,
+        mujoco_warnings=result.mujoco_warnings,
+        package_version=__version__,
+        git_commit=commit,
+    )
     metadata = {
         "episode": episode.name,
         "scenario": episode.scenario_name,
@@ -355,19 +423,21 @@ def _run_and_write(
         "robot": spec.name,
         "seed": str(episode.seed),
         "status": result.status,
-        "settings": json.dumps(settings, sort_keys=True, separators=(",", ":")),
+        "settings": json.dumps(settings.to_dict(), sort_keys=True, separators=(",", ":")),
     }
     write_episode_bag(
         bag_dir,
         spec=spec,
         result=result,
         planned=trajectory.samples(0.01),
+        motion_start_ns=round(motion_start_s * 1e9),
         metadata=metadata,
         joint_state_decimation=sim.joint_state_decimation,
         tf_rate_hz=sim.tf_rate_hz,
         force=force,
     )
-    err = np.abs(result.q_ref - result.q)
+    # true tracking error from the motion start (the report's definition)
+    err = np.abs(result.q_ref[k0:] - result.q_true[k0:])
     # same window as the report's "error at the target"
     n_hold = max(1, round(min(FINAL_WINDOW_S, scenario.hold_s / 2) / control_dt_s))
     return EpisodeOutcome(

@@ -22,6 +22,7 @@ import polars as pl
 
 from pipeline.analysis.episodes import episode_table, limits_table
 from pipeline.analysis.metrics import check_baseline, comparisons, joint_metrics
+from pipeline.analysis.protocol import protocol_view
 from pipeline.errors import RecordingError, ReportError
 from pipeline.log.reader import Recording, find_recordings, read_recording
 from pipeline.report.figures import (
@@ -190,8 +191,10 @@ def run_report(
     Raises:
         ReportError / RecordingError: see :func:`read_all`; unknown baseline controller.
     """
-    recordings, bad = read_all(recordings_dir, skip_bad=skip_bad, progress=progress)
-    episodes = episode_table(recordings)
+    raw, bad = read_all(recordings_dir, skip_bad=skip_bad, progress=progress)
+    views = {rec.episode: protocol_view(rec)[0] for rec in raw}
+    recordings = [views[rec.episode].recording for rec in raw]
+    episodes = episode_table(recordings, views)
     check_baseline(episodes, baseline)
     metrics = joint_metrics(
         pl.concat([r.samples for r in recordings], how="vertical"),
@@ -207,6 +210,7 @@ def run_report(
         baseline=baseline,
         skipped=tuple(Skipped(s, p) for s, p in bad),
         recordings_dir=recordings_dir,
+        protocol=views,
     )
     out_dir = Path(out_dir)
     try:

@@ -23,6 +23,18 @@ from mcap.writer import Writer as McapWriter
 from mcap_ros2.writer import Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from pipeline.model.uncertainty import link_inertials
+from pipeline.robots import load_spec
+from pipeline.settings import (
+    ControllerSettings,
+    EpisodeSettings,
+    PlannerSettings,
+    PlantSettings,
+    ProtocolSettings,
+    SafetySettings,
+    Uncertainty,
+)
+
 UR5_JOINTS = (
     "shoulder_pan_joint",
     "shoulder_lift_joint",
@@ -138,47 +150,72 @@ class Episode:
 
 
 def default_settings(ep: Episode) -> dict[str, Any]:
-    """Settings JSON as the record stage writes it (the shape the report reads)."""
+    """Settings as the record stage writes them: built through the same typed contract
+    (:class:`pipeline.settings.EpisodeSettings`), so a fixture cannot carry keys production
+    never writes. An unknown motion end (``motion_end_s=None``) drops the one key that
+    says it, which the contract then refuses (as the report must tolerate)."""
     n = len(ep.joint_names)
-    motion_end = ep.motion_end_s
-    planner: dict[str, Any] = {
-        "planner": "RRTConnect",
-        "planning_time_s": 0.05,
-        "path_length_rad": 1.2,
-        "velocity_scaling": 1.0,
-        "acceleration_scaling": 1.0,
-    }
-    if motion_end is not None:
-        planner["trajectory_duration_s"] = motion_end
-    return {
-        "robot": ur5_robot_dict(),
-        "scenario": {
+    spec = load_spec("ur5")
+    settings = EpisodeSettings(
+        episode=ep.episode,
+        robot=ur5_robot_dict(),
+        scenario={
             "name": ep.scenario,
             "start": [float(v) for v in ep.q_ref[0]],
-            "goal": [float(v) for v in ep.q_ref[-1]],
             "obstacles": [],
             "hold_s": ep.hold_s,
         },
-        "controller": {
-            "name": ep.controller,
-            "gains": {"kp": [100.0] * n, "kd": [20.0] * n},
-        },
-        "plant": {
-            "damping": [0.1],
-            "frictionloss": [0.0],
-            "armature": [0.01],
-            "payload_kg": 0.0,
-            "noise": {"position_std_rad": 0.0},
-            "physics_dt_s": 0.001,
-            "control_period_s": 0.002,
-        },
-        "planner": planner,
-        "seed": ep.seed,
-        "status": ep.status,
-        "reason": ep.reason,
-        "package_version": "0.1.0",
-        "git_commit": "0000000",
-    }
+        controller=ControllerSettings(
+            name=ep.controller, type=ep.controller, gains={"kp": [100.0] * n, "kd": [20.0] * n}
+        ),
+        plant=PlantSettings(
+            exact=False,
+            links=link_inertials(spec),
+            armature=tuple(float(a) + 0.01 for a in spec.armature),
+            nominal_armature=tuple(float(a) for a in spec.armature),
+            damping=(0.1,) * n,
+            frictionloss=(0.0,) * n,
+            payload_kg=0.0,
+            position_noise_std_rad=0.0,
+            velocity_noise_std_rad_s=0.0,
+            uncertainty=Uncertainty(),
+            physics_dt_s=0.001,
+            control_period_s=0.002,
+        ),
+        planner=PlannerSettings(
+            planner="RRTConnect",
+            seed=0,
+            time_limit_s=5.0,
+            simplify=True,
+            direct=True,
+            n_waypoints=2,
+            n_states_before_simplify=2,
+            path_length_rad=1.2,
+            padding_m=0.02,
+            check_step_rad=0.01,
+            interpolation="toppra",
+            trajectory_duration_s=ep.motion_end_s if ep.motion_end_s is not None else 0.0,
+            velocity_scaling=1.0,
+            acceleration_scaling=1.0,
+            start=tuple(float(v) for v in ep.q_ref[0]),
+            goal=tuple(float(v) for v in ep.q_ref[-1]),
+        ),
+        protocol=ProtocolSettings(
+            motion_start_s=0.0,
+            hold_s=ep.hold_s,
+            start_abs_error_rad=(0.0,) * n,
+            start_effort_nm=(0.0,) * n,
+        ),
+        safety=SafetySettings(min_clearance_m=0.05, clearance_cap_m=0.05),
+        seed=ep.seed,
+        status=ep.status,
+        reason=ep.reason,
+        package_version="0.1.0",
+        git_commit="0000000",
+    ).to_dict()
+    if ep.motion_end_s is None:
+        del settings["planner"]["trajectory_duration_s"]
+    return settings
 
 
 def write_bag(
@@ -424,7 +461,7 @@ def paper_like(
         q_ref=q_ref,
         qd_ref=qd_ref,
         motion_end_s=motion_end_s,
-        hold_s=duration_s - motion_end_s,
+        hold_s=max(duration_s - motion_end_s, 0.0),
         scenario=scenario,
         seed=seed,
     )

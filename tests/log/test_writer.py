@@ -31,6 +31,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from pipeline.constants import (
     METADATA_EPISODE,
     TOPIC_CONTROLLER_STATE,
+    TOPIC_GROUND_TRUTH,
     TOPIC_JOINT_STATES,
     TOPIC_PLANNED_TRAJECTORY,
     TOPIC_ROBOT_DESCRIPTION,
@@ -210,12 +211,20 @@ def check_decoded(
         for ts, edge in zip(msg.transforms, edges, strict=True):
             assert stamp_ns(ts.header.stamp) == t
             assert (ts.header.frame_id, ts.child_frame_id) == (edge.parent, edge.child)
+    gt = by_topic[TOPIC_GROUND_TRUTH]
+    assert [t for t, _ in gt] == st.tolist()  # every control step, never decimated
+    for k, (t, msg) in enumerate(gt):
+        assert stamp_ns(msg.header.stamp) == t and list(msg.name) == names
+        np.testing.assert_array_equal(msg.position, result.q_true[k])
+        np.testing.assert_array_equal(msg.velocity, result.qd_true[k])
+        np.testing.assert_array_equal(msg.effort, result.tau_nm[k])
     assert set(by_topic) == {
         TOPIC_ROBOT_DESCRIPTION,
         TOPIC_PLANNED_TRAJECTORY,
         TOPIC_JOINT_STATES,
         TOPIC_CONTROLLER_STATE,
         TOPIC_TF,
+        TOPIC_GROUND_TRUTH,
     }
 
 
@@ -620,6 +629,7 @@ def test_episode_without_samples_still_records_description_and_plan(
         TOPIC_JOINT_STATES: 0,
         TOPIC_CONTROLLER_STATE: 0,
         TOPIC_TF: 0,
+        TOPIC_GROUND_TRUTH: 0,
     }
     with AnyReader([summary.path]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}

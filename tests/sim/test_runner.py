@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import mujoco
@@ -131,7 +132,11 @@ def test_ctc_with_payload_and_damping_settles_where_its_stiffness_predicts(ur5, 
 
 
 def test_absurd_gain_is_reported_as_diverged_not_raised(ur5, reference):
-    result = _run(ur5, reference, gains={"kp": 1e9})
+    # without rotor armature the wrist's tiny inertia lets saturated torque spin it away
+    bare = dataclasses.replace(
+        ur5, joints=tuple(dataclasses.replace(j, armature=0.0) for j in ur5.joints)
+    )
+    result = _run(bare, reference, gains={"kp": 1e9})
     assert result.status == "diverged" and not result.ok
     assert "t=" in result.reason and "velocity limit" in result.reason
     assert any(name in result.reason for name in ur5.joint_names)

@@ -1,0 +1,135 @@
+"""The experiment protocol applied to a recording before any metric: settled start, true state.
+
+- **Settled start.** A recording starts with a pre-roll: the controller holds the start
+  pose until ``protocol.motion_start_s``. Metrics count from the motion start, so the
+  frames are cut there and their ``time_s`` restarts at 0 (what every metric and figure
+  then calls "the start"). The state at the motion start is kept per episode.
+- **Ground truth.** Where a recording carries the plant's true state
+  (``/ground_truth/joint_states``), tracking error, position and velocity are the true
+  ones (reference - true position); the measured ones stay beside them as
+  ``measured_*`` columns. A real robot's bag has no ground truth: its measured state is
+  used and the report says so.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+import polars as pl
+
+from pipeline.log.reader import Recording
+from pipeline.settings import EpisodeSettings, SettingsError
+
+ERROR_SOURCE_TRUE = "true plant state"
+ERROR_SOURCE_MEASURED = "measured"
+
+
+@dataclass(frozen=True)
+class ProtocolView:
+    """A recording as the metrics see it, and what was done to get there.
+
+    Attributes:
+        recording: frames cut at the motion start, time from it, true state where recorded.
+        settings: the typed settings (None: absent or not following the contract).
+        error_source: :data:`ERROR_SOURCE_TRUE` or :data:`ERROR_SOURCE_MEASURED`.
+        motion_start_s: the pre-roll cut from the recording's start [s] (0 if none).
+        start_abs_error_rad: max over joints of |e| at the motion start (None if unknown).
+        start_abs_effort_nm: max over joints of |applied effort| at the motion start.
+    """
+
+    recording: Recording
+    settings: EpisodeSettings | None
+    error_source: str
+    motion_start_s: float
+    start_abs_error_rad: float | None
+    start_abs_effort_nm: float | None
+
+
+def typed_settings(rec: Recording) -> tuple[EpisodeSettings | None, str]:
+    """The recording's settings under the contract, or None and why (a note; "" if absent)."""
+    if not rec.settings:
+        return None, ""
+    try:
+        return EpisodeSettings.from_dict(rec.settings), ""
+    except SettingsError as err:
+        return None, f"settings do not follow the recording contract ({err}): settings are n/a"
+
+
+def _true_state(frame: pl.DataFrame, *, error: bool) -> pl.DataFrame:
+    """Swap the measured columns for the true ones (rows without truth keep measured)."""
+    has = pl.col("true_position_rad").is_not_null()
+    out = frame
+    if "feedback_position_rad" in frame.columns:
+        out = out.with_columns(
+            pl.col("feedback_position_rad").alias("measured_position_rad"),
+            pl.when(has)
+            .then(pl.col("true_position_rad"))
+            .otherwise(pl.col("feedback_position_rad"))
+            .alias("feedback_position_rad"),
+        )
+    if "position_rad" in frame.columns:
+        out = out.with_columns(
+            pl.col("position_rad").alias("measured_position_rad"),
+            pl.col("velocity_rad_s").alias("measured_velocity_rad_s"),
+            pl.when(has)
+            .then(pl.col("true_position_rad"))
+            .otherwise(pl.col("position_rad"))
+            .alias("position_rad"),
+            pl.when(pl.col("true_velocity_rad_s").is_not_null())
+            .then(pl.col("true_velocity_rad_s"))
+            .otherwise(pl.col("velocity_rad_s"))
+            .alias("velocity_rad_s"),
+        )
+    if error:
+        out = out.with_columns(
+            pl.col("error_rad").alias("measured_error_rad"),
+            pl.when(has)
+            .then(pl.col("reference_position_rad") - pl.col("true_position_rad"))
+            .otherwise(pl.col("error_rad"))
+            .alias("error_rad"),
+        )
+    return out
+
+
+def _from_motion_start(frame: pl.DataFrame, start_s: float, eps_s: float) -> pl.DataFrame:
+    if start_s <= 0:
+        return frame
+    return frame.filter(pl.col("time_s") >= start_s - eps_s).with_columns(
+        (pl.col("time_s") - start_s).alias("time_s")
+    )
+
+
+def protocol_view(rec: Recording) -> tuple[ProtocolView, list[str]]:
+    """Apply the protocol to ``rec`` (see the module doc); returns the view and notes."""
+    settings, note = typed_settings(rec)
+    notes = [note] if note else []
+    start_s = settings.protocol.motion_start_s if settings is not None else 0.0
+    source = ERROR_SOURCE_TRUE if rec.has_ground_truth else ERROR_SOURCE_MEASURED
+    cs, samples = rec.controller_states, rec.samples
+    if rec.has_ground_truth:
+        cs = _true_state(cs, error=True)
+        samples = _true_state(samples, error=True)
+    n = max(len(rec.joint_names), 1)
+    times = cs.get_column("time_s").to_numpy()[::n]
+    eps_s = 0.5 * float(np.median(np.diff(times))) if times.size > 1 else 1e-9
+    cs = _from_motion_start(cs, start_s, eps_s)
+    samples = _from_motion_start(samples, start_s, eps_s)
+    first = cs.filter(pl.col("time_s") == pl.col("time_s").min()) if cs.height else cs
+    start_err = first.get_column("error_rad").abs().max() if first.height else None
+    first_js = (
+        samples.filter(pl.col("time_s") == pl.col("time_s").min()) if samples.height else samples
+    )
+    start_effort = first_js.get_column("effort_nm").abs().max() if first_js.height else None
+    view = ProtocolView(
+        recording=dataclasses.replace(
+            rec, controller_states=cs, samples=samples, notes=(*rec.notes, *notes)
+        ),
+        settings=settings,
+        error_source=source,
+        motion_start_s=start_s,
+        start_abs_error_rad=float(start_err) if isinstance(start_err, int | float) else None,
+        start_abs_effort_nm=float(start_effort) if isinstance(start_effort, int | float) else None,
+    )
+    return view, notes
