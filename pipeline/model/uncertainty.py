@@ -36,7 +36,14 @@ def _rows(tensor: np.ndarray) -> tuple[tuple[float, float, float], ...]:
 
 def _six(tensor: np.ndarray) -> tuple[float, float, float, float, float, float]:
     t = 0.5 * (tensor + tensor.T)
-    return (t[0, 0], t[1, 1], t[2, 2], t[0, 1], t[0, 2], t[1, 2])
+    return (
+        float(t[0, 0]),
+        float(t[1, 1]),
+        float(t[2, 2]),
+        float(t[0, 1]),
+        float(t[0, 2]),
+        float(t[1, 2]),
+    )
 
 
 def link_inertials(spec: RobotSpec) -> tuple[LinkInertial, ...]:
@@ -85,7 +92,7 @@ def draw_plant(spec: RobotSpec, uncertainty: Uncertainty, *, seed: int) -> Robot
         drawn = np.trace(second) * np.eye(3) - second
         com = np.array(j.inertial.com) + uncertainty.com_m * u_com[i]
         inertial = Inertial(
-            mass=j.inertial.mass * (1.0 + uncertainty.mass_rel * u_mass[i]),
+            mass=float(j.inertial.mass * (1.0 + uncertainty.mass_rel * u_mass[i])),
             com=(float(com[0]), float(com[1]), float(com[2])),
             inertia=_rows(drawn),
         )
