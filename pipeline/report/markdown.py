@@ -40,10 +40,17 @@ def _num(x: Any, fmt: str = ".3g") -> str:
     return str(x)
 
 
+# A reduction below this (the candidate more than twice the baseline) reads better as a
+# ratio: "-3600 %" says less than "37x the baseline's".
+RATIO_BELOW_PCT = -100.0
+
+
 def _pct(x: Any) -> str:
     if x is None:
         return "— (divisor ≈ 0)"
-    return f"{float(x):.1f} %" if abs(float(x)) < 1e4 else f"{float(x):.3g} %"
+    if float(x) < RATIO_BELOW_PCT:
+        return f"{1.0 - float(x) / 100.0:.3g}× the baseline's"
+    return f"{float(x):.1f} %"
 
 
 def _signed(x: float, digits: int) -> str:
@@ -65,6 +72,8 @@ def _ci(ci: MeanCI, fmt: Any, hw_fmt: Any = None) -> str:
 def _ci_pct(ci: MeanCI) -> str:
     if ci.mean is None:
         return "— (divisor ≈ 0)"
+    if ci.mean < RATIO_BELOW_PCT:
+        return f"{1.0 - ci.mean / 100.0:.3g}× the baseline's on average (n = {ci.n})"
     if ci.half_width is None:
         return f"{ci.mean:.1f} % (n = {ci.n})"
     return f"{ci.mean:.1f} ± {ci.half_width:.1f} % (n = {ci.n})"
@@ -187,6 +196,9 @@ def _intro(data: ReportData) -> list[str]:
                 _num(row["motion_end_s"], ".3f"),
                 _num(row["end_s"], ".3f"),
                 _samples(row["samples"], row["controller_samples"]),
+                row["error_source"] or NA,
+                _sci(row["start_abs_error_rad"], 1),
+                _num(row["start_abs_effort_nm"], ".1f"),
             ]
         )
     lines.append(
@@ -201,10 +213,22 @@ def _intro(data: ReportData) -> list[str]:
                 "motion end [s]",
                 "end [s]",
                 "samples",
+                "error from",
+                "|e| at start [rad]",
+                "|effort| at start [N m]",
             ],
             rows,
         )
     )
+    lines += [
+        "",
+        "Times count from the **motion start**: every episode first holds its start pose "
+        "under its own controller (the pre-roll, recorded in the bag before the planned "
+        "trajectory's stamp), so metrics measure tracking, not a cold start. *Error from*: "
+        "the plant's true state (`/ground_truth/joint_states`, simulation) or the measured "
+        "one (a real robot's bag). *At start*: the worst joint at the motion start.",
+    ]
+    lines += _physical_checks(data)
     failed = [r for r in recs if r.status != "ok"]
     if failed:
         lines += ["", "### Failed episodes", ""]
@@ -228,10 +252,73 @@ def _intro(data: ReportData) -> list[str]:
     return lines
 
 
+SATURATION_WARN_FRACTION = 0.05
+"""Warn when a joint's effort sits at its limit for more than this share of the samples."""
+GOAL_MISS_RAD = 1e-2
+"""A completed episode whose error at the target exceeds this never reached its goal."""
+_STIFFNESS_GAINS = ("pid", "pd_gravity")  # controller types whose kp is in N m/rad
+
+
+def _physical_checks(data: ReportData) -> list[str]:
+    """Physically broken setups, per episode: contact, saturation, a missed goal, a gain
+    too small against the configured friction. Never hidden, never fatal."""
+    found: list[str] = []
+    metrics = {(r["episode"], r["joint"]): r for r in data.metrics.iter_rows(named=True)}
+    for rec in data.recordings:
+        view = data.protocol.get(rec.episode)
+        st = view.settings if view is not None else None
+        start = view.motion_start_s if view is not None else 0.0
+        if st is not None:
+            for c in st.safety.contacts:
+                found.append(
+                    f"- **{rec.episode}**: contact {c.bodies[0]} – {c.bodies[1]}, "
+                    f"{c.max_penetration_m * 1e3:.2f} mm deep, t = {c.first_s - start:.3f} to "
+                    f"{c.last_s - start:.3f} s from the motion start ({c.samples} samples)"
+                )
+        for j, joint in enumerate(rec.joint_names):
+            m = metrics.get((rec.episode, joint), {})
+            sat = m.get("saturation_fraction")
+            if sat is not None and sat > SATURATION_WARN_FRACTION:
+                found.append(
+                    f"- **{rec.episode}**: {joint} saturated {sat * 100:.1f} % of the time "
+                    f"(above {SATURATION_WARN_FRACTION * 100:.0f} %): its gains ask for more "
+                    "torque than the motor has"
+                )
+            final = m.get("final_error")
+            if final is not None and final > GOAL_MISS_RAD:
+                found.append(
+                    f"- **{rec.episode}**: {joint} never reaches its goal (error at the "
+                    f"target {final:.3g} rad > {GOAL_MISS_RAD:g} rad)"
+                )
+            if st is None or st.controller.type not in _STIFFNESS_GAINS:
+                continue
+            kp = st.controller.gains.get("kp")
+            friction = st.plant.frictionloss
+            if isinstance(kp, list) and j < len(kp) and j < len(friction) and kp[j] > 0:
+                band = friction[j] / kp[j]
+                if band > SETTLING_TOLERANCE_RAD:
+                    found.append(
+                        f"- **{rec.episode}**: {joint}'s kp ({kp[j]:.3g} N m/rad) is too small "
+                        f"for its friction ({friction[j]:.3g} N m): a proportional dead band of "
+                        f"{band:.3g} rad, above the {SETTLING_TOLERANCE_RAD:g} rad settling band"
+                    )
+    lines = ["", "## Physical checks", ""]
+    if not found:
+        stable = sum(1 for r in data.recordings if r.status == "ok")
+        return [
+            *lines,
+            f"No contact during execution, no joint saturated more than "
+            f"{SATURATION_WARN_FRACTION * 100:.0f} % of the time, every completed episode "
+            f"reached its goal within {GOAL_MISS_RAD:g} rad, no gain below the configured "
+            f"friction's dead band; {stable} of {len(data.recordings)} episodes stable "
+            "(not diverged).",
+        ]
+    return [*lines, *found]
+
+
 # Settings shown first, in this order, when present; any others follow as recorded.
 _PLANNER_KEYS = (
     "planner",
-    "planning_time_s",
     "time_limit_s",
     "path_length_rad",
     "trajectory_duration_s",
@@ -239,11 +326,15 @@ _PLANNER_KEYS = (
     "acceleration_scaling",
 )
 _PLANT_KEYS = (
+    "exact",
     "damping",
     "frictionloss",
     "armature",
+    "nominal_armature",
     "payload_kg",
-    "noise",
+    "position_noise_std_rad",
+    "velocity_noise_std_rad_s",
+    "uncertainty",
     "physics_dt_s",
     "control_period_s",
 )
@@ -476,7 +567,31 @@ def _other_tables(data: ReportData, scenario: str) -> list[str]:
     return lines
 
 
-def _paper_pairs(data: ReportData) -> tuple[str, list[tuple[str, str]]] | None:
+def _paper_scenarios(data: ReportData) -> list[str]:
+    """Scenarios whose recordings say they reproduce the paper (settings contract)."""
+    marked = {
+        rec.scenario
+        for rec in data.recordings
+        if (view := data.protocol.get(rec.episode)) is not None
+        and view.settings is not None
+        and view.settings.protocol.reproduces_paper
+    }
+    return sorted(marked)
+
+
+def _exact(data: ReportData, scenario: str) -> bool | None:
+    """Whether the scenario's plant is the nominal model (None: unknown)."""
+    flags = {
+        view.settings.plant.exact
+        for rec in data.in_scenario(scenario)
+        if (view := data.protocol.get(rec.episode)) is not None and view.settings is not None
+    }
+    return flags.pop() if len(flags) == 1 else None
+
+
+def _paper_pairs(
+    data: ReportData, only: str | None = None
+) -> tuple[str, list[tuple[str, str]]] | None:
     """(scenario, [(PID episode, CTC episode), ...]) to put beside the paper.
 
     Scenario "paper" first, else the first with both controllers completed. Pairs as in
@@ -487,6 +602,8 @@ def _paper_pairs(data: ReportData) -> tuple[str, list[tuple[str, str]]] | None:
     eps = eps.filter(pl.col("controller").is_in([paper.PAPER_BASELINE, paper.PAPER_CANDIDATE]))
     found = pairs(eps, baseline=paper.PAPER_BASELINE)
     for scenario in sorted(data.scenarios(), key=lambda s: (s != "paper", s)):
+        if only is not None and scenario != only:
+            continue
         chosen = [(b, c) for sc, b, c in found if sc == scenario]
         if chosen:
             return scenario, chosen
@@ -500,8 +617,33 @@ def _red(base: Any, cand: Any, by: Any) -> Any:
 
 
 def _versus_paper(data: ReportData) -> list[str]:
-    lines = ["## Versus the paper", ""]
-    found = _paper_pairs(data)
+    marked = _paper_scenarios(data)
+    if not marked:
+        return [
+            "## Versus the paper",
+            "",
+            "No scenario here is marked as the paper's experiment (`reproduces_paper: true` "
+            "in params), so nothing is compared with the paper's numbers.",
+            "",
+        ]
+    out: list[str] = []
+    for scenario in marked:
+        out += _versus_paper_one(data, scenario)
+    return out
+
+
+def _versus_paper_one(data: ReportData, only: str) -> list[str]:
+    exact = _exact(data, only)
+    kind = (
+        "ideal plant: the nominal model is the plant, so CTC's model terms are exact by "
+        "construction"
+        if exact
+        else "realistic plant: it differs from the nominal model (see its setup)"
+        if exact is False
+        else "plant unknown"
+    )
+    lines = [f"## Versus the paper: `{only}` ({kind})", ""]
+    found = _paper_pairs(data, only)
     if found is None:
         return [
             *lines,

@@ -147,6 +147,7 @@ class Episode:
     # Schema text and name for /joint_states instead of the Humble sensor_msgs/msg/JointState.
     joint_state_msgdef: tuple[str, str] | None = None
     episode_metadata: bool = True  # False: no armlab.episode metadata record
+    reproduces_paper: bool | None = None  # None: the scenario named "paper" does
 
 
 def default_settings(ep: Episode) -> dict[str, Any]:
@@ -205,6 +206,9 @@ def default_settings(ep: Episode) -> dict[str, Any]:
             hold_s=ep.hold_s,
             start_abs_error_rad=(0.0,) * n,
             start_effort_nm=(0.0,) * n,
+            reproduces_paper=(
+                ep.scenario == "paper" if ep.reproduces_paper is None else ep.reproduces_paper
+            ),
         ),
         safety=SafetySettings(min_clearance_m=0.05, clearance_cap_m=0.05),
         seed=ep.seed,
