@@ -348,25 +348,39 @@ def _collide_rows(
     is_obstacle = np.zeros(model.ngeom, dtype=bool)
     is_obstacle[obstacle_geoms] = True
 
-    qpos = data.qpos
+    qpos, xpos = data.qpos, data.geom_xpos
     collide = checker.collide_current
     centres = np.empty((len(rows), len(robot_geoms), 3))
-    found: list[tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]] = []
+    # flat buffers for every contact, grown when full; filtered after the loop
+    size = 2 * len(rows) + 16  # the floor test outgrows this: growth is exercised
+    row_buf = np.empty(size, dtype=np.int64)
+    geom_buf = np.empty((size, 2), dtype=np.int64)
+    dist_buf = np.empty(size)
+    filled = 0
     for i, k in enumerate(rows.tolist()):
         qpos[:] = qs[k]
         ncon = collide()
-        centres[i] = data.geom_xpos[robot_geoms]
+        if obstacle_geoms:
+            centres[i] = xpos[robot_geoms]
         if ncon:
+            end = filled + ncon
+            if end > size:
+                size = 2 * end
+                row_buf, geom_buf, dist_buf = (
+                    np.resize(row_buf, size),
+                    np.resize(geom_buf, (size, 2)),
+                    np.resize(dist_buf, size),
+                )
             contact = data.contact
-            geoms = contact.geom[:ncon].astype(np.int64)
-            keep = ~is_obstacle[geoms].any(axis=1)
-            if keep.any():
-                found.append((np.full(int(keep.sum()), k), geoms[keep], contact.dist[:ncon][keep]))
-
+            row_buf[filled:end] = k
+            geom_buf[filled:end] = contact.geom[:ncon]
+            dist_buf[filled:end] = contact.dist[:ncon]
+            filled = end
+    row_of, geom_pairs, dists = row_buf[:filled], geom_buf[:filled], dist_buf[:filled]
+    keep = ~is_obstacle[geom_pairs].any(axis=1)
+    found = [(row_of[keep], geom_pairs[keep], dists[keep])]
     if obstacle_geoms:
         found.extend(_obstacle_distances(checker, qs, rows, centres, robot_geoms, obstacle_geoms))
-    if not found:
-        return np.zeros(0, np.int64), np.zeros((0, 2), np.int64), np.zeros(0)
     row_of, geom_pairs, dists = (np.concatenate(parts) for parts in zip(*found, strict=True))
     inside = dists < padding
     return row_of[inside], geom_pairs[inside], dists[inside]
@@ -384,23 +398,25 @@ def _obstacle_distances(
     model, data = checker.model, checker.data
     padding = checker.padding_m
     rbound = model.geom_rbound[robot_geoms]
+    boxes = np.array(obstacle_geoms)
+    # a world geom's pos is in the world frame and obstacles are axis-aligned there:
+    # distance of every bounding sphere to every box, (rows, robot geoms, boxes)
+    gap = np.abs(centres[:, :, None, :] - model.geom_pos[boxes]) - model.geom_size[boxes]
+    near = np.linalg.norm(np.maximum(gap, 0.0), axis=3) - rbound[:, None] < padding
     found_rows: list[int] = []
     found_geoms: list[tuple[int, int]] = []
     found_dists: list[float] = []
     fromto = np.zeros(6)
-    for box in obstacle_geoms:
-        # a world geom's pos is in the world frame and obstacles are axis-aligned there
-        gap = np.abs(centres - model.geom_pos[box]) - model.geom_size[box]
-        near = np.linalg.norm(np.maximum(gap, 0.0), axis=2) - rbound < padding
-        for i, j in zip(*np.nonzero(near), strict=True):
-            k = int(rows[i])
-            if not np.array_equal(data.qpos, qs[k]):
-                data.qpos[:] = qs[k]
-                mujoco.mj_kinematics(model, data)
-            g = int(robot_geoms[j])
+    distance = mujoco.mj_geomDistance
+    for i in np.flatnonzero(near.any(axis=(1, 2))).tolist():
+        k = int(rows[i])
+        data.qpos[:] = qs[k]
+        mujoco.mj_kinematics(model, data)
+        for j, b in zip(*np.nonzero(near[i]), strict=True):
+            g, box = int(robot_geoms[j]), int(boxes[b])
             found_rows.append(k)
             found_geoms.append((g, box))
-            found_dists.append(mujoco.mj_geomDistance(model, data, g, box, padding, fromto))
+            found_dists.append(distance(model, data, g, box, padding, fromto))
     if not found_rows:
         return []
     return [
