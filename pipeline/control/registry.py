@@ -7,7 +7,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from pipeline.control import ctc, pd_gravity, pid
+from pipeline.control import ctc, ctc_pid, pd_gravity, pid
 from pipeline.control.base import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, Controller
 from pipeline.errors import ParamsError
 from pipeline.robots.spec import RobotSpec
@@ -34,6 +34,7 @@ class ControllerEntry:
 CONTROLLERS: dict[str, ControllerEntry] = {
     pid.NAME: ControllerEntry(pid.PidController, pid.default_gains),
     ctc.NAME: ControllerEntry(ctc.ComputedTorqueController, ctc.default_gains),
+    ctc_pid.NAME: ControllerEntry(ctc_pid.ComputedTorquePidController, ctc_pid.default_gains),
     pd_gravity.NAME: ControllerEntry(pd_gravity.PdGravityController, pd_gravity.default_gains),
 }
 

@@ -9,6 +9,7 @@ the zero pose), so a configuration is in collision exactly when
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 
@@ -140,13 +141,19 @@ class CollisionChecker:
         arr = self._as_q(q, "q")
         return self.within_limits(arr) and not self.in_collision(arr)
 
-    def _pair_names(self, geom1: int, geom2: int) -> tuple[str, str]:
+    @functools.cached_property
+    def geom_labels(self) -> tuple[str, ...]:
+        """Per MuJoCo geom, the name a pair reports: the robot link (body) name, or the
+        geom's own name for world geometry (``ground``, ``pedestal``, obstacles)."""
         m = self.model
-        names = []
-        for g in (geom1, geom2):
-            body = int(m.geom_bodyid[g])
-            names.append(m.geom(g).name if body == 0 else m.body(body).name)
-        a, b = sorted(names)
+        return tuple(
+            m.geom(g).name if int(m.geom_bodyid[g]) == 0 else m.body(int(m.geom_bodyid[g])).name
+            for g in range(m.ngeom)
+        )
+
+    def _pair_names(self, geom1: int, geom2: int) -> tuple[str, str]:
+        labels = self.geom_labels
+        a, b = sorted((labels[geom1], labels[geom2]))
         return a, b
 
     def contacts(self, q: ArrayLike) -> list[tuple[str, str]]:

@@ -39,11 +39,11 @@ def _mujoco_mass_and_bias(spec, q, qd=None):
 # --- registry ---------------------------------------------------------------------
 
 
-def test_registry_offers_pid_ctc_and_pd_gravity():
-    assert controller_names() == ("ctc", "pd_gravity", "pid")
+def test_registry_offers_pid_ctc_ctc_pid_and_pd_gravity():
+    assert controller_names() == ("ctc", "ctc_pid", "pd_gravity", "pid")
 
 
-@pytest.mark.parametrize("name", ["pid", "ctc", "pd_gravity"])
+@pytest.mark.parametrize("name", ["pid", "ctc", "ctc_pid", "pd_gravity"])
 def test_each_controller_reports_its_registry_name(ur5, name):
     assert make_controller(name, ur5).name == name
 
@@ -54,12 +54,12 @@ def test_unknown_controller_lists_the_valid_names(ur5):
     message = str(err.value)
     assert isinstance(err.value, PipelineError)
     assert "'ctcc'" in message and "did you mean 'ctc'" in message
-    assert "ctc, pd_gravity, pid" in message
+    assert "ctc, ctc_pid, pd_gravity, pid" in message
     assert "\n" not in message
 
 
 def test_unknown_controller_for_default_gains_is_refused_too(ur5):
-    with pytest.raises(UnknownControllerError, match="valid: ctc, pd_gravity, pid"):
+    with pytest.raises(UnknownControllerError, match="valid: ctc, ctc_pid, pd_gravity, pid"):
         default_gains(ur5, "lqr")
 
 
@@ -138,7 +138,7 @@ def test_model_based_settings_are_json_and_complete(ur5, name):
 
 def test_model_based_controllers_need_dynamics():
     mdh = load_spec("mdh_example")
-    for name in ("ctc", "pd_gravity", "pid"):
+    for name in ("ctc", "ctc_pid", "pd_gravity", "pid"):
         with pytest.raises(SpecError, match="kinematics-only"):
             make_controller(name, mdh)
 
@@ -266,7 +266,7 @@ def test_pid_velocity_feed_forward_scales_the_reference_velocity(ur5):
     np.testing.assert_allclose(tau, np.array(scale) * 0.5)
 
 
-@pytest.mark.parametrize("name", ["pid", "ctc", "pd_gravity"])
+@pytest.mark.parametrize("name", ["pid", "ctc", "ctc_pid", "pd_gravity"])
 def test_tuning_knobs_choose_the_defaults_and_explicit_gains_override_them(ur5, name):
     from pipeline.control import default_gains
 

@@ -1,0 +1,428 @@
+"""Execution safety, post hoc: contacts and clearance along an episode's true states.
+
+The control loop stays untouched; afterwards every (or every ``every``-th)
+true joint state of the plant goes through the planner's ``CollisionChecker``
+(MuJoCo's collision with the plant's own contype/conaffinity filtering and
+excluded pairs), padded by ``padding_m`` so that near misses are measured
+too. Per touching pair (robot–obstacle, robot–self, robot–floor/pedestal) the
+result says when it first and last penetrated, in how many checked samples,
+and how deep [m]; over the whole episode, the smallest clearance and where.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import mujoco
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from pipeline.errors import SimulationError
+from pipeline.model.mjcf import Box
+from pipeline.planning.collision import CollisionChecker
+from pipeline.robots.spec import RobotSpec
+
+ContactKind = Literal["obstacle", "floor", "self"]
+KINDS: tuple[ContactKind, ...] = ("obstacle", "floor", "self")
+FLOOR_GEOMS = ("ground", "pedestal")
+"""World geometry of the scene besides obstacles (names from ``pipeline.model.mjcf``)."""
+DEFAULT_PADDING_M = 0.05
+_BOX = int(mujoco.mjtGeom.mjGEOM_BOX)
+
+
+@dataclass(frozen=True)
+class ContactSpan:
+    """One pair that penetrated during the episode.
+
+    Attributes:
+        bodies: (robot link, world geom: an obstacle's name, ``ground`` or
+            ``pedestal``), or two robot links, sorted.
+        kind: ``obstacle``, ``self`` (link vs link) or ``floor`` (ground or pedestal).
+        first_ns, last_ns: first and last checked sample in penetration [ns].
+        samples: checked samples in penetration (not necessarily contiguous).
+        max_depth_m: deepest penetration [m] (> 0).
+        deepest_ns: when it was deepest [ns].
+    """
+
+    bodies: tuple[str, str]
+    kind: ContactKind
+    first_ns: int
+    last_ns: int
+    samples: int
+    max_depth_m: float
+    deepest_ns: int
+
+    def summary(self) -> str:
+        """E.g. ``touched box by 0.7 mm at t=1.234-2.111 s (878 samples): forearm_link–box``."""
+        what = "itself" if self.kind == "self" else self.bodies[1]
+        return (
+            f"touched {what} by {self.max_depth_m * 1e3:.1f} mm at "
+            f"t={self.first_ns * 1e-9:.3f}-{self.last_ns * 1e-9:.3f} s ({self.samples} "
+            f"samples): {self.bodies[0]}–{self.bodies[1]}"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {
+            "bodies": list(self.bodies),
+            "kind": self.kind,
+            "first_ns": self.first_ns,
+            "last_ns": self.last_ns,
+            "samples": self.samples,
+            "max_depth_m": self.max_depth_m,
+            "deepest_ns": self.deepest_ns,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> ContactSpan:
+        """Inverse of ``to_dict``."""
+        a, b = d["bodies"]
+        return cls(
+            bodies=(str(a), str(b)),
+            kind=d["kind"],
+            first_ns=int(d["first_ns"]),
+            last_ns=int(d["last_ns"]),
+            samples=int(d["samples"]),
+            max_depth_m=float(d["max_depth_m"]),
+            deepest_ns=int(d["deepest_ns"]),
+        )
+
+
+@dataclass(frozen=True)
+class Clearance:
+    """The closest approach of one kind of pair during the episode.
+
+    Attributes:
+        kind: ``obstacle``, ``self`` or ``floor``.
+        bodies: the closest pair, ordered as in ``ContactSpan``.
+        distance_m: its signed distance [m] (negative: penetration depth).
+        stamp_ns: when [ns].
+    """
+
+    kind: ContactKind
+    bodies: tuple[str, str]
+    distance_m: float
+    stamp_ns: int
+
+    def summary(self) -> str:
+        """E.g. ``obstacle 11.2 mm (wrist_2_link–blocker at t=0.007 s)``."""
+        a, b = self.bodies
+        t_s = self.stamp_ns * 1e-9
+        return f"{self.kind} {self.distance_m * 1e3:.1f} mm ({a}–{b} at t={t_s:.3f} s)"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {
+            "kind": self.kind,
+            "bodies": list(self.bodies),
+            "distance_m": self.distance_m,
+            "stamp_ns": self.stamp_ns,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Clearance:
+        """Inverse of ``to_dict``."""
+        a, b = d["bodies"]
+        return cls(
+            kind=d["kind"],
+            bodies=(str(a), str(b)),
+            distance_m=float(d["distance_m"]),
+            stamp_ns=int(d["stamp_ns"]),
+        )
+
+
+@dataclass(frozen=True)
+class ExecutionSafety:
+    """Contacts and clearance over an episode's true states.
+
+    Attributes:
+        padding_m: distances below this were measured; farther pairs were not [m].
+        every: every how many rows of the episode were checked.
+        samples_checked: rows checked.
+        clearances: per kind of pair that came within ``padding_m`` (obstacle,
+            floor, self, in that order), its closest approach.
+        contacts: every pair that penetrated, by first contact time.
+    """
+
+    padding_m: float
+    every: int
+    samples_checked: int
+    clearances: tuple[Clearance, ...]
+    contacts: tuple[ContactSpan, ...]
+
+    @property
+    def touched(self) -> bool:
+        """Did anything penetrate?"""
+        return bool(self.contacts)
+
+    @property
+    def min_clearance_m(self) -> float:
+        """Smallest signed distance over every pair [m], negative after a penetration;
+        ``padding_m`` (a lower bound) when nothing came closer."""
+        return min((c.distance_m for c in self.clearances), default=self.padding_m)
+
+    def summary(self) -> str:
+        """One line for people: each contact, or the clearances when there was none."""
+        if self.contacts:
+            return "; ".join(c.summary() for c in self.contacts)
+        beyond = f">= {self.padding_m * 1e3:.1f} mm"
+        if not self.clearances:
+            return f"no contact; clearance {beyond}"
+        shown = ", ".join(c.summary() for c in self.clearances)
+        return f"no contact; min clearance {shown}; anything else {beyond}"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form (for a recording's settings); ``touched``, ``min_clearance_m``
+        and ``summary`` are derived, for readers of the JSON alone."""
+        return {
+            "padding_m": self.padding_m,
+            "every": self.every,
+            "samples_checked": self.samples_checked,
+            "touched": self.touched,
+            "min_clearance_m": self.min_clearance_m,
+            "clearances": [c.to_dict() for c in self.clearances],
+            "contacts": [c.to_dict() for c in self.contacts],
+            "summary": self.summary(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> ExecutionSafety:
+        """Inverse of ``to_dict`` (derived keys are not read)."""
+        return cls(
+            padding_m=float(d["padding_m"]),
+            every=int(d["every"]),
+            samples_checked=int(d["samples_checked"]),
+            clearances=tuple(Clearance.from_dict(c) for c in d["clearances"]),
+            contacts=tuple(ContactSpan.from_dict(c) for c in d["contacts"]),
+        )
+
+
+def _kind(
+    pair: tuple[str, str], obstacle_names: frozenset[str]
+) -> tuple[ContactKind, tuple[str, str]]:
+    """The pair's kind, and the pair ordered (robot link, world geom) unless self."""
+    kind: ContactKind
+    if obstacle_names.intersection(pair):
+        kind, world = "obstacle", obstacle_names
+    elif set(FLOOR_GEOMS).intersection(pair):
+        kind, world = "floor", frozenset(FLOOR_GEOMS)
+    else:
+        return "self", pair
+    return kind, ((pair[1], pair[0]) if pair[0] in world else pair)
+
+
+def _check_inputs(
+    spec: RobotSpec, q: ArrayLike, stamp_ns: ArrayLike, padding_m: float, every: int
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    qs = np.asarray(q, dtype=np.float64)
+    stamps = np.asarray(stamp_ns)
+    if qs.ndim != 2 or qs.shape[1] != spec.dof:
+        raise SimulationError(
+            f"q: expected (N, {spec.dof}) joint positions of {spec.name}, got shape {qs.shape}"
+        )
+    if stamps.shape != (qs.shape[0],) or not np.issubdtype(stamps.dtype, np.integer):
+        raise SimulationError(
+            f"stamp_ns: expected {qs.shape[0]} integer stamps [ns], got "
+            f"shape {stamps.shape} of {stamps.dtype}"
+        )
+    if not np.isfinite(qs).all():
+        row = int(np.argmax(~np.isfinite(qs).all(axis=1)))
+        raise SimulationError(f"q: row {row} is not finite: {qs[row].tolist()}")
+    number = isinstance(padding_m, int | float | np.integer | np.floating)
+    if not (
+        number and not isinstance(padding_m, bool) and math.isfinite(padding_m) and padding_m >= 0
+    ):
+        raise SimulationError(f"padding_m: expected a finite distance >= 0 [m], got {padding_m!r}")
+    if not (isinstance(every, int | np.integer) and not isinstance(every, bool) and every >= 1):
+        raise SimulationError(f"every: expected an integer >= 1, got {every!r}")
+    return qs, stamps.astype(np.int64)
+
+
+def assess_execution(
+    spec: RobotSpec,
+    *,
+    q: ArrayLike,
+    stamp_ns: ArrayLike,
+    obstacles: Sequence[Box],
+    padding_m: float = DEFAULT_PADDING_M,
+    every: int = 1,
+) -> ExecutionSafety:
+    """Contacts and the minimum clearance along true joint states.
+
+    Args:
+        spec: the robot.
+        q: (N, n) true joint positions of the plant [rad] (``EpisodeResult.q_true``).
+        stamp_ns: (N,) their stamps [ns].
+        obstacles: the boxes the episode ran with.
+        padding_m: measure clearances below this [m]; farther pairs cost nothing.
+        every: check every ``every``-th row (the last row is always checked).
+
+    Raises:
+        SimulationError: shapes, non-finite positions, a bad padding or step.
+    """
+    qs, stamps = _check_inputs(spec, q, stamp_ns, padding_m, every)
+    checker = CollisionChecker(spec, obstacles=obstacles, padding_m=float(padding_m))
+    rows = np.arange(0, len(qs), every)
+    if len(qs) and rows[-1] != len(qs) - 1:
+        rows = np.append(rows, len(qs) - 1)
+    row_of, geom_pairs, dists = _collide_rows(checker, qs, rows)
+    labels = checker.geom_labels
+    obstacle_names = frozenset(b.name for b in obstacles)
+    # one id per unordered pair of labels (robot links are labelled by body, so a
+    # link's several capsules make one pair); a link pair's kind and name, once
+    names = sorted(set(labels))
+    lab = np.array([names.index(name) for name in labels], dtype=np.int64)
+    la, lb = lab[geom_pairs[:, 0]], lab[geom_pairs[:, 1]]
+    lo, hi = np.minimum(la, lb), np.maximum(la, lb)
+    pair_id = lo * len(names) + hi
+    unique_ids, first = np.unique(pair_id, return_index=True)
+    kind_of = {
+        pid: _kind((names[lo[i]], names[hi[i]]), obstacle_names)
+        for pid, i in zip(unique_ids.tolist(), first.tolist(), strict=True)
+    }
+
+    spans = []
+    inside = np.flatnonzero(dists < 0.0)
+    for pid in np.unique(pair_id[inside]).tolist():
+        idx = inside[pair_id[inside] == pid]
+        deepest = idx[int(np.argmin(dists[idx]))]
+        hit_rows = np.unique(row_of[idx])  # a pair may have several contacts per row
+        kind, bodies = kind_of[pid]
+        spans.append(
+            ContactSpan(
+                bodies=bodies,
+                kind=kind,
+                first_ns=int(stamps[hit_rows[0]]),
+                last_ns=int(stamps[hit_rows[-1]]),
+                samples=len(hit_rows),
+                max_depth_m=float(-dists[deepest]),
+                deepest_ns=int(stamps[row_of[deepest]]),
+            )
+        )
+    spans.sort(key=lambda s: (s.first_ns, s.bodies))
+
+    clearances = []
+    for kind in KINDS:
+        ids = [pid for pid, (k, _) in kind_of.items() if k == kind]
+        idx = np.flatnonzero(np.isin(pair_id, ids) & (dists < padding_m))
+        if len(idx):
+            i = int(idx[np.argmin(dists[idx])])
+            clearances.append(
+                Clearance(
+                    kind=kind,
+                    bodies=kind_of[int(pair_id[i])][1],
+                    distance_m=float(dists[i]),
+                    stamp_ns=int(stamps[row_of[i]]),
+                )
+            )
+    return ExecutionSafety(
+        padding_m=float(padding_m),
+        every=int(every),
+        samples_checked=len(rows),
+        clearances=tuple(clearances),
+        contacts=tuple(spans),
+    )
+
+
+def _collide_rows(
+    checker: CollisionChecker, qs: NDArray[np.float64], rows: NDArray[np.int64]
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+    """Every pair within the padding at the given rows: (row, (geom1, geom2), distance).
+
+    Robot–robot and robot–floor pairs come from ``mj_collision`` with the
+    checker's margins (capsule–capsule and capsule–plane distances are exact).
+    Robot–obstacle pairs do not: MuJoCo's capsule–box collider misses or
+    misjudges pairs within the margin (google-deepmind/mujoco#1473; a capsule
+    20 mm above a box with a 50 mm margin gives no contact at all), so their
+    distances come from ``mj_geomDistance``, only for the rows and geoms whose
+    bounding sphere comes within the padding of the box.
+    """
+    model, data = checker.model, checker.data
+    padding = checker.padding_m
+    world = model.geom_bodyid == 0
+    obstacle_geoms = [g for g in range(model.ngeom) if world[g] and model.geom_type[g] == _BOX]
+    robot_geoms = np.flatnonzero(~world)
+    is_obstacle = np.zeros(model.ngeom, dtype=bool)
+    is_obstacle[obstacle_geoms] = True
+
+    qpos, xpos = data.qpos, data.geom_xpos
+    collide = checker.collide_current
+    centres = np.empty((len(rows), len(robot_geoms), 3))
+    # flat buffers for every contact, grown when full; filtered after the loop
+    size = 2 * len(rows) + 16  # the floor test outgrows this: growth is exercised
+    row_buf = np.empty(size, dtype=np.int64)
+    geom_buf = np.empty((size, 2), dtype=np.int64)
+    dist_buf = np.empty(size)
+    filled = 0
+    for i, k in enumerate(rows.tolist()):
+        qpos[:] = qs[k]
+        ncon = collide()
+        if obstacle_geoms:
+            centres[i] = xpos[robot_geoms]
+        if ncon:
+            end = filled + ncon
+            if end > size:
+                size = 2 * end
+                row_buf, geom_buf, dist_buf = (
+                    np.resize(row_buf, size),
+                    np.resize(geom_buf, (size, 2)),
+                    np.resize(dist_buf, size),
+                )
+            contact = data.contact
+            row_buf[filled:end] = k
+            geom_buf[filled:end] = contact.geom[:ncon]
+            dist_buf[filled:end] = contact.dist[:ncon]
+            filled = end
+    row_of, geom_pairs, dists = row_buf[:filled], geom_buf[:filled], dist_buf[:filled]
+    keep = ~is_obstacle[geom_pairs].any(axis=1)
+    found = [(row_of[keep], geom_pairs[keep], dists[keep])]
+    if obstacle_geoms:
+        found.extend(_obstacle_distances(checker, qs, rows, centres, robot_geoms, obstacle_geoms))
+    row_of, geom_pairs, dists = (np.concatenate(parts) for parts in zip(*found, strict=True))
+    inside = dists < padding
+    return row_of[inside], geom_pairs[inside], dists[inside]
+
+
+def _obstacle_distances(
+    checker: CollisionChecker,
+    qs: NDArray[np.float64],
+    rows: NDArray[np.int64],
+    centres: NDArray[np.float64],
+    robot_geoms: NDArray[np.int64],
+    obstacle_geoms: list[int],
+) -> list[tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]]:
+    """Exact robot–box distances where a geom's bounding sphere comes within the padding."""
+    model, data = checker.model, checker.data
+    padding = checker.padding_m
+    rbound = model.geom_rbound[robot_geoms]
+    boxes = np.array(obstacle_geoms)
+    # a world geom's pos is in the world frame and obstacles are axis-aligned there:
+    # distance of every bounding sphere to every box, (rows, robot geoms, boxes)
+    gap = np.abs(centres[:, :, None, :] - model.geom_pos[boxes]) - model.geom_size[boxes]
+    near = np.linalg.norm(np.maximum(gap, 0.0), axis=3) - rbound[:, None] < padding
+    found_rows: list[int] = []
+    found_geoms: list[tuple[int, int]] = []
+    found_dists: list[float] = []
+    fromto = np.zeros(6)
+    distance = mujoco.mj_geomDistance
+    for i in np.flatnonzero(near.any(axis=(1, 2))).tolist():
+        k = int(rows[i])
+        data.qpos[:] = qs[k]
+        mujoco.mj_kinematics(model, data)
+        for j, b in zip(*np.nonzero(near[i]), strict=True):
+            g, box = int(robot_geoms[j]), int(boxes[b])
+            found_rows.append(k)
+            found_geoms.append((g, box))
+            found_dists.append(distance(model, data, g, box, padding, fromto))
+    if not found_rows:
+        return []
+    return [
+        (
+            np.array(found_rows, dtype=np.int64),
+            np.array(found_geoms, dtype=np.int64),
+            np.array(found_dists),
+        )
+    ]
