@@ -406,6 +406,9 @@ def record_cmd(
             f"{o.wall_s:.2f}",
         )
     console.print(table)
+    for o in outcomes:
+        if o.contact:
+            sys.stderr.write(f"warning: {o.name}: contact during execution: {o.contact}\n")
     failed = [o for o in outcomes if o.status != "ok"]
     for o in failed:
         sys.stderr.write(f"error: {o.name}: {o.reason}\n")

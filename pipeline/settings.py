@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, fields
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar
 
 from pipeline.errors import RecordingError
 
@@ -323,62 +323,200 @@ class ControllerSettings:
         )
 
 
+def _pair(value: Any, path: str) -> tuple[str, str]:
+    if not (isinstance(value, list | tuple) and len(value) == 2):
+        raise _fail(path, "two names", value)
+    return (_str(value[0], f"{path}[0]"), _str(value[1], f"{path}[1]"))
+
+
+ContactKind = Literal["obstacle", "floor", "self"]
+KINDS: tuple[ContactKind, ...] = ("obstacle", "floor", "self")
+
+
+def _kind_of(value: Any, path: str) -> ContactKind:
+    for kind in KINDS:
+        if value == kind:
+            return kind
+    raise _fail(path, f"one of {', '.join(KINDS)}", value)
+
+
 @dataclass(frozen=True)
-class Contact:
-    """Robot geometry touching something during the episode (true plant state)."""
-
-    bodies: tuple[str, str]
-    first_s: float
-    last_s: float
-    samples: int
-    max_penetration_m: float
-
-
-@dataclass(frozen=True)
-class SafetySettings:
-    """Execution safety measured on the plant's true states.
+class ContactSpan:
+    """One pair that penetrated during the episode.
 
     Attributes:
-        min_clearance_m: smallest distance between geometry that may collide, capped at
-            ``clearance_cap_m`` (beyond it nothing is measured); negative = penetration.
-        clearance_cap_m: the distance up to which clearance is measured [m].
-        contacts: every touching pair with its times and depth.
+        bodies: (robot link, world geom: an obstacle's name, ``ground`` or
+            ``pedestal``), or two robot links, sorted.
+        kind: ``obstacle``, ``self`` (link vs link) or ``floor`` (ground or pedestal).
+        first_ns, last_ns: first and last checked sample in penetration [ns].
+        samples: checked samples in penetration (not necessarily contiguous).
+        max_depth_m: deepest penetration [m] (> 0).
+        deepest_ns: when it was deepest [ns].
     """
 
-    min_clearance_m: float
-    clearance_cap_m: float
-    contacts: tuple[Contact, ...] = ()
+    bodies: tuple[str, str]
+    kind: ContactKind
+    first_ns: int
+    last_ns: int
+    samples: int
+    max_depth_m: float
+    deepest_ns: int
+
+    def summary(self) -> str:
+        """E.g. ``touched box by 0.7 mm at t=1.234-2.111 s (878 samples): forearm_link–box``."""
+        what = "itself" if self.kind == "self" else self.bodies[1]
+        return (
+            f"touched {what} by {self.max_depth_m * 1e3:.1f} mm at "
+            f"t={self.first_ns * 1e-9:.3f}-{self.last_ns * 1e-9:.3f} s ({self.samples} "
+            f"samples): {self.bodies[0]}–{self.bodies[1]}"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {
+            "bodies": list(self.bodies),
+            "kind": self.kind,
+            "first_ns": self.first_ns,
+            "last_ns": self.last_ns,
+            "samples": self.samples,
+            "max_depth_m": self.max_depth_m,
+            "deepest_ns": self.deepest_ns,
+        }
 
     @classmethod
-    def from_dict(cls, data: Any, path: str = "safety") -> SafetySettings:
+    def from_dict(cls, data: Any, path: str = "safety.contacts[0]") -> ContactSpan:
+        """Inverse of ``to_dict``, validated (:class:`SettingsError` names the field)."""
         d = _mapping(data, path)
         _check_keys(d, cls, path)
-        contacts = d["contacts"]
+        return cls(
+            bodies=_pair(d["bodies"], f"{path}.bodies"),
+            kind=_kind_of(d["kind"], f"{path}.kind"),
+            first_ns=_int(d["first_ns"], f"{path}.first_ns"),
+            last_ns=_int(d["last_ns"], f"{path}.last_ns"),
+            samples=_int(d["samples"], f"{path}.samples", minimum=1),
+            max_depth_m=_number(d["max_depth_m"], f"{path}.max_depth_m", minimum=0),
+            deepest_ns=_int(d["deepest_ns"], f"{path}.deepest_ns"),
+        )
+
+
+@dataclass(frozen=True)
+class Clearance:
+    """The closest approach of one kind of pair during the episode.
+
+    Attributes:
+        kind: ``obstacle``, ``self`` or ``floor``.
+        bodies: the closest pair, ordered as in ``ContactSpan``.
+        distance_m: its signed distance [m] (negative: penetration depth).
+        stamp_ns: when [ns].
+    """
+
+    kind: ContactKind
+    bodies: tuple[str, str]
+    distance_m: float
+    stamp_ns: int
+
+    def summary(self) -> str:
+        """E.g. ``obstacle 11.2 mm (wrist_2_link–blocker at t=0.007 s)``."""
+        a, b = self.bodies
+        t_s = self.stamp_ns * 1e-9
+        return f"{self.kind} {self.distance_m * 1e3:.1f} mm ({a}–{b} at t={t_s:.3f} s)"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form."""
+        return {
+            "kind": self.kind,
+            "bodies": list(self.bodies),
+            "distance_m": self.distance_m,
+            "stamp_ns": self.stamp_ns,
+        }
+
+    @classmethod
+    def from_dict(cls, data: Any, path: str = "safety.clearances[0]") -> Clearance:
+        """Inverse of ``to_dict``, validated."""
+        d = _mapping(data, path)
+        _check_keys(d, cls, path)
+        return cls(
+            kind=_kind_of(d["kind"], f"{path}.kind"),
+            bodies=_pair(d["bodies"], f"{path}.bodies"),
+            distance_m=_number(d["distance_m"], f"{path}.distance_m"),
+            stamp_ns=_int(d["stamp_ns"], f"{path}.stamp_ns"),
+        )
+
+
+@dataclass(frozen=True)
+class ExecutionSafety:
+    """Contacts and clearance over an episode's true states.
+
+    Attributes:
+        padding_m: distances below this were measured; farther pairs were not [m].
+        every: every how many rows of the episode were checked.
+        samples_checked: rows checked.
+        clearances: per kind of pair that came within ``padding_m`` (obstacle,
+            floor, self, in that order), its closest approach.
+        contacts: every pair that penetrated, by first contact time.
+    """
+
+    padding_m: float
+    every: int
+    samples_checked: int
+    clearances: tuple[Clearance, ...]
+    contacts: tuple[ContactSpan, ...]
+
+    @property
+    def touched(self) -> bool:
+        """Did anything penetrate?"""
+        return bool(self.contacts)
+
+    @property
+    def min_clearance_m(self) -> float:
+        """Smallest signed distance over every pair [m], negative after a penetration;
+        ``padding_m`` (a lower bound) when nothing came closer."""
+        return min((c.distance_m for c in self.clearances), default=self.padding_m)
+
+    def summary(self) -> str:
+        """One line for people: each contact, or the clearances when there was none."""
+        if self.contacts:
+            return "; ".join(c.summary() for c in self.contacts)
+        beyond = f">= {self.padding_m * 1e3:.1f} mm"
+        if not self.clearances:
+            return f"no contact; clearance {beyond}"
+        shown = ", ".join(c.summary() for c in self.clearances)
+        return f"no contact; min clearance {shown}; anything else {beyond}"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready form (for a recording's settings); ``touched``, ``min_clearance_m``
+        and ``summary`` are derived, for readers of the JSON alone."""
+        return {
+            "padding_m": self.padding_m,
+            "every": self.every,
+            "samples_checked": self.samples_checked,
+            "touched": self.touched,
+            "min_clearance_m": self.min_clearance_m,
+            "clearances": [c.to_dict() for c in self.clearances],
+            "contacts": [c.to_dict() for c in self.contacts],
+            "summary": self.summary(),
+        }
+
+    @classmethod
+    def from_dict(cls, data: Any, path: str = "safety") -> ExecutionSafety:
+        """Inverse of ``to_dict`` (derived keys are not read), validated."""
+        d = _mapping(data, path)
+        _check_keys(d, cls, path)
+        clearances, contacts = d["clearances"], d["contacts"]
+        if not isinstance(clearances, list):
+            raise _fail(f"{path}.clearances", "a list", clearances)
         if not isinstance(contacts, list):
             raise _fail(f"{path}.contacts", "a list", contacts)
-        out = []
-        for i, c in enumerate(contacts):
-            p = f"{path}.contacts[{i}]"
-            cd = _mapping(c, p)
-            _check_keys(cd, Contact, p)
-            bodies = cd["bodies"]
-            if not (isinstance(bodies, list | tuple) and len(bodies) == 2):
-                raise _fail(f"{p}.bodies", "two names", bodies)
-            out.append(
-                Contact(
-                    bodies=(_str(bodies[0], f"{p}.bodies[0]"), _str(bodies[1], f"{p}.bodies[1]")),
-                    first_s=_number(cd["first_s"], f"{p}.first_s", minimum=0),
-                    last_s=_number(cd["last_s"], f"{p}.last_s", minimum=0),
-                    samples=_int(cd["samples"], f"{p}.samples", minimum=1),
-                    max_penetration_m=_number(
-                        cd["max_penetration_m"], f"{p}.max_penetration_m", minimum=0
-                    ),
-                )
-            )
         return cls(
-            min_clearance_m=_number(d["min_clearance_m"], f"{path}.min_clearance_m"),
-            clearance_cap_m=_number(d["clearance_cap_m"], f"{path}.clearance_cap_m", minimum=0),
-            contacts=tuple(out),
+            padding_m=_number(d["padding_m"], f"{path}.padding_m", minimum=0),
+            every=_int(d["every"], f"{path}.every", minimum=1),
+            samples_checked=_int(d["samples_checked"], f"{path}.samples_checked"),
+            clearances=tuple(
+                Clearance.from_dict(c, f"{path}.clearances[{i}]") for i, c in enumerate(clearances)
+            ),
+            contacts=tuple(
+                ContactSpan.from_dict(c, f"{path}.contacts[{i}]") for i, c in enumerate(contacts)
+            ),
         )
 
 
@@ -409,7 +547,7 @@ class EpisodeSettings:
     plant: PlantSettings
     planner: PlannerSettings
     protocol: ProtocolSettings
-    safety: SafetySettings
+    safety: ExecutionSafety
     seed: int
     status: str
     reason: str
@@ -421,6 +559,7 @@ class EpisodeSettings:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready plain data (lists, not tuples)."""
         out: dict[str, Any] = _plain(asdict(self))
+        out["safety"] = self.safety.to_dict()  # with its derived keys, for readers of the JSON
         return out
 
     @classmethod
@@ -447,7 +586,7 @@ class EpisodeSettings:
             plant=PlantSettings.from_dict(d["plant"]),
             planner=PlannerSettings.from_dict(d["planner"]),
             protocol=ProtocolSettings.from_dict(d["protocol"]),
-            safety=SafetySettings.from_dict(d["safety"]),
+            safety=ExecutionSafety.from_dict(d["safety"]),
             seed=_int(d["seed"], "seed"),
             status=status,
             reason=_str(d["reason"], "reason"),

@@ -5,16 +5,19 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
 import polars as pl
 
 from pipeline.analysis.aggregate import CONFIDENCE, MeanCI, mean_ci
-from pipeline.analysis.episodes import setting
+from pipeline.analysis.episodes import robot_spec, setting
 from pipeline.analysis.metrics import ERROR_FLOOR_RAD, SETTLING_TOLERANCE_RAD, pairs
 from pipeline.constants import FINAL_WINDOW_S, TOPIC_CONTROLLER_STATE, TOPIC_JOINT_STATES
 from pipeline.log.reader import Recording
 from pipeline.report import paper
 from pipeline.report.figures import FigureFile
 from pipeline.report.inputs import ReportData
+from pipeline.robots.spec import RobotSpec
+from pipeline.settings import EpisodeSettings
 
 REPORT_FILE = "report.md"
 NA = "n/a"
@@ -259,49 +262,76 @@ GOAL_MISS_RAD = 1e-2
 _STIFFNESS_GAINS = ("pid", "pd_gravity")  # controller types whose kp is in N m/rad
 
 
+def _stiffness_nm_per_rad(st: EpisodeSettings, spec: RobotSpec | None) -> list[float] | None:
+    """Per-joint position stiffness [N m/rad] of the controller's proportional term:
+    ``kp`` itself for the decentralized laws, ``M_n(goal)_jj * kp`` for the model-based
+    ones (their kp is an acceleration gain [1/s^2])."""
+    kp = st.controller.gains.get("kp")
+    if not (isinstance(kp, list) and all(isinstance(k, int | float) for k in kp)):
+        return None
+    if st.controller.type in _STIFFNESS_GAINS:
+        return [float(k) for k in kp]
+    if spec is None or not spec.has_dynamics or len(st.planner.goal) != spec.dof:
+        return None
+    import pinocchio as pin
+
+    from pipeline.model.urdf import build_pinocchio_model
+
+    model = build_pinocchio_model(spec)
+    mass = pin.crba(model, model.createData(), np.asarray(st.planner.goal, dtype=float))
+    return [float(k) * float(mass[j, j]) for j, k in enumerate(kp)]
+
+
 def _physical_checks(data: ReportData) -> list[str]:
     """Physically broken setups, per episode: contact, saturation, a missed goal, a gain
-    too small against the configured friction. Never hidden, never fatal."""
-    found: list[str] = []
+    too small against the configured friction. Never hidden, never fatal; a finding shared
+    by several episodes (same gains and friction over seeds) is listed once."""
+    found: dict[str, list[str]] = {}
     metrics = {(r["episode"], r["joint"]): r for r in data.metrics.iter_rows(named=True)}
     for rec in data.recordings:
         view = data.protocol.get(rec.episode)
         st = view.settings if view is not None else None
         start = view.motion_start_s if view is not None else 0.0
+
+        def add(text: str, episode: str = rec.episode) -> None:
+            found.setdefault(text, []).append(episode)
+
         if st is not None:
             for c in st.safety.contacts:
-                found.append(
-                    f"- **{rec.episode}**: contact {c.bodies[0]} – {c.bodies[1]}, "
-                    f"{c.max_penetration_m * 1e3:.2f} mm deep, t = {c.first_s - start:.3f} to "
-                    f"{c.last_s - start:.3f} s from the motion start ({c.samples} samples)"
+                add(
+                    f"{c.kind} contact {c.bodies[0]} – {c.bodies[1]}, "
+                    f"{c.max_depth_m * 1e3:.2f} mm deep, t = {c.first_ns * 1e-9 - start:.3f} to "
+                    f"{c.last_ns * 1e-9 - start:.3f} s from the motion start ({c.samples} samples)"
                 )
+        stiffness = _stiffness_nm_per_rad(st, robot_spec(rec)) if st is not None else None
         for j, joint in enumerate(rec.joint_names):
             m = metrics.get((rec.episode, joint), {})
             sat = m.get("saturation_fraction")
             if sat is not None and sat > SATURATION_WARN_FRACTION:
-                found.append(
-                    f"- **{rec.episode}**: {joint} saturated {sat * 100:.1f} % of the time "
-                    f"(above {SATURATION_WARN_FRACTION * 100:.0f} %): its gains ask for more "
-                    "torque than the motor has"
+                add(
+                    f"{joint} saturated {sat * 100:.1f} % of the time (above "
+                    f"{SATURATION_WARN_FRACTION * 100:.0f} %): its gains ask for more torque "
+                    "than the motor has"
                 )
             final = m.get("final_error")
             if final is not None and final > GOAL_MISS_RAD:
-                found.append(
-                    f"- **{rec.episode}**: {joint} never reaches its goal (error at the "
-                    f"target {final:.3g} rad > {GOAL_MISS_RAD:g} rad)"
+                add(
+                    f"{joint} never reaches its goal (error at the target {final:.3g} rad > "
+                    f"{GOAL_MISS_RAD:g} rad)"
                 )
-            if st is None or st.controller.type not in _STIFFNESS_GAINS:
+            friction = st.plant.frictionloss if st is not None else ()
+            if stiffness is None or j >= len(friction) or j >= len(stiffness):
                 continue
-            kp = st.controller.gains.get("kp")
-            friction = st.plant.frictionloss
-            if isinstance(kp, list) and j < len(kp) and j < len(friction) and kp[j] > 0:
-                band = friction[j] / kp[j]
-                if band > SETTLING_TOLERANCE_RAD:
-                    found.append(
-                        f"- **{rec.episode}**: {joint}'s kp ({kp[j]:.3g} N m/rad) is too small "
-                        f"for its friction ({friction[j]:.3g} N m): a proportional dead band of "
-                        f"{band:.3g} rad, above the {SETTLING_TOLERANCE_RAD:g} rad settling band"
-                    )
+            if stiffness[j] > 0 and friction[j] / stiffness[j] > SETTLING_TOLERANCE_RAD:
+                assert st is not None
+                add(
+                    f"`{st.controller.type}` on {joint}: proportional stiffness "
+                    f"{stiffness[j]:.3g} N m/rad against {friction[j]:.3g} N m of friction, a "
+                    f"dead band of {friction[j] / stiffness[j]:.3g} rad (> the "
+                    f"{SETTLING_TOLERANCE_RAD:g} rad settling band): without integral action "
+                    "the joint may stop anywhere in it; with it, only after the integral "
+                    "breaks the friction away"
+                )
     lines = ["", "## Physical checks", ""]
     if not found:
         stable = sum(1 for r in data.recordings if r.status == "ok")
@@ -313,7 +343,14 @@ def _physical_checks(data: ReportData) -> list[str]:
             f"friction's dead band; {stable} of {len(data.recordings)} episodes stable "
             "(not diverged).",
         ]
-    return [*lines, *found]
+    for text, episodes in found.items():
+        who = (
+            ", ".join(episodes)
+            if len(episodes) <= 3
+            else (f"{episodes[0]} … {episodes[-1]} ({len(episodes)} episodes)")
+        )
+        lines.append(f"- **{who}**: {text}")
+    return lines
 
 
 # Settings shown first, in this order, when present; any others follow as recorded.

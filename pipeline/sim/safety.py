@@ -12,192 +12,22 @@ and how deep [m]; over the whole episode, the smallest clearance and where.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import Any, Literal
+from collections.abc import Sequence
 
 import mujoco
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import SimulationError
-from pipeline.model.mjcf import Box
+from pipeline.model.scene import Box
 from pipeline.planning.collision import CollisionChecker
 from pipeline.robots.spec import RobotSpec
+from pipeline.settings import KINDS, Clearance, ContactKind, ContactSpan, ExecutionSafety
 
-ContactKind = Literal["obstacle", "floor", "self"]
-KINDS: tuple[ContactKind, ...] = ("obstacle", "floor", "self")
 FLOOR_GEOMS = ("ground", "pedestal")
 """World geometry of the scene besides obstacles (names from ``pipeline.model.mjcf``)."""
 DEFAULT_PADDING_M = 0.05
 _BOX = int(mujoco.mjtGeom.mjGEOM_BOX)
-
-
-@dataclass(frozen=True)
-class ContactSpan:
-    """One pair that penetrated during the episode.
-
-    Attributes:
-        bodies: (robot link, world geom: an obstacle's name, ``ground`` or
-            ``pedestal``), or two robot links, sorted.
-        kind: ``obstacle``, ``self`` (link vs link) or ``floor`` (ground or pedestal).
-        first_ns, last_ns: first and last checked sample in penetration [ns].
-        samples: checked samples in penetration (not necessarily contiguous).
-        max_depth_m: deepest penetration [m] (> 0).
-        deepest_ns: when it was deepest [ns].
-    """
-
-    bodies: tuple[str, str]
-    kind: ContactKind
-    first_ns: int
-    last_ns: int
-    samples: int
-    max_depth_m: float
-    deepest_ns: int
-
-    def summary(self) -> str:
-        """E.g. ``touched box by 0.7 mm at t=1.234-2.111 s (878 samples): forearm_link–box``."""
-        what = "itself" if self.kind == "self" else self.bodies[1]
-        return (
-            f"touched {what} by {self.max_depth_m * 1e3:.1f} mm at "
-            f"t={self.first_ns * 1e-9:.3f}-{self.last_ns * 1e-9:.3f} s ({self.samples} "
-            f"samples): {self.bodies[0]}–{self.bodies[1]}"
-        )
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form."""
-        return {
-            "bodies": list(self.bodies),
-            "kind": self.kind,
-            "first_ns": self.first_ns,
-            "last_ns": self.last_ns,
-            "samples": self.samples,
-            "max_depth_m": self.max_depth_m,
-            "deepest_ns": self.deepest_ns,
-        }
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> ContactSpan:
-        """Inverse of ``to_dict``."""
-        a, b = d["bodies"]
-        return cls(
-            bodies=(str(a), str(b)),
-            kind=d["kind"],
-            first_ns=int(d["first_ns"]),
-            last_ns=int(d["last_ns"]),
-            samples=int(d["samples"]),
-            max_depth_m=float(d["max_depth_m"]),
-            deepest_ns=int(d["deepest_ns"]),
-        )
-
-
-@dataclass(frozen=True)
-class Clearance:
-    """The closest approach of one kind of pair during the episode.
-
-    Attributes:
-        kind: ``obstacle``, ``self`` or ``floor``.
-        bodies: the closest pair, ordered as in ``ContactSpan``.
-        distance_m: its signed distance [m] (negative: penetration depth).
-        stamp_ns: when [ns].
-    """
-
-    kind: ContactKind
-    bodies: tuple[str, str]
-    distance_m: float
-    stamp_ns: int
-
-    def summary(self) -> str:
-        """E.g. ``obstacle 11.2 mm (wrist_2_link–blocker at t=0.007 s)``."""
-        a, b = self.bodies
-        t_s = self.stamp_ns * 1e-9
-        return f"{self.kind} {self.distance_m * 1e3:.1f} mm ({a}–{b} at t={t_s:.3f} s)"
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form."""
-        return {
-            "kind": self.kind,
-            "bodies": list(self.bodies),
-            "distance_m": self.distance_m,
-            "stamp_ns": self.stamp_ns,
-        }
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> Clearance:
-        """Inverse of ``to_dict``."""
-        a, b = d["bodies"]
-        return cls(
-            kind=d["kind"],
-            bodies=(str(a), str(b)),
-            distance_m=float(d["distance_m"]),
-            stamp_ns=int(d["stamp_ns"]),
-        )
-
-
-@dataclass(frozen=True)
-class ExecutionSafety:
-    """Contacts and clearance over an episode's true states.
-
-    Attributes:
-        padding_m: distances below this were measured; farther pairs were not [m].
-        every: every how many rows of the episode were checked.
-        samples_checked: rows checked.
-        clearances: per kind of pair that came within ``padding_m`` (obstacle,
-            floor, self, in that order), its closest approach.
-        contacts: every pair that penetrated, by first contact time.
-    """
-
-    padding_m: float
-    every: int
-    samples_checked: int
-    clearances: tuple[Clearance, ...]
-    contacts: tuple[ContactSpan, ...]
-
-    @property
-    def touched(self) -> bool:
-        """Did anything penetrate?"""
-        return bool(self.contacts)
-
-    @property
-    def min_clearance_m(self) -> float:
-        """Smallest signed distance over every pair [m], negative after a penetration;
-        ``padding_m`` (a lower bound) when nothing came closer."""
-        return min((c.distance_m for c in self.clearances), default=self.padding_m)
-
-    def summary(self) -> str:
-        """One line for people: each contact, or the clearances when there was none."""
-        if self.contacts:
-            return "; ".join(c.summary() for c in self.contacts)
-        beyond = f">= {self.padding_m * 1e3:.1f} mm"
-        if not self.clearances:
-            return f"no contact; clearance {beyond}"
-        shown = ", ".join(c.summary() for c in self.clearances)
-        return f"no contact; min clearance {shown}; anything else {beyond}"
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready form (for a recording's settings); ``touched``, ``min_clearance_m``
-        and ``summary`` are derived, for readers of the JSON alone."""
-        return {
-            "padding_m": self.padding_m,
-            "every": self.every,
-            "samples_checked": self.samples_checked,
-            "touched": self.touched,
-            "min_clearance_m": self.min_clearance_m,
-            "clearances": [c.to_dict() for c in self.clearances],
-            "contacts": [c.to_dict() for c in self.contacts],
-            "summary": self.summary(),
-        }
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> ExecutionSafety:
-        """Inverse of ``to_dict`` (derived keys are not read)."""
-        return cls(
-            padding_m=float(d["padding_m"]),
-            every=int(d["every"]),
-            samples_checked=int(d["samples_checked"]),
-            clearances=tuple(Clearance.from_dict(c) for c in d["clearances"]),
-            contacts=tuple(ContactSpan.from_dict(c) for c in d["contacts"]),
-        )
 
 
 def _kind(

@@ -33,7 +33,6 @@ from pipeline.settings import (
     PlannerSettings,
     PlantSettings,
     ProtocolSettings,
-    SafetySettings,
     Uncertainty,
     per_joint,
 )
@@ -61,6 +60,7 @@ class EpisodeOutcome:
     final_abs_error_rad: float
     duration_s: float
     wall_s: float
+    contact: str = ""  # the execution-safety summary when the arm touched anything
 
 
 # The code a recording depends on (relative to pipeline/): dvc.yaml's record deps list
@@ -141,6 +141,7 @@ def spec_as_dict(spec: RobotSpec) -> dict[str, Any]:
                     else {}
                 ),
                 "collision": {"radius": j.collision_radius},
+                "armature": j.armature,
             }
             for j in spec.joints
         ],
@@ -241,12 +242,6 @@ def _plant_is_exact(spec: RobotSpec, plant_spec: RobotSpec, scenario: ScenarioPa
     return plant_spec == spec and all(x == 0 for group in zero for x in group)
 
 
-def assess_safety(spec: RobotSpec, result: Any, *, obstacles: list[Any]) -> SafetySettings:
-    """Contacts and clearance of the plant's true motion (placeholder until safety lands)."""
-    del spec, result, obstacles
-    return SafetySettings(min_clearance_m=0.05, clearance_cap_m=0.05, contacts=())
-
-
 def _per_joint(value: float | list[float]) -> tuple[float, ...]:
     return tuple(value) if isinstance(value, list) else (float(value),)
 
@@ -304,6 +299,7 @@ def _run_and_write(
     from pipeline.model.mjcf import PlantOptions
     from pipeline.model.uncertainty import draw_plant, link_inertials, with_plant
     from pipeline.sim.runner import run_episode
+    from pipeline.sim.safety import assess_execution
 
     scenario = episode.scenario
     spec = load_spec(scenario.robot)
@@ -350,7 +346,10 @@ def _run_and_write(
     )
     k0 = int(result.extra["motion_start_row"])
     motion_start_s = float(result.extra["motion_start_s"])
-    safety = assess_safety(spec, result, obstacles=_boxes(scenario))
+    # contacts and clearance along the plant's true motion, every control step
+    safety = assess_execution(
+        spec, q=result.q_true, stamp_ns=result.stamp_ns, obstacles=_boxes(scenario)
+    )
     plant_settings = PlantSettings(
         exact=_plant_is_exact(spec, plant_spec, scenario),
         links=link_inertials(plant_spec),
@@ -449,6 +448,7 @@ def _run_and_write(
         final_abs_error_rad=float(err[-n_hold:].mean(axis=0).max()) if err.size else float("nan"),
         duration_s=float(result.stamp_ns[-1] * 1e-9) if result.stamp_ns.size else 0.0,
         wall_s=0.0,
+        contact=safety.summary() if safety.touched else "",
     )
 
 

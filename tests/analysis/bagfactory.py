@@ -28,10 +28,10 @@ from pipeline.robots import load_spec
 from pipeline.settings import (
     ControllerSettings,
     EpisodeSettings,
+    ExecutionSafety,
     PlannerSettings,
     PlantSettings,
     ProtocolSettings,
-    SafetySettings,
     Uncertainty,
 )
 
@@ -210,7 +210,9 @@ def default_settings(ep: Episode) -> dict[str, Any]:
                 ep.scenario == "paper" if ep.reproduces_paper is None else ep.reproduces_paper
             ),
         ),
-        safety=SafetySettings(min_clearance_m=0.05, clearance_cap_m=0.05),
+        safety=ExecutionSafety(
+            padding_m=0.05, every=1, samples_checked=len(ep.stamp_ns), clearances=(), contacts=()
+        ),
         seed=ep.seed,
         status=ep.status,
         reason=ep.reason,

@@ -22,6 +22,7 @@ def _params(tmp_path: Path, name: str = "params.yaml", **scenario_overrides: obj
     data = yaml.safe_load((REPO / "params.yaml").read_text())
     data["scenarios"]["paper"]["hold_s"] = 0.3
     data["scenarios"]["paper"].update(scenario_overrides)
+    data["episodes"] = {k: v for k, v in data["episodes"].items() if v["scenario"] == "paper"}
     path = tmp_path / name
     path.write_text(yaml.safe_dump(data))
     return path
@@ -201,7 +202,16 @@ def test_diverging_episode_is_recorded_reported_and_fails_the_run(tmp_path):
     assert re.search(r"^error: paper-ctc: diverged at t=", result.stderr, re.MULTILINE)
     assert sorted(p.name for p in out.iterdir()) == ["paper-ctc", "paper-pid"]
     report = subprocess.run(
-        [*PIPELINE, "report", "--recordings", str(out), "--out", str(tmp_path / "rep")],
+        [
+            *PIPELINE,
+            "report",
+            "--recordings",
+            str(out),
+            "--out",
+            str(tmp_path / "rep"),
+            "--baseline",
+            "soft",
+        ],
         capture_output=True,
         text=True,
         cwd=REPO,
@@ -209,3 +219,50 @@ def test_diverging_episode_is_recorded_reported_and_fails_the_run(tmp_path):
     assert report.returncode == 0, report.stderr
     text = (tmp_path / "rep" / "report.md").read_text()
     assert re.search(r"\*\*paper-ctc\*\* \(ctc, paper\): diverged — diverged at t=", text)
+
+
+@pytest.mark.slow
+def test_a_soft_pid_landing_on_a_shelf_is_flagged_in_summary_recording_and_report(tmp_path):
+    """A shelf 20 mm under the elbow at the start pose; a PID tuned to 10 rad/s sags onto
+    it while holding the start (kp ~ m w^2, 16x softer than the default). The contact is
+    named in the record summary, the recording's settings and the report."""
+    from pipeline.model.chain import chain
+    from pipeline.model.dh import link_frames
+    from pipeline.robots import load_spec
+
+    spec = load_spec("ur5")
+    frame = link_frames(spec, np.zeros(6))[2]
+    seg = chain(spec)[2].segments_dh[0]
+    z = min((frame @ np.append(p, 1.0))[2] for p in (seg.start, seg.end)) - seg.radius
+    shelf = {"name": "shelf", "center": [-0.6, 0.0, float(z) - 0.02 - 0.05],
+             "half_size": [0.12, 0.1, 0.05]}  # fmt: skip
+    data = yaml.safe_load(_params(tmp_path).read_text())
+    data["scenarios"]["paper"]["obstacles"] = [shelf]
+    data["scenarios"]["paper"]["preroll_s"] = 1.0
+    data["controllers"]["soft"] = {"type": "pid", "gains": {"omega_n_rad_s": 10.0}}
+    data["episodes"] = {"shelf-soft": {"scenario": "paper", "controller": "soft", "seed": 0}}
+    params = tmp_path / "shelf.yaml"
+    params.write_text(yaml.safe_dump(data))
+    out = tmp_path / "rec"
+    run = _record(params, out)
+    assert run.returncode == 0, run.stderr
+    assert "warning: shelf-soft: contact during execution: touched shelf" in run.stderr
+
+    from pipeline.analysis.protocol import typed_settings
+    from pipeline.log.reader import read_recording
+
+    settings, note = typed_settings(read_recording(out / "shelf-soft"))
+    assert settings is not None, note
+    (contact,) = [c for c in settings.safety.contacts if c.bodies == ("elbow_link", "shelf")]
+    assert contact.kind == "obstacle" and 1e-4 < contact.max_depth_m < 0.02
+    assert contact.first_ns < settings.protocol.motion_start_s * 1e9  # while holding the start
+
+    report = subprocess.run(
+        [*PIPELINE, "report", "--recordings", str(out), "--out", str(tmp_path / "rep"),
+         "--baseline", "soft"],
+        capture_output=True, text=True, timeout=600, cwd=REPO,
+    )  # fmt: skip
+    assert report.returncode == 0, report.stderr
+    text = (tmp_path / "rep" / "report.md").read_text()
+    checks = text.split("## Physical checks", 1)[1].split("\n## ", 1)[0]
+    assert "obstacle contact elbow_link – shelf" in checks
