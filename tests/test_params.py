@@ -23,12 +23,21 @@ def _write(tmp_path: Path, data: object) -> Path:
 
 def test_default_params_hold_the_papers_scenario_under_pid_and_ctc():
     params = load_params(REPO / "params.yaml")
-    assert [e.name for e in params.episodes] == ["paper-pid", "paper-ctc"]
+    names = [e.name for e in params.episodes]
+    assert names[:2] == ["paper-pid", "paper-ctc"]
     paper = params.scenarios["paper"]
+    assert paper.reproduces_paper and params.scenarios["paper-realistic"].reproduces_paper
+    # the realistic plant differs from the nominal model, with seeds for an interval
+    real = params.scenarios["paper-realistic"]
+    assert real.plant.uncertainty.mass_rel > 0 and real.goal == paper.goal
+    for controller in ("pid", "ctc"):
+        seeds = {e.seed for e in params.episodes if e.scenario_name == "paper-realistic"
+                 and e.controller_name == controller}  # fmt: skip
+        assert len(seeds) >= 5
     assert paper.robot == "ur5"
     assert paper.start == [0.0] * 6
     assert paper.goal.joints == [-0.15, -0.5, 0.785, -1.15, -0.3925, 0.0]
-    assert {e.controller.type for e in params.episodes} == {"pid", "ctc"}
+    assert {"pid", "ctc"} <= {e.controller.type for e in params.episodes}
 
 
 @pytest.mark.parametrize(
@@ -36,7 +45,8 @@ def test_default_params_hold_the_papers_scenario_under_pid_and_ctc():
     [
         (
             lambda d: d["episodes"]["paper-ctc"].update(controller="lqr"),
-            r"episodes\.paper-ctc\.controller: unknown controller 'lqr' \(defined: ctc, pid\)",
+            r"episodes\.paper-ctc\.controller: unknown controller 'lqr' "
+            r"\(defined: ctc, ctc_pid, pid\)",
         ),
         (
             lambda d: d["episodes"]["paper-ctc"].update(scenario="nope"),
@@ -81,7 +91,7 @@ def test_bad_params_name_the_field(tmp_path, mutate, expected):
 def test_unknown_only_episode_lists_the_known_ones():
     params = load_params(REPO / "params.yaml")
     with pytest.raises(
-        ParamsError, match=r"unknown episode 'paper-lqr' \(episodes: paper-pid, paper-ctc\)"
+        ParamsError, match=r"unknown episode 'paper-lqr' \(episodes: paper-pid, paper-ctc, real-"
     ):
         params.select(["paper-lqr"])
 

@@ -2,8 +2,10 @@
 
 Definitions (also in docs/report.md and in every report):
 
-- error e(t) = reference - measured position [rad], as the controller recorded it on
-  ``/controller_state``. Every error-based metric (max, RMS, final, settling,
+- error e(t) = reference - position [rad] from the frames :mod:`pipeline.analysis.protocol`
+  prepares: the plant's true position where the recording has it, else the measured one
+  as the controller recorded it on ``/controller_state``; times from the motion start.
+  Every error-based metric (max, RMS, final, settling,
   overshoot) uses every ``/controller_state`` message, at its full rate, even when
   ``/joint_states`` is decimated; velocity and effort metrics use ``/joint_states``.
 - max_abs_error = max |e| over the whole episode; rms_error = sqrt(mean e^2).
@@ -15,13 +17,13 @@ Definitions (also in docs/report.md and in every report):
   ``SETTLING_TOLERANCE_RAD`` for the rest of the episode (the first sample after
   the last violation; 0 when |e| never leaves the band after the motion end);
   null when it never settles or the motion end is unknown.
-- overshoot = how far the measured position passes the goal in the direction
+- overshoot = how far the position passes the goal in the direction
   of travel (max over the episode, clipped at 0) [rad]; null for a joint that
   does not move.
 - final_error, settling_time and overshoot are null for an episode that did not
   complete its motion (status not "ok", or the recording ends before the motion
   end): its last samples are not "at the target". Max and RMS use what exists.
-- peak_velocity = the measured velocity with the largest magnitude, with its sign.
+- peak_velocity = the velocity (true where recorded) with the largest magnitude, with its sign.
 - rms_effort = sqrt(mean applied effort^2) [N m].
 - saturation_fraction = share of samples where |applied effort| is at the
   joint's effort limit (within 1e-6 relative) or |commanded| exceeds |applied|.

@@ -107,10 +107,10 @@ def protocol_view(rec: Recording) -> tuple[ProtocolView, list[str]]:
     notes = [note] if note else []
     start_s = settings.protocol.motion_start_s if settings is not None else 0.0
     source = ERROR_SOURCE_TRUE if rec.has_ground_truth else ERROR_SOURCE_MEASURED
-    cs, samples = rec.controller_states, rec.samples
-    if rec.has_ground_truth:
-        cs = _true_state(cs, error=True)
-        samples = _true_state(samples, error=True)
+    # every frame gets the same columns (measured_* beside the ones metrics use), so
+    # recordings with and without ground truth concatenate
+    cs = _true_state(rec.controller_states, error=True)
+    samples = _true_state(rec.samples, error=True)
     n = max(len(rec.joint_names), 1)
     times = cs.get_column("time_s").to_numpy()[::n]
     eps_s = 0.5 * float(np.median(np.diff(times))) if times.size > 1 else 1e-9

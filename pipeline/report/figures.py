@@ -197,7 +197,7 @@ def scenario_figures(
     ax.set_ylabel("position [rad]")
     ax.grid(True, lw=0.3)
     ax.legend(fontsize=8)
-    fig.suptitle(f"{scenario}: joint 1 ({first_joint}) reference and measured (cf. paper Fig. 5)")
+    fig.suptitle(f"{scenario}: joint 1 ({first_joint}) reference and actual (cf. paper Fig. 5)")
     out.append(
         FigureFile(
             _save(fig, out_dir, f"{stem}_fig5_joint1_position.png"),
@@ -215,7 +215,7 @@ def scenario_figures(
     ax.set_ylabel("error [rad]")
     ax.grid(True, lw=0.3)
     ax.legend(fontsize=8)
-    fig.suptitle(f"{scenario}: joint 1 tracking error, reference - measured (cf. paper Fig. 6)")
+    fig.suptitle(f"{scenario}: joint 1 tracking error, reference - actual (cf. paper Fig. 6)")
     out.append(
         FigureFile(
             _save(fig, out_dir, f"{stem}_fig6_joint1_error.png"),

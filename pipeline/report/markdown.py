@@ -11,7 +11,12 @@ import polars as pl
 from pipeline.analysis.aggregate import CONFIDENCE, MeanCI, mean_ci
 from pipeline.analysis.episodes import robot_spec, setting
 from pipeline.analysis.metrics import ERROR_FLOOR_RAD, SETTLING_TOLERANCE_RAD, pairs
-from pipeline.constants import FINAL_WINDOW_S, TOPIC_CONTROLLER_STATE, TOPIC_JOINT_STATES
+from pipeline.constants import (
+    FINAL_WINDOW_S,
+    TOPIC_CONTROLLER_STATE,
+    TOPIC_GROUND_TRUTH,
+    TOPIC_JOINT_STATES,
+)
 from pipeline.log.reader import Recording
 from pipeline.report import paper
 from pipeline.report.figures import FigureFile
@@ -827,22 +832,30 @@ def _definitions() -> list[str]:
     return [
         "## Definitions",
         "",
-        f"- error e(t) = reference − measured joint position [rad], as recorded on {cs} "
-        "(`error.positions`). Every error-based number (max, RMS, at the target, settling, "
-        f"overshoot) uses every {cs} message, at its full rate; velocities and efforts come "
-        f"from {js} (which may be decimated). Times count from the recording's first sample.",
+        "- error e(t) = reference − true joint position [rad] where the recording carries "
+        f"the plant's true state (`{TOPIC_GROUND_TRUTH}`, simulation), else reference − "
+        f"measured position as recorded on {cs} (`error.positions`; a real robot's bag); "
+        "the *error from* column of the episode table says which. Every error-based number "
+        f"(max, RMS, at the target, settling, overshoot) uses every {cs} message, at its "
+        f"full rate; velocities (true where recorded) and efforts come from {js} (which may "
+        "be decimated). Times count from the motion start: the pre-roll before it (the "
+        "controller holding the start pose) takes no part.",
         "- max |error|: largest |e| over the episode; RMS error: sqrt(mean e²) over the episode.",
         f"- error at the target: mean |e| over the last min({FINAL_WINDOW_S} s, hold / 2) of the "
         "episode, hold = episode end − motion end (motion end = the planned trajectory's "
         "duration); the last sample alone when there is no hold.",
         f"- settling time: from the motion end until |e| stays within {SETTLING_TOLERANCE_RAD:g} "
         "rad for the rest of the episode; 'never settles' when the last sample is outside.",
-        "- overshoot: how far the measured position (`feedback.positions`) passes the goal in "
-        "the direction of travel (n/a for a joint that does not move).",
+        "- overshoot: how far the position (true where recorded, else `feedback.positions`) "
+        "passes the goal in the direction of travel (n/a for a joint that does not move).",
         f"- '{ENDED_EARLY}': the episode failed or its recording stops before the motion end, "
         "so its last samples are not at the target: error at the target, settling time and "
         "overshoot are not given (max and RMS are, over what was recorded).",
-        f"- peak velocity: the measured velocity of largest magnitude, with its sign ({js}).",
+        f"- peak velocity: the velocity of largest magnitude, with its sign (true where "
+        f"recorded, else {js}).",
+        "- reduction: (baseline − candidate) / baseline × 100 %; a candidate more than twice "
+        'the baseline is shown as a ratio ("3.7× the baseline\'s") instead of a large '
+        "negative percentage.",
         f"- RMS effort: sqrt(mean applied effort²) ({js} `effort`); saturation: share of "
         f"{js} samples where |applied effort| is at the joint's effort limit or |commanded| "
         f"({cs} `output.effort`) exceeds |applied|.",

@@ -211,7 +211,14 @@ def series_frame(data: ReportData, column: str, *, controller_state: bool = Fals
                     "joint": list(rec.joint_names) * idx.size,
                     # + 0.0 writes -0.0 as 0.0
                     "value": values.reshape(-1) + 0.0,
-                }
+                },
+                # typed: an episode with no samples (diverged before its motion) is empty
+                schema={
+                    "time_s": pl.Float64,
+                    "episode": pl.String,
+                    "joint": pl.String,
+                    "value": pl.Float64,
+                },
             ).with_columns(pl.col("value").fill_nan(None))  # not recorded: an empty cell
         )
     return pl.concat(parts) if parts else pl.DataFrame()

@@ -148,6 +148,9 @@ class Episode:
     joint_state_msgdef: tuple[str, str] | None = None
     episode_metadata: bool = True  # False: no armlab.episode metadata record
     reproduces_paper: bool | None = None  # None: the scenario named "paper" does
+    # the plant's true positions, written on /ground_truth/joint_states when given
+    q_true: np.ndarray | None = None
+    motion_start_s: float = 0.0  # the pre-roll recorded before the motion (settings)
 
 
 def default_settings(ep: Episode) -> dict[str, Any]:
@@ -195,14 +198,16 @@ def default_settings(ep: Episode) -> dict[str, Any]:
             padding_m=0.02,
             check_step_rad=0.01,
             interpolation="toppra",
-            trajectory_duration_s=ep.motion_end_s if ep.motion_end_s is not None else 0.0,
+            trajectory_duration_s=(
+                ep.motion_end_s - ep.motion_start_s if ep.motion_end_s is not None else 0.0
+            ),
             velocity_scaling=1.0,
             acceleration_scaling=1.0,
             start=tuple(float(v) for v in ep.q_ref[0]),
             goal=tuple(float(v) for v in ep.q_ref[-1]),
         ),
         protocol=ProtocolSettings(
-            motion_start_s=0.0,
+            motion_start_s=ep.motion_start_s,
             hold_s=ep.hold_s,
             start_abs_error_rad=(0.0,) * n,
             start_effort_nm=(0.0,) * n,
@@ -318,6 +323,22 @@ def write_bag(
                     "/joint_states", sch["sensor_msgs/msg/JointState"], js_msg, log_time=t_ns
                 )
                 counts["/joint_states"] = counts.get("/joint_states", 0) + 1
+            if ep.q_true is not None:
+                if "gt" not in sch:
+                    sch["gt"] = w.register_msgdef(
+                        "sensor_msgs/msg/JointState", msgdef("sensor_msgs/msg/JointState")
+                    )
+                gt_msg = {
+                    "header": header,
+                    "name": names,
+                    "position": ep.q_true[k].tolist(),
+                    "velocity": ep.qd[k].tolist(),
+                    "effort": ep.effort[k].tolist(),
+                }
+                w.write_message("/ground_truth/joint_states", sch["gt"], gt_msg, log_time=t_ns)
+                counts["/ground_truth/joint_states"] = (
+                    counts.get("/ground_truth/joint_states", 0) + 1
+                )
             if "/controller_state" in topics:
                 err = ep.q_ref[k] - ep.q[k]
                 w.write_message(
@@ -387,6 +408,7 @@ def _write_metadata_yaml(mcap_path: Path, counts: dict[str, int], duration_ns: i
         "/planned_trajectory": "trajectory_msgs/msg/JointTrajectory",
         "/robot_description": "std_msgs/msg/String",
         "/tf": "tf2_msgs/msg/TFMessage",
+        "/ground_truth/joint_states": "sensor_msgs/msg/JointState",
     }
     info = {
         "rosbag2_bagfile_information": {

@@ -119,8 +119,8 @@ def _mass_and_gravity(model, q):
 
 
 def test_integral_removes_the_steady_state_error_a_payload_leaves_under_ctc(ur5):
-    """A 1 kg payload the nominal model does not know: ctc settles at M_n Kp e = dg (up
-    to 0.09 rad on the light wrist 2), ctc_pid drives the error to zero."""
+    """A 1 kg payload the nominal model does not know: ctc settles at M_n Kp e = dg (a few
+    mrad on the wrists, whose rotor armature dominates M_n), ctc_pid drives it to zero."""
     reference = QuinticReference.between(PAPER_START_RAD, PAPER_GOAL_RAD, duration_s=1.0)
     plant = PlantOptions(payload_kg=1.0)
     final, rest = {}, {}
@@ -144,7 +144,7 @@ def test_integral_removes_the_steady_state_error_a_payload_leaves_under_ctc(ur5)
     predicted = np.linalg.solve(mass_n, gravity_p - gravity_n) / kp
     np.testing.assert_allclose(final["ctc"], predicted, rtol=1e-3, atol=1e-7)
     loaded = np.abs(final["ctc"]) > 1e-4
-    assert loaded.sum() >= 4 and np.abs(final["ctc"]).max() > 1e-2
+    assert loaded.sum() >= 4 and np.abs(final["ctc"]).max() > 1e-3
     ratio = np.abs(final["ctc_pid"][loaded]) / np.abs(final["ctc"][loaded])
     assert ratio.max() < 1e-3, (final["ctc"], final["ctc_pid"])
 
