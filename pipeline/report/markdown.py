@@ -714,8 +714,15 @@ def _versus_paper_one(data: ReportData, only: str) -> list[str]:
             values.append(_red(vp, vc, vp if divide_by == "pid" else vc))
         return mean_ci(values)
 
-    def pct(ci: MeanCI) -> str:
-        return _pct(ci.mean) if n_pairs == 1 else _ci_pct(ci)
+    def pct(ci: MeanCI, divide_by: str = "pid") -> str:
+        """A percentage, or, where one controller is more than twice the other, the ratio
+        by name ("CTC 4.0× PID's"): -3600 % or +3600 % say less."""
+        mean = ci.mean
+        if mean is not None and divide_by == "pid" and mean < RATIO_BELOW_PCT:
+            return f"CTC {1.0 - mean / 100.0:.3g}× PID's" + ("" if n_pairs == 1 else " (mean)")
+        if mean is not None and divide_by == "ctc" and mean > -RATIO_BELOW_PCT:
+            return f"PID {1.0 + mean / 100.0:.3g}× CTC's" + ("" if n_pairs == 1 else " (mean)")
+        return _pct(mean) if n_pairs == 1 else _ci_pct(ci)
 
     def val(ci: MeanCI, fmt: Any, hw_fmt: Any = None) -> str:
         if ci.mean is None:
@@ -738,8 +745,49 @@ def _versus_paper_one(data: ReportData, only: str) -> list[str]:
             f"seeds {', '.join(seeds)}): mean ± {CONFIDENCE * 100:.0f} % confidence interval "
             "(Student t) over the runs, reductions per pair"
         )
+
+    def verdict(ci: MeanCI) -> str:
+        """Does "CTC below PID" hold: by the CI when there are several pairs."""
+        if ci.mean is None:
+            return "n/a"
+        if ci.half_width is None:
+            return "holds" if ci.mean > 0 else "does not hold"
+        if ci.mean - ci.half_width > 0:
+            return "holds"
+        if ci.mean + ci.half_width < 0:
+            return "does not hold"
+        return "inconclusive"
+
+    def by_verdict(metric: str) -> str:
+        groups: dict[str, list[str]] = {}
+        for k, joint in enumerate(joints[:5]):  # the paper's claims are about joints 1-5
+            groups.setdefault(verdict(per_pair(joint, metric, "pid")), []).append(str(k + 1))
+        return "; ".join(f"{v} on joint{'s' if len(js) > 1 else ''} {', '.join(js)}"
+                         for v, js in groups.items())  # fmt: skip
+
+    j1_ci = per_pair(joints[0], "max_abs_error", "pid")
+    claims = [
+        [
+            "CTC's max tracking error on joint 1 is smaller than PID's (45.9 % smaller)",
+            f"{verdict(j1_ci)}: {pct(j1_ci)} smaller",
+        ],
+        [
+            "CTC's max tracking error is smaller on joints 1-5 (Figs. 6-7)",
+            by_verdict("max_abs_error"),
+        ],
+        [
+            "CTC's error at the target is smaller on joints 1-5 (Table 3)",
+            by_verdict("final_error"),
+        ],
+    ]
     lines += [
         f"Ours: scenario **{scenario}**, {ours}. Paper: {paper.PAPER_SOURCE}.",
+        "",
+        "**The paper's claims here** (a claim *holds* when CTC is below PID; with several "
+        "seed pairs, when the whole confidence interval of the paired reduction is above "
+        "zero; *inconclusive* when it straddles zero):",
+        "",
+        _table(["claim", "here"], claims),
         "",
         "Two reduction formulas appear in the paper: the joint-1 figure (45.9 %) is "
         "(PID − CTC) / PID × 100, while Table 3's percentages are (PID − CTC) / CTC × 100. "
@@ -762,7 +810,7 @@ def _versus_paper_one(data: ReportData, only: str) -> list[str]:
         [
             "(PID − CTC) / CTC",
             _pct(_red(pp, pc, pc)),
-            pct(per_pair(j1, "max_abs_error", "ctc")),
+            pct(per_pair(j1, "max_abs_error", "ctc"), "ctc"),
         ],
     ]
     lines += [_table(["joint 1", "paper", "ours"], rows), ""]
@@ -785,7 +833,7 @@ def _versus_paper_one(data: ReportData, only: str) -> list[str]:
                 _pct(_red(pp_k, pc_k, pp_k)),
                 val(per_episode(ctc_eps, joint, "final_error"), e5),
                 val(per_episode(pid_eps, joint, "final_error"), e5),
-                pct(per_pair(joint, "final_error", "ctc")),
+                pct(per_pair(joint, "final_error", "ctc"), "ctc"),
                 pct(per_pair(joint, "final_error", "pid")),
             ]
         )
