@@ -450,7 +450,16 @@ def _setup(data: ReportData, scenario: str) -> list[str]:
         f"obstacles: {len(obstacles) if isinstance(obstacles, list) else NA}; "
         f"hold after the motion: {_value(setting(sc, 'hold_s'))} s.",
         f"- Planner: {_planner_line(planner)}.",
-        f"- Plant: {_settings_line(setting(s, 'plant', default={}), _PLANT_KEYS)}.",
+        f"- Plant: {_settings_line(setting(s, 'plant', default={}), _PLANT_KEYS, skip=('links',))}"
+        + (
+            "; link masses, centres of mass and inertias (and the armature above) drawn per "
+            "episode seed, recorded in each bag's `settings.plant.links`."
+            if _exact(data, scenario) is False
+            else ": the controllers' nominal model **is** the plant, so model-based terms are "
+            "exact by construction."
+            if _exact(data, scenario)
+            else "."
+        ),
         "",
         "Controllers:",
         "",
