@@ -50,14 +50,20 @@ def _mcap_bytes(out: Path) -> dict[str, bytes]:
 @pytest.mark.slow
 def test_two_runs_give_byte_identical_recordings(tmp_path):
     params = _params(tmp_path)
+    # plus one episode on the realistic plant: its drawn link parameters are seeded too
+    data = yaml.safe_load(params.read_text())
+    full = yaml.safe_load((REPO / "params.yaml").read_text())
+    data["scenarios"]["paper-realistic"]["hold_s"] = 0.3
+    data["episodes"]["real-ctc-s1"] = full["episodes"]["real-ctc-s1"]
+    params.write_text(yaml.safe_dump(data))
     first = _record(params, tmp_path / "a", "--jobs", "2")
     second = _record(params, tmp_path / "b", "--jobs", "1")
     assert first.returncode == 0, first.stderr
     assert second.returncode == 0, second.stderr
     a, b = _mcap_bytes(tmp_path / "a"), _mcap_bytes(tmp_path / "b")
-    assert sorted(a) == ["paper-ctc", "paper-pid"]
+    assert sorted(a) == ["paper-ctc", "paper-pid", "real-ctc-s1"]
     assert a == b
-    for name in a:
+    for name in ("paper-pid", "paper-ctc"):
         meta_a = (tmp_path / "a" / name / "metadata.yaml").read_bytes()
         assert meta_a == (tmp_path / "b" / name / "metadata.yaml").read_bytes()
         final = _last_joint_state_by_rosbags(tmp_path / "a" / name)
