@@ -50,6 +50,22 @@ class PageClient:
         self.gui_value: dict[str, Any] = {}
         self.gui_props: dict[str, dict[str, Any]] = {}
         self.received: list[tuple[float, dict[str, Any]]] = []
+        # the browser reports its camera first; viser registers a client (and routes
+        # its GUI events) only after that
+        self.send(
+            {
+                "type": "ViewerCameraMessage",
+                "wxyz": [1.0, 0.0, 0.0, 0.0],
+                "position": [1.3, -1.3, 0.9],
+                "fov": 1.0,
+                "near": 0.01,
+                "far": 100.0,
+                "image_height": 800,
+                "image_width": 1280,
+                "look_at": [0.0, 0.0, 0.15],
+                "up_direction": [0.0, 0.0, 1.0],
+            }
+        )
 
     def close(self) -> None:
         self._ws.close()
