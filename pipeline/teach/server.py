@@ -13,8 +13,10 @@ nothing is fetched at run time.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import html
+import io
 import math
 import socket
 import threading
@@ -211,11 +213,12 @@ class TeachServer:
         self._lock = threading.RLock()
         self._syncing = False
         check_port_free(host, port)
-        self._server = viser.ViserServer(
-            host=host, port=port, label=f"armlab teach: {self._spec.name}", verbose=False
-        )
+        with contextlib.redirect_stdout(io.StringIO()):  # viser's banner; we print the URL
+            self._server = viser.ViserServer(
+                host=host, port=port, label=f"armlab teach: {self._spec.name}", verbose=False
+            )
         if port and self._server.get_port() != port:  # lost a race for the port
-            self._server.stop()
+            self.close()
             raise TeachError(f"port {port} on {host} is already in use; pick another with --port N")
         self.host = host
         self.port = int(self._server.get_port())
@@ -445,8 +448,9 @@ class TeachServer:
         return params_path
 
     def close(self) -> None:
-        """Stop the server and its threads."""
-        self._server.stop()
+        """Stop the server and its threads (quietly: viser prints 'Server stopped')."""
+        with contextlib.redirect_stdout(io.StringIO()):
+            self._server.stop()
 
 
 __all__ = [
