@@ -28,6 +28,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from typing import Any
 
@@ -37,7 +38,7 @@ from ik import machine
 from pipeline.model import transforms as tf
 from pipeline.model.dh import forward_kinematics
 from pipeline.robots import RobotSpec, load_spec
-from pipeline.teach.server import TeachServer, link_node
+from pipeline.teach.server import BAD_RGB, MARKER_NODE, TeachServer, link_node
 from pipeline.teach.session import TeachSession, choose_solver, home_pose
 from pipeline.teach.wire import PageClient
 
@@ -83,18 +84,27 @@ def page_fk_error(spec: RobotSpec, client: PageClient, target: np.ndarray) -> fl
 def through_page(spec: RobotSpec, solver: str, qs: np.ndarray) -> dict[str, Any]:
     """Latency target -> arm pose at the client, server in its own process."""
     port = _free_port()
+    errors = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115 (closed below; a full pipe would stall the server)
     proc = subprocess.Popen(
         [sys.executable, "-m", "pipeline", "teach", spec.name, "--solver", solver,
          "--port", str(port)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        stdout=subprocess.PIPE, stderr=errors, text=True,
     )  # fmt: skip
     try:
         assert proc.stdout is not None
         while not (line := proc.stdout.readline()).startswith("teach:"):
             if not line and proc.poll() is not None:
-                raise RuntimeError(proc.stderr.read() if proc.stderr else "teach exited")
+                raise RuntimeError(f"pipeline teach exited with {proc.returncode}")
         last = link_node(spec.dof)
+
+        def answer(m: dict[str, Any]) -> bool:
+            """The new arm pose, or the marker turning red (unreachable)."""
+            if m.get("name") == MARKER_NODE:
+                return bool(m.get("updates", {}).get("color") == list(BAD_RGB))
+            return m.get("type") == "SetPositionMessage" and m.get("name") == last
+
         latencies: list[float] = []
+        unsolved = 0
         worst_fk = 0.0
         with PageClient(f"http://127.0.0.1:{port}/") as client:
             client.pump_until(lambda c: spec.joint_names[-1] in c.gui_label.values())
@@ -103,15 +113,13 @@ def through_page(spec: RobotSpec, solver: str, qs: np.ndarray) -> dict[str, Any]
                 n = len(client.received)
                 t0 = time.perf_counter()
                 client.move_target(target[:3, 3], tf.quat_wxyz(target[:3, :3]))
-                got = client.pump_until(
-                    lambda c, n=n: any(
-                        m.get("type") == "SetPositionMessage" and m.get("name") == last
-                        for _, m in c.received[n:]
-                    )
-                )
+                got = client.pump_until(lambda c, n=n: any(answer(m) for _, m in c.received[n:]))
                 if not got:
-                    raise RuntimeError("no arm pose came back")
-                stamp = next(s for s, m in client.received[n:] if m.get("name") == last)
+                    raise RuntimeError(f"no answer to target {len(latencies)}")
+                stamp, first = next((s, m) for s, m in client.received[n:] if answer(m))
+                if first.get("name") == MARKER_NODE:  # marker turned red: IK gave up
+                    unsolved += 1
+                    continue
                 latencies.append((stamp - t0) * 1e3)
                 # the joints the page shows reach the target (slider updates share the frame)
                 client.pump_until(
@@ -125,11 +133,18 @@ def through_page(spec: RobotSpec, solver: str, qs: np.ndarray) -> dict[str, Any]
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
-    return {**stats(latencies), "worst_fk_error_of_page_joints": worst_fk}
+        errors.seek(0)
+        err_text = errors.read()
+        errors.close()
+        if "Traceback" in err_text:
+            raise RuntimeError(f"pipeline teach printed an error:\n{err_text}")
+    return {**stats(latencies), "unsolved": unsolved,
+            "worst_fk_error_of_page_joints": worst_fk}  # fmt: skip
 
 
 def in_process(spec: RobotSpec, solver: str, qs: np.ndarray) -> dict[str, Any]:
-    """``TeachServer.update_target`` alone: IK + checks + render + flush, no client."""
+    """``TeachServer.update_target`` alone: IK + checks + render + flush, no client.
+    Timed whether or not IK succeeds (the page answers either way)."""
     ik, _ = choose_solver(spec, solver)
     server = TeachServer(TeachSession(spec, ik), robot_arg=spec.name, port=0)
     try:
@@ -140,7 +155,6 @@ def in_process(spec: RobotSpec, solver: str, qs: np.ndarray) -> dict[str, Any]:
             state = server.update_target(target[:3, 3], tf.quat_wxyz(target[:3, :3]))
             times.append((time.perf_counter() - t0) * 1e3)
             solve.append(state.solve_time_ms)
-            assert state.reachable, state.reason
     finally:
         server.close()
     return {**stats(times), "ik_solve_ms": stats(solve)}

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import KinematicsError
-from pipeline.kinematics.base import IKOptions, IKSolver, as_pose, pose_error
+from pipeline.kinematics.base import IKSolver, as_pose, pose_error
 from pipeline.kinematics.check import (
     ORIENTATION_TARGET_RAD,
     POSITION_TARGET_M,
@@ -41,9 +41,6 @@ warns within about 2.5 degrees of it, while dragging, before joints race.
 """
 NEAR_LIMIT_FRACTION = 0.05
 """A joint within this fraction of its range from a limit is flagged."""
-TEACH_MAX_RESTARTS = 8
-"""Numeric restarts per target: the drag is seeded from the current pose, and an
-unreachable target must not stall the page (40 restarts take ~0.1 s)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,14 +113,13 @@ def choose_solver(spec: RobotSpec, requested: str | None) -> tuple[IKSolver, str
     name = requested or "analytic"
     if name not in solver_names():
         make_solver(name, spec)  # raises with the list of names
-    options = IKOptions(max_restarts=TEACH_MAX_RESTARTS)
     try:
-        return make_solver(name, spec, options=options), ""
+        return make_solver(name, spec), ""
     except KinematicsError as err:
         if name != "analytic":
             raise
         note = f"no closed form for this robot ({err}); using numeric (Levenberg-Marquardt)"
-        return make_solver("numeric", spec, options=options), note
+        return make_solver("numeric", spec), note
 
 
 HOME_CANDIDATES = 64
