@@ -154,5 +154,61 @@ def test_port_in_use_is_one_error_suggesting_port() -> None:
         port = busy.getsockname()[1]
         with pytest.raises(TeachError, match=f"port {port} .* already in use; .*--port"):
             check_port_free("127.0.0.1", port)
-        with pytest.raises(TeachError, match="--port"):
-            TeachServer(start_server("ur5").session, robot_arg="ur5", port=port)
+        other = start_server("ur5")  # any free port
+        try:
+            with pytest.raises(TeachError, match="--port"):
+                TeachServer(other.session, robot_arg="ur5", port=port)
+        finally:
+            other.close()
+
+
+def test_choosing_another_solution_on_the_page_moves_the_arm_not_the_flange(
+    ur5_server: TeachServer,
+) -> None:
+    spec = ur5_server.session.spec
+    target = forward_kinematics(spec, [0.4, -1.1, 1.3, -0.6, 0.9, -0.3])
+    with _connected(ur5_server) as client:
+        client.move_target(target[:3, 3], tf.quat_wxyz(target[:3, :3]))
+        assert client.pump_until(lambda c: str(c.value("IK solution")).startswith("1 of 8"))
+        first = _joints(client, spec.joint_names)
+        client.set_gui("IK solution", "3 of 8")
+
+        def switched(c: PageClient) -> bool:
+            return not np.allclose(_joints(c, spec.joint_names), first)
+
+        assert client.pump_until(switched), "the arm did not change solution"
+        q = _joints(client, spec.joint_names)
+        np.testing.assert_allclose(forward_kinematics(spec, q), target, atol=1e-9)
+        np.testing.assert_allclose(q, ur5_server.state.solutions[2], atol=0)
+
+
+def test_use_as_goal_button_writes_a_valid_params_file(
+    ur5_server: TeachServer, tmp_path: Path
+) -> None:
+    import shutil
+
+    from pipeline.params import load_params
+
+    params = tmp_path / "params.yaml"
+    shutil.copy(Path(__file__).resolve().parents[2] / "params.yaml", params)
+    spec = ur5_server.session.spec
+    target = forward_kinematics(spec, [0.4, -1.1, 1.3, -0.6, 0.9, -0.3])
+    with _connected(ur5_server) as client:
+        client.move_target(target[:3, 3], tf.quat_wxyz(target[:3, :3]))
+        assert client.pump_until(lambda c: str(c.value("IK solution")).startswith("1 of 8"))
+        client.set_gui("params file", str(params))
+        client.set_gui("scenario", "from-page")
+        client.set_gui("goal as", "joints")
+        client.set_gui("Write goal", True)  # handled after the inputs above, in order
+        assert client.pump_until(
+            lambda c: any("wrote scenarios.from-page.goal" in str(m) for _, m in c.received)
+        ), "the page never confirmed the write"
+    joints = load_params(params).scenarios["from-page"].goal.joints
+    assert joints is not None
+    np.testing.assert_allclose(forward_kinematics(spec, joints), target, atol=1e-9)
+
+
+def test_hiding_the_error_map_before_showing_it_is_harmless(ur5_server: TeachServer) -> None:
+    ur5_server.hide_error_map()
+    assert ur5_server.show_error_map(10) == 0
+    ur5_server.hide_error_map()
