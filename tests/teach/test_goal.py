@@ -50,7 +50,7 @@ def test_pose_goal_is_written_validated_and_resolves_to_the_taught_pose(
                                atol=1e-9)  # fmt: skip
     text = params_file.read_text()
     assert "# armlab pipeline parameters" in text  # comments survive the edit
-    assert "paper-ctc" in text and set(params.scenarios) == {"paper", "taught"}
+    assert "paper-ctc" in text and {"paper", "taught"} <= set(params.scenarios)
 
 
 def test_joints_goal_replaces_an_existing_scenarios_goal_exactly(
@@ -79,10 +79,12 @@ def test_scenario_of_another_robot_is_refused_and_the_file_untouched(params_file
 
 def test_an_invalid_result_is_not_written(ur5: RobotSpec, params_file: Path) -> None:
     # a params file that is already invalid elsewhere: validation of the result fails
-    text = params_file.read_text().replace("hold_s: 1.0", "hold_s: -1.0")
+    text = params_file.read_text().replace("hold_s: 1.0", "hold_s: -1.0", 1)
     params_file.write_text(text)
     goal = goal_from_state(_taught(ur5).state, kind="joints", solver="analytic")
-    with pytest.raises(ParamsError, match=r"scenarios\.paper\.hold_s"):
+    with pytest.raises(
+        ParamsError, match=r"scenarios\.paper\.hold_s: .*greater than or equal to 0"
+    ):
         write_goal(params_file, scenario="taught", robot="ur5", spec=ur5, goal=goal)
     assert params_file.read_text() == text
     assert [p.name for p in params_file.parent.iterdir()] == ["params.yaml"]  # no temp left
