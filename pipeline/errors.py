@@ -41,3 +41,7 @@ class RecordingError(PipelineError):
 
 class ReportError(PipelineError):
     """The report cannot be written from the given recordings."""
+
+
+class TeachError(PipelineError):
+    """The teach page cannot start (e.g. its port is in use)."""

@@ -18,8 +18,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -30,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import KinematicsError
+from pipeline.fileio import atomic_write_bytes
 from pipeline.kinematics.base import IKOptions, pose_error
 from pipeline.kinematics.registry import make_solver
 from pipeline.model.dh import forward_kinematics
@@ -94,6 +93,71 @@ def _no_nan(obj: Any) -> Any:
     return obj
 
 
+@dataclass(frozen=True, eq=False)
+class RoundTrips:
+    """Per-sample outcome of FK -> IK -> FK on random configurations.
+
+    Attributes:
+        flange_position_m: (N, 3) flange position of each sample's target [m].
+        position_error_m: (N,) worst position error over the sample's solutions [m];
+            NaN where IK returned nothing.
+        orientation_error_rad: (N,) worst orientation error, same convention [rad].
+        time_ms: (N,) solve time of each sample [ms].
+        solutions_checked: solutions verified by FK over all samples.
+    """
+
+    flange_position_m: NDArray[np.float64]
+    position_error_m: NDArray[np.float64]
+    orientation_error_rad: NDArray[np.float64]
+    time_ms: NDArray[np.float64]
+    solutions_checked: int
+
+    @property
+    def good(self) -> NDArray[np.bool_]:
+        """Samples solved within the notes' position and orientation targets."""
+        out: NDArray[np.bool_] = (self.position_error_m < POSITION_TARGET_M) & (
+            self.orientation_error_rad < ORIENTATION_TARGET_RAD
+        )
+        return out
+
+
+def sample_round_trips(
+    spec: RobotSpec,
+    *,
+    solver_name: str,
+    samples: int,
+    seed: int,
+    progress: Callable[[int], None] | None = None,
+) -> RoundTrips:
+    """Random joints within limits (seeded) -> FK -> IK (default seed) -> FK, per sample.
+
+    Raises:
+        KinematicsError: an unknown solver or one that does not fit the robot.
+    """
+    solver = make_solver(solver_name, spec, options=IKOptions(seed=seed))
+    rng = np.random.default_rng(seed)
+    qs = rng.uniform(spec.lower, spec.upper, (samples, spec.dof))
+    pos_err = np.full(samples, np.nan)
+    ang_err = np.full(samples, np.nan)
+    times_ms = np.empty(samples)
+    where = np.empty((samples, 3))
+    n_solutions = 0
+    for i, q in enumerate(qs):
+        target = forward_kinematics(spec, q)
+        where[i] = target[:3, 3]
+        t0 = time.perf_counter_ns()
+        result = solver.solve(target)
+        times_ms[i] = (time.perf_counter_ns() - t0) * 1e-6
+        if result.ok:
+            errs = [pose_error(forward_kinematics(spec, s), target) for s in result.solutions]
+            n_solutions += len(errs)
+            pos_err[i] = max(e[0] for e in errs)
+            ang_err[i] = max(e[1] for e in errs)
+        if progress is not None:
+            progress(1)
+    return RoundTrips(where, pos_err, ang_err, times_ms, n_solutions)
+
+
 def run_ik_check(
     spec: RobotSpec,
     *,
@@ -122,28 +186,12 @@ def run_ik_check(
         raise KinematicsError(f"ik-check needs --samples >= 1, got {samples}")
     if not 0.0 <= min_success_rate <= 1.0:
         raise KinematicsError(f"min success rate must be in [0, 1], got {min_success_rate}")
-    solver = make_solver(solver_name, spec, options=IKOptions(seed=seed))
-    rng = np.random.default_rng(seed)
-    qs = rng.uniform(spec.lower, spec.upper, (samples, spec.dof))
-    pos_err = np.full(samples, np.nan)
-    ang_err = np.full(samples, np.nan)
-    times_ms = np.empty(samples)
-    where = np.empty((samples, 3))
-    n_solutions = 0
-    for i, q in enumerate(qs):
-        target = forward_kinematics(spec, q)
-        where[i] = target[:3, 3]
-        t0 = time.perf_counter_ns()
-        result = solver.solve(target)
-        times_ms[i] = (time.perf_counter_ns() - t0) * 1e-6
-        if result.ok:
-            errs = [pose_error(forward_kinematics(spec, s), target) for s in result.solutions]
-            n_solutions += len(errs)
-            pos_err[i] = max(e[0] for e in errs)
-            ang_err[i] = max(e[1] for e in errs)
-        if progress is not None:
-            progress(1)
-    good = (pos_err < POSITION_TARGET_M) & (ang_err < ORIENTATION_TARGET_RAD)
+    trips = sample_round_trips(
+        spec, solver_name=solver_name, samples=samples, seed=seed, progress=progress
+    )
+    pos_err, ang_err, times_ms = trips.position_error_m, trips.orientation_error_rad, trips.time_ms
+    where, n_solutions = trips.flange_position_m, trips.solutions_checked
+    good = trips.good
     solved = np.isfinite(pos_err)
     successes = int(good.sum())
     pos = _stats(pos_err[solved])
@@ -186,7 +234,7 @@ def run_ik_check(
         error_map_png=str(map_path),
     )
     _write_map(map_path, report, where, pos_err, ang_err, good)
-    _atomic_write(summary_path, (json.dumps(report.to_json(), indent=2) + "\n").encode())
+    atomic_write_bytes(summary_path, (json.dumps(report.to_json(), indent=2) + "\n").encode())
     return report
 
 
@@ -194,21 +242,6 @@ def _stats(values: NDArray[np.float64]) -> Stats:
     if values.size == 0:
         return Stats(max=math.nan, median=math.nan)
     return Stats(max=float(values.max()), median=float(np.median(values)))
-
-
-def _atomic_write(path: Path, data: bytes) -> None:
-    # a killed run leaves a temp file, never a half-written file under the final name
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; outputs are ordinary files
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def _write_map(
@@ -264,7 +297,7 @@ def _write_map(
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110)
     plt.close(fig)
-    _atomic_write(path, buf.getvalue())
+    atomic_write_bytes(path, buf.getvalue())
 
 
 __all__ = [
@@ -273,7 +306,9 @@ __all__ = [
     "POSITION_TARGET_M",
     "TIME_TARGET_MS",
     "IKCheckReport",
+    "RoundTrips",
     "Stats",
     "TimeStats",
     "run_ik_check",
+    "sample_round_trips",
 ]
