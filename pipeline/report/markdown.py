@@ -192,7 +192,14 @@ def _intro(data: ReportData) -> list[str]:
         "",
     ]
     rows = []
+    worst_sat = {
+        r["episode"]: r["saturation_fraction"]
+        for r in data.metrics.group_by("episode")
+        .agg(pl.col("saturation_fraction").max())
+        .iter_rows(named=True)
+    }
     for row in data.episodes.iter_rows(named=True):
+        sat = worst_sat.get(row["episode"])
         rows.append(
             [
                 row["episode"],
@@ -207,6 +214,7 @@ def _intro(data: ReportData) -> list[str]:
                 row["error_source"] or NA,
                 _sci(row["start_abs_error_rad"], 1),
                 _num(row["start_abs_effort_nm"], ".1f"),
+                NA if sat is None else f"{sat * 100:.1f} %",
             ]
         )
     lines.append(
@@ -224,6 +232,7 @@ def _intro(data: ReportData) -> list[str]:
                 "error from",
                 "|e| at start [rad]",
                 "|effort| at start [N m]",
+                "saturated (worst joint)",
             ],
             rows,
         )
@@ -234,7 +243,9 @@ def _intro(data: ReportData) -> list[str]:
         "under its own controller (the pre-roll, recorded in the bag before the planned "
         "trajectory's stamp), so metrics measure tracking, not a cold start. *Error from*: "
         "the plant's true state (`/ground_truth/joint_states`, simulation) or the measured "
-        "one (a real robot's bag). *At start*: the worst joint at the motion start.",
+        "one (a real robot's bag). *At start*: the worst joint at the motion start. "
+        f"*Saturated*: share of samples at the effort limit, worst joint (flagged above "
+        f"{SATURATION_WARN_FRACTION * 100:.0f} %); *status* ok = stable (not diverged).",
     ]
     lines += _physical_checks(data)
     failed = [r for r in recs if r.status != "ok"]
