@@ -521,6 +521,38 @@ class ExecutionSafety:
 
 
 @dataclass(frozen=True)
+class CampaignInfo:
+    """Where an episode sits in a campaign (a sweep), for the report's summaries.
+
+    Attributes:
+        name: the campaign's name in params.
+        condition: stable key of the swept values other than the controller and the
+            seed (e.g. ``"payload_kg=0.5,frictionloss=1"``; ``""`` when only those vary):
+            episodes of one condition differ only by controller and seed.
+        swept: every swept axis and this episode's value (controller and seed included),
+            JSON scalars, keyed by the params path (``plant.payload_kg``).
+    """
+
+    name: str
+    condition: str
+    swept: Mapping[str, Any]
+
+    @classmethod
+    def from_dict(cls, data: Any, path: str = "campaign") -> CampaignInfo:
+        d = _mapping(data, path)
+        _check_keys(d, cls, path)
+        swept = _mapping(d["swept"], f"{path}.swept")
+        for key, value in swept.items():
+            if not (value is None or isinstance(value, str | int | float | bool)):
+                raise _fail(f"{path}.swept.{key}", "a JSON scalar", value)
+        return cls(
+            name=_str(d["name"], f"{path}.name"),
+            condition=_str(d["condition"], f"{path}.condition"),
+            swept=swept,
+        )
+
+
+@dataclass(frozen=True)
 class EpisodeSettings:
     """Everything a recording says about how it was made (its ``settings`` JSON).
 
@@ -537,6 +569,7 @@ class EpisodeSettings:
         status: "ok" or "diverged"; reason: why it diverged ("" if ok).
         mujoco_warnings: MuJoCo warning counters (non-zero only).
         package_version, git_commit: provenance.
+        campaign: the campaign and condition the episode belongs to (None: hand-listed).
         version: settings layout version.
     """
 
@@ -554,6 +587,7 @@ class EpisodeSettings:
     package_version: str
     git_commit: str
     mujoco_warnings: Mapping[str, int] = field(default_factory=dict)
+    campaign: CampaignInfo | None = None
     version: int = SETTINGS_VERSION
 
     def to_dict(self) -> dict[str, Any]:
