@@ -90,6 +90,20 @@ def _joint_list(text: str, option: str) -> list[float]:
         ) from err
 
 
+def _check_joints(spec: Any, joints: list[float]) -> None:
+    """Refuse joint values that are not finite or outside the robot's limits (one line)."""
+    from pipeline.errors import KinematicsError
+
+    if len(joints) != spec.dof:
+        return  # forward_kinematics names the count
+    for i, (q, j) in enumerate(zip(joints, spec.joints, strict=True)):
+        if not (j.limits.lower <= q <= j.limits.upper):  # NaN fails this too
+            raise KinematicsError(
+                f"joint {i + 1} ({j.name}): {q!r} rad is outside its limits "
+                f"[{j.limits.lower:.6g}, {j.limits.upper:.6g}] rad"
+            )
+
+
 @app.command("fk", context_settings={"ignore_unknown_options": True})
 def fk_cmd(
     robot: Annotated[str, typer.Argument(help=_ROBOT_HELP, show_default=False)],
@@ -113,6 +127,7 @@ def fk_cmd(
     from pipeline.robots import load_spec
 
     spec = load_spec(robot)
+    _check_joints(spec, joints)
     pose = pose_summary(forward_kinematics(spec, joints))
     if as_json:
         print_json({"robot": spec.name, "joints": [float(q) for q in joints], **pose})
@@ -246,7 +261,11 @@ def ik_check_cmd(
     ] = 1000,
     seed: Annotated[
         int,
-        typer.Option("--seed", help="Seed of the random configurations and the IK restarts."),
+        typer.Option(
+            "--seed",
+            min=0,
+            help="Seed of the random configurations and the IK restarts (>= 0).",
+        ),
     ] = 0,
     out: Annotated[
         str,
@@ -274,10 +293,12 @@ def ik_check_cmd(
 
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
+    from pipeline.fsutil import ensure_dir
     from pipeline.kinematics.check import run_ik_check
     from pipeline.robots import load_spec
 
     spec = load_spec(robot)
+    ensure_dir(Path(out))  # before the work: a bad --out fails in a second, not after it
     with Progress(
         TextColumn("ik-check {task.description}"),
         BarColumn(),
@@ -391,6 +412,9 @@ def teach_cmd(
     console.print("teach: stopped")
 
 
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, what shells report for Ctrl-C
+
+
 def main() -> None:
     """Console-script entry point."""
     debug = "--debug" in sys.argv[1:]
@@ -398,9 +422,17 @@ def main() -> None:
         sys.argv = [sys.argv[0], "--debug", *(a for a in sys.argv[1:] if a != "--debug")]
     try:
         app()
+    except KeyboardInterrupt:
+        if debug:
+            raise
+        sys.stderr.write("interrupted\n")
+        sys.exit(EXIT_INTERRUPTED)
     except PipelineError as err:
         if debug:
             raise
+        if getattr(err, "exit_code", 1) == EXIT_INTERRUPTED:  # record's Interrupted
+            sys.stderr.write(f"{err}\n")
+            sys.exit(EXIT_INTERRUPTED)
         sys.stderr.write(f"error: {err}\n")
         sys.exit(1)
 
@@ -434,34 +466,17 @@ def record_cmd(
     """
     from pathlib import Path
 
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
+    from pipeline.fsutil import OutputLock
     from pipeline.params import load_params
-    from pipeline.stages.record import prepare, record
+    from pipeline.stages.record import check_outputs_free, prepare
 
     loaded = load_params(params)
-    selected = prepare(loaded, out_dir=Path(out), only=only, force=force)
-    with Progress(
-        TextColumn("{task.description:<32}"),
-        BarColumn(),
-        TextColumn("{task.percentage:>5.1f}%"),
-        TimeElapsedColumn(),
-        console=Console(stderr=True),
-        transient=False,
-        disable=not sys.stderr.isatty(),  # no bar spam in logs (dvc repro, CI)
-    ) as bars:
-        tasks = {e.name: bars.add_task(e.name, total=1.0) for e in selected}
-        plan_task = bars.add_task("planning", total=len({e.scenario_name for e in selected}))
-
-        def on_event(kind: str, name: str, value: float) -> None:
-            if kind == "plan":
-                bars.advance(plan_task, 1)
-            elif name in tasks:
-                bars.update(tasks[name], completed=value)
-
-        outcomes = record(
-            loaded, selected, out_dir=Path(out), jobs=jobs, force=force, on_event=on_event
-        )
+    # every input error first: a refused run creates nothing
+    selected = prepare(loaded, out_dir=Path(out), only=only, force=force, jobs=jobs)
+    # One run per --out at a time: two runs would mix episodes of two params files.
+    with OutputLock(Path(out), command="`pipeline record`"):
+        check_outputs_free(selected, Path(out), force=force)  # again, now that we own it
+        outcomes = _record_with_progress(loaded, selected, out=Path(out), jobs=jobs, force=force)
     table = Table("episode", "status", "max |e| (rad)", "final |e| (rad)", "sim (s)", "wall (s)")
     for o in outcomes:
         table.add_row(
@@ -482,6 +497,34 @@ def record_cmd(
     if failed:
         raise typer.Exit(1)
     console.print(f"wrote {len(outcomes)} recording(s) to {out}/")
+
+
+def _record_with_progress(
+    loaded: Any, selected: Any, *, out: Any, jobs: int, force: bool
+) -> list[Any]:
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from pipeline.stages.record import record
+
+    with Progress(
+        TextColumn("{task.description:<32}"),
+        BarColumn(),
+        TextColumn("{task.percentage:>5.1f}%"),
+        TimeElapsedColumn(),
+        console=Console(stderr=True),
+        transient=False,
+        disable=not sys.stderr.isatty(),  # no bar spam in logs (dvc repro, CI)
+    ) as bars:
+        tasks = {e.name: bars.add_task(e.name, total=1.0) for e in selected}
+        plan_task = bars.add_task("planning", total=len({e.scenario_name for e in selected}))
+
+        def on_event(kind: str, name: str, value: float) -> None:
+            if kind == "plan":
+                bars.advance(plan_task, 1)
+            elif name in tasks:
+                bars.update(tasks[name], completed=value)
+
+        return record(loaded, selected, out_dir=out, jobs=jobs, force=force, on_event=on_event)
 
 
 @app.command("report")

@@ -7,6 +7,7 @@ paths in errors match the YAML (``params.yaml: scenarios.paper.hold_s: ...``).
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -17,16 +18,27 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from pipeline.constants import MAX_SEED
 from pipeline.errors import ParamsError
-from pipeline.robots.spec import format_validation_error
-from pipeline.yamlio import parse_yaml
+from pipeline.robots.spec import Name, format_validation_error
+from pipeline.yamlio import parse_yaml, refuse_bool_numbers
 
-NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0, le=1e6, allow_inf_nan=False)]
 PerJoint = NonNegative | list[NonNegative]  # one value for every joint, or one per joint
 MAX_HOLD_S = 3600.0
+MIN_PHYSICS_DT_S = 1e-5  # 100 kHz: finer than any arm simulation needs
+MAX_CONTROL_PERIOD_S = 0.1  # 10 Hz: slower is not joint-level control
+MAX_GAIN = 1e9  # |gain| above this is a typo: no actuator realises it
+MAX_EPISODE_CHARS = 100  # keys become file names (with a .partial-<pid> prefix, < 255 bytes)
+_RESERVED_GEOMS = ("ground", "pedestal")  # the plant's own geoms (pipeline/model/mjcf.py)
 
 
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_bool_numbers(cls, data: Any) -> Any:
+        refuse_bool_numbers(cls.model_fields, data)  # `hold_s: true` is not 1.0 s
+        return data
 
 
 class PoseGoal(_Strict):
@@ -56,7 +68,7 @@ class Goal(_Strict):
 
 
 class BoxParams(_Strict):
-    name: str = Field(min_length=1)
+    name: Name
     center: tuple[float, float, float]
     half_size: tuple[float, float, float]
 
@@ -68,7 +80,7 @@ class BoxParams(_Strict):
 
 
 class PlannerParams(_Strict):
-    time_limit_s: float = Field(default=5.0, gt=0)
+    time_limit_s: float = Field(default=5.0, gt=0, le=600)
     simplify: bool = True
     seed: int = Field(default=0, ge=0, le=MAX_SEED)
 
@@ -98,9 +110,9 @@ class PlantParams(_Strict):
     frictionloss: PerJoint = 0.0
     armature: PerJoint = 0.0  # added to the robot's own armature (the plant's only)
     uncertainty: UncertaintyParams = UncertaintyParams()
-    payload_kg: float = Field(default=0.0, ge=0)
-    position_noise_std_rad: float = Field(default=0.0, ge=0)
-    velocity_noise_std_rad_s: float = Field(default=0.0, ge=0)
+    payload_kg: float = Field(default=0.0, ge=0, le=1000)
+    position_noise_std_rad: float = Field(default=0.0, ge=0, le=1.0)
+    velocity_noise_std_rad_s: float = Field(default=0.0, ge=0, le=100.0)
 
 
 class ScenarioParams(_Strict):
@@ -117,11 +129,36 @@ class ScenarioParams(_Strict):
     # compare with the paper's numbers in the report (only the paper's experiment)
     reproduces_paper: bool = False
 
+    @model_validator(mode="after")
+    def _unique_obstacles(self) -> ScenarioParams:
+        names = [b.name for b in self.obstacles]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"obstacles: duplicate obstacle name(s) {', '.join(dup)}")
+        reserved = sorted(set(names) & set(_RESERVED_GEOMS))
+        if reserved:
+            raise ValueError(
+                f"obstacles: name '{reserved[0]}' is reserved for the plant's own geometry"
+            )
+        return self
+
 
 class ControllerParams(_Strict):
     type: str = Field(min_length=1)
     # numbers, per-joint lists or flags (antiwindup): the controller validates each key
     gains: dict[str, Any] = {}
+
+    @model_validator(mode="after")
+    def _finite_gains(self) -> ControllerParams:
+        for key, value in self.gains.items():
+            for v in value if isinstance(value, list) else [value]:
+                if isinstance(v, bool) or not isinstance(v, int | float):
+                    continue  # flags and the rest: the controller validates them
+                if not (math.isfinite(v) and abs(v) <= MAX_GAIN):
+                    raise ValueError(
+                        f"gains.{key}: {v!r} is not a finite gain of magnitude <= {MAX_GAIN:g}"
+                    )
+        return self
 
 
 class EpisodeParams(_Strict):
@@ -131,10 +168,29 @@ class EpisodeParams(_Strict):
 
 
 class SimParams(_Strict):
-    physics_dt_s: float = Field(default=0.001, gt=0, le=0.01)
-    control_period_steps: int = Field(default=1, ge=1)
-    joint_state_decimation: int = Field(default=1, ge=1)
-    tf_rate_hz: float = Field(default=50.0, gt=0)
+    # Ranges a manipulator experiment can use; beyond them a value is a typo that would
+    # exhaust the machine (1e-9 s steps, 1e9 Hz /tf), not a setting. What an in-range
+    # episode costs is estimated before it runs (pipeline.stages.record.estimate_episode).
+    physics_dt_s: float = Field(default=0.001, ge=MIN_PHYSICS_DT_S, le=0.01)
+    control_period_steps: int = Field(default=1, ge=1, le=1000)
+    joint_state_decimation: int = Field(default=1, ge=1, le=1000)
+    tf_rate_hz: float = Field(default=50.0, gt=0, le=1000)
+
+    @model_validator(mode="after")
+    def _rates(self) -> SimParams:
+        control_period_s = self.physics_dt_s * self.control_period_steps
+        if control_period_s > MAX_CONTROL_PERIOD_S:
+            raise ValueError(
+                f"control period physics_dt_s x control_period_steps = {control_period_s:g} s "
+                f"exceeds {MAX_CONTROL_PERIOD_S:g} s (a control rate below "
+                f"{1 / MAX_CONTROL_PERIOD_S:g} Hz): lower control_period_steps"
+            )
+        if self.tf_rate_hz > 1.0 / control_period_s * (1 + 1e-9):
+            raise ValueError(
+                f"tf_rate_hz ({self.tf_rate_hz:g}) exceeds the control rate "
+                f"({1 / control_period_s:g} Hz) it is sampled from"
+            )
+        return self
 
 
 class _Params(_Strict):
@@ -146,10 +202,11 @@ class _Params(_Strict):
     @model_validator(mode="after")
     def _references(self) -> _Params:
         for name, ep in self.episodes.items():
-            if not _NAME.fullmatch(name):
+            if not _NAME.fullmatch(name) or len(name) > MAX_EPISODE_CHARS:
+                shown = name if len(name) <= 40 else name[:37] + "..."
                 raise ValueError(
-                    f"episodes.{name}: episode names are directory names: use letters, "
-                    "digits, '-', '_' and '.' only"
+                    f"episodes.{shown}: episode names are directory names: use letters, "
+                    f"digits, '-', '_' and '.' only, at most {MAX_EPISODE_CHARS} characters"
                 )
             if ep.scenario not in self.scenarios:
                 raise ValueError(

@@ -70,7 +70,10 @@ def test_default_params_hold_the_papers_scenario_under_pid_and_ctc():
             lambda d: d["scenarios"]["paper"].update(hold="1s"),
             r"scenarios\.paper\.hold: Extra inputs are not permitted",
         ),
-        (lambda d: d["sim"].update(physics_dt_s=0.0), r"sim\.physics_dt_s: .*greater than 0"),
+        (
+            lambda d: d["sim"].update(physics_dt_s=0.0),
+            r"sim\.physics_dt_s: .*greater than or equal to 1e-05|0.00001",
+        ),
         (
             lambda d: d["episodes"].update(
                 {"bad/name": {"scenario": "paper", "controller": "pid"}}

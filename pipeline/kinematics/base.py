@@ -70,7 +70,7 @@ def target_pose(
             )
     elif quaternion_wxyz is not None:
         qv = _vector(quaternion_wxyz, 4, "quaternion (w x y z)")
-        if float(np.linalg.norm(qv)) < 1e-9:
+        if not np.any(qv):
             raise KinematicsError("quaternion (w x y z) must not be zero")
         r = tf.quat_to_matrix(qv)
     else:
@@ -169,7 +169,9 @@ def seed_or_middle(spec: RobotSpec, seed_q: ArrayLike | None) -> Array:
     arr = np.asarray(seed_q, dtype=float)
     if arr.ndim != 1:
         arr = arr.reshape(-1)
-    if arr.shape[0] != len(spec.joints) or not math.isfinite(float(arr.sum())):
+    if arr.shape[0] == len(spec.joints) and not np.all(np.isfinite(arr)):
+        raise KinematicsError(f"the IK seed must be finite joint values [rad], got {arr.tolist()}")
+    if arr.shape[0] != len(spec.joints):
         raise KinematicsError(
             f"robot '{spec.name}' has {spec.dof} joints; the IK seed has {arr.shape[0]} "
             f"values {arr.tolist()}"

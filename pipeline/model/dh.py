@@ -51,6 +51,8 @@ def _check(spec: RobotSpec, q: ArrayLike) -> NDArray[np.float64]:
         raise KinematicsError(
             f"robot '{spec.name}' has {spec.dof} joints, got {arr.shape[0]} joint values"
         )
+    if not np.all(np.isfinite(arr)):
+        raise KinematicsError(f"joint values must be finite [rad], got {arr.tolist()}")
     return arr
 
 

@@ -116,7 +116,7 @@ def build_mjcf(
         anchor = inv_post[:3, 3]
         lim = joint.limits
         out.append(
-            f'{indent}<body name="{link_name(joint.name)}" '
+            f"{indent}<body name={quoteattr(link_name(joint.name))} "
             f'pos="{_v(rel[:3, 3])}" quat="{_v(quat)}">'
         )
         out.append(
@@ -136,13 +136,15 @@ def build_mjcf(
         rgba = _COLOURS[i % len(_COLOURS)]
         for k, seg in enumerate(link.segments_dh):
             out.append(
-                f'{indent}  <geom name="{link_name(joint.name)}_c{k}" type="capsule" '
+                f"{indent}  <geom name={quoteattr(f'{link_name(joint.name)}_c{k}')} "
+                'type="capsule" '
                 f'fromto="{_v(seg.start + seg.end)}" size="{seg.radius!r}" rgba="{rgba}" '
                 f'contype="{ROBOT_BIT}" conaffinity="{affinity}"/>'
             )
         if not link.segments_dh:
             out.append(
-                f'{indent}  <geom name="{link_name(joint.name)}_c0" type="sphere" '
+                f"{indent}  <geom name={quoteattr(link_name(joint.name) + '_c0')} "
+                'type="sphere" '
                 f'size="{joint.collision_radius!r}" rgba="{rgba}" contype="{ROBOT_BIT}" '
                 f'conaffinity="{affinity}"/>'
             )
@@ -163,7 +165,7 @@ def build_mjcf(
     pairs = default_collision_pairs(spec) if excluded_pairs is None else excluded_pairs
     if pairs:
         out.append("  <contact>")
-        out.extend(f'    <exclude body1="{a}" body2="{b}"/>' for a, b in pairs)
+        out.extend(f"    <exclude body1={quoteattr(a)} body2={quoteattr(b)}/>" for a, b in pairs)
         out.append("  </contact>")
     out.append("  <actuator>")
     for joint in spec.joints:

@@ -56,7 +56,9 @@ def quat_wxyz(r: Mat) -> Mat:
 
 
 def quat_to_matrix(q_wxyz: Mat) -> Mat:
-    w, x, y, z = np.asarray(q_wxyz, dtype=float) / np.linalg.norm(q_wxyz)
+    q = np.asarray(q_wxyz, dtype=float)
+    q = q / np.abs(q).max()  # first: the norm of (1e308, 1e308, 0, 0) overflows
+    w, x, y, z = q / np.linalg.norm(q)
     return np.array(
         [
             [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],

@@ -55,7 +55,7 @@ def build_urdf(spec: RobotSpec) -> str:
     prev_post = np.eye(4)
     for joint, link in zip(spec.joints, links, strict=True):
         name = link_name(joint.name)
-        out.append(f'  <link name="{name}">')
+        out.append(f"  <link name={quoteattr(name)}>")
         if joint.inertial is not None:
             inn = joint.inertial
             # inertial frame: DH frame i (post) shifted to the centre of mass
@@ -77,7 +77,8 @@ def build_urdf(spec: RobotSpec) -> str:
         lim = joint.limits
         out.append(
             f'  <joint name={quoteattr(joint.name)} type="revolute">'
-            f'<parent link="{parent}"/><child link="{name}"/>{_origin(prev_post @ link.pre)}'
+            f"<parent link={quoteattr(parent)}/><child link={quoteattr(name)}/>"
+            f"{_origin(prev_post @ link.pre)}"
             f'<axis xyz="0 0 1"/><limit lower="{lim.lower!r}" upper="{lim.upper!r}" '
             f'effort="{lim.effort!r}" velocity="{lim.velocity!r}"/></joint>'
         )
@@ -85,7 +86,7 @@ def build_urdf(spec: RobotSpec) -> str:
         prev_post = link.post
     out.append(f'  <link name="{FLANGE}"/>')
     out.append(
-        f'  <joint name="{FLANGE}_fixed_joint" type="fixed"><parent link="{parent}"/>'
+        f'  <joint name="{FLANGE}_fixed_joint" type="fixed"><parent link={quoteattr(parent)}/>'
         f'<child link="{FLANGE}"/>{_origin(prev_post)}</joint>'
     )
     out.append("</robot>")

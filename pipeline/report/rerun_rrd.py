@@ -9,11 +9,13 @@ stream goes to a file sink only.
 from __future__ import annotations
 
 import uuid
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
+import rerun_bindings as rr_bindings
 from numpy.typing import NDArray
 
 from pipeline.analysis.episodes import robot_spec
@@ -146,12 +148,64 @@ def _send_arm(stream: rr.RecordingStream, rec: Recording, color: tuple[int, int,
     return True
 
 
+def _save(stream: rr.RecordingStream, path: Path, layout: rrb.Blueprint) -> Callable[[], None]:
+    """``stream.save(path, default_blueprint=layout)`` that leaves no thread behind.
+
+    Returns the function that closes the blueprint's own stream. rerun-sdk 0.41 logs a
+    default blueprint into a hidden in-memory stream whose sink and stream hold each other:
+    it is never freed, and its two threads (RecordingStream, ChunkBatcher) outlive the call,
+    one pair per report. Here we build that stream ourselves, as ``save`` does, and
+    disconnect it when done. Without those internals (another rerun version) we fall back to
+    the public call; tests/report/test_report_threads.py notices the leak if it returns.
+    """
+    try:
+        native = rr_bindings.new_blueprint(
+            application_id=APPLICATION_ID,
+            make_default=False,
+            make_thread_default=False,
+            default_enabled=True,
+        )
+        bp_stream = rr.RecordingStream._from_native(native)
+        bp_stream.set_time("blueprint", sequence=0)
+        layout.to_blueprint()._log_to_stream(bp_stream)
+        storage = bp_stream.memory_recording().storage
+        rr_bindings.save(
+            path=str(path), default_blueprint=storage, recording=stream.to_native(),
+            write_footer=True,
+        )  # fmt: skip
+    except (AttributeError, TypeError):  # pragma: no cover - another rerun-sdk
+        stream.save(path, default_blueprint=layout)
+        return lambda: None
+
+    def close() -> None:
+        bp_stream.flush()
+        bp_stream.disconnect()
+
+    return close
+
+
 def write_rrd(data: ReportData, path: Path) -> list[str]:
-    """Write the .rrd to ``path``; return the episodes whose arm could not be drawn."""
+    """Write the .rrd to ``path``; return the episodes whose arm could not be drawn.
+
+    Every stream it opens is flushed, disconnected and freed before it returns, so a
+    process calling it many times (a service, a notebook) does not accumulate threads.
+    """
     stream = rr.RecordingStream(
         APPLICATION_ID, recording_id=_recording_id(data), send_properties=False
     )
-    stream.save(path, default_blueprint=blueprint(data))
+    close_blueprint = _save(stream, path, blueprint(data))
+    try:
+        return _log_all(stream, data)
+    finally:
+        stream.flush()
+        stream.disconnect()
+        close_blueprint()
+        del stream
+        # a dropped stream's threads end only in this sweep (rerun-sdk 0.41)
+        rr_bindings.flush_and_cleanup_orphaned_recordings()
+
+
+def _log_all(stream: rr.RecordingStream, data: ReportData) -> list[str]:
     no_arm: list[str] = []
     for scenario in data.scenarios():
         recs = data.in_scenario(scenario)
@@ -187,6 +241,4 @@ def write_rrd(data: ReportData, path: Path) -> list[str]:
                     )
             if not _send_arm(stream, rec, color):
                 no_arm.append(rec.episode)
-    stream.flush()
-    stream.disconnect()
     return no_arm

@@ -10,18 +10,52 @@ from __future__ import annotations
 import difflib
 import functools
 import math
+import re
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from pipeline.errors import SpecError
-from pipeline.yamlio import parse_yaml
+from pipeline.yamlio import parse_yaml, refuse_bool_numbers
 
 Convention = Literal["standard", "modified"]
+
+# Names that end up in URDF, MJCF, /tf frames and file names: ROS-style identifiers, plus
+# '-' and '.' (both are fine in XML attributes, tf frame ids and file names). Anything else
+# ('"', '<', '&', NUL, spaces, '/') is refused here, at the edge; the XML writers escape
+# attribute values anyway.
+NAME_PATTERN = re.compile(r"[A-Za-z_][A-Za-z0-9_.-]*")
+MAX_NAME_CHARS = 100
+NAME_RULE = (
+    f"a name starts with a letter or '_' and holds only letters, digits, '_', '-' and '.' "
+    f"(at most {MAX_NAME_CHARS} characters)"
+)
+
+
+def check_name(value: str) -> str:
+    """Return ``value`` if it is a valid robot, joint or obstacle name.
+
+    Raises:
+        ValueError: naming the value and :data:`NAME_RULE`.
+    """
+    if len(value) > MAX_NAME_CHARS or not NAME_PATTERN.fullmatch(value):
+        raise ValueError(f"invalid name: {NAME_RULE}")
+    return value
+
+
+Name = Annotated[str, AfterValidator(check_name)]
 
 
 @dataclass(frozen=True)
@@ -141,8 +175,29 @@ class RobotSpec:
 # --- the YAML edge -----------------------------------------------------------------
 
 
+# Physical ranges of a manipulator's description. Beyond them a value is a typo (or an
+# attack) that breaks the engines downstream: MuJoCo refuses masses and inertias below
+# 1e-15, OMPL an unbounded joint range, and 1e308 overflows every transform.
+MAX_LENGTH_M = 10.0  # DH a, d, centres of mass
+MAX_ANGLE_RAD = 2 * math.pi  # DH alpha, theta_offset
+MAX_JOINT_RAD = 4 * math.pi  # |lower|, |upper|: two turns each way
+MAX_VELOCITY_RAD_S = 100.0
+MAX_ACCELERATION_RAD_S2 = 1e4
+MAX_EFFORT_NM = 1e5
+MIN_MASS_KG, MAX_MASS_KG = 1e-6, 1e4
+MIN_INERTIA_KG_M2, MAX_INERTIA_KG_M2 = 1e-12, 1e4
+MIN_RADIUS_M, MAX_RADIUS_M = 1e-3, 1.0
+Length = Annotated[float, Field(ge=-MAX_LENGTH_M, le=MAX_LENGTH_M)]
+
+
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=False, allow_inf_nan=False)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_bool_numbers(cls, data: Any) -> Any:
+        refuse_bool_numbers(cls.model_fields, data)  # `mass: true` is not 1.0 kg
+        return data
 
 
 class _Limits(_Strict):
@@ -150,7 +205,7 @@ class _Limits(_Strict):
     upper: float
     velocity: float = Field(gt=0, allow_inf_nan=False)
     acceleration: float = Field(gt=0, allow_inf_nan=False)
-    effort: float = Field(gt=0, allow_inf_nan=False)
+    effort: float = Field(gt=0, le=MAX_EFFORT_NM, allow_inf_nan=False)
 
     @model_validator(mode="after")
     def _ordered(self) -> _Limits:
@@ -160,8 +215,8 @@ class _Limits(_Strict):
 
 
 class _Inertial(_Strict):
-    mass: float = Field(gt=0, allow_inf_nan=False)
-    com: tuple[float, float, float]
+    mass: float = Field(ge=MIN_MASS_KG, le=MAX_MASS_KG, allow_inf_nan=False)
+    com: tuple[Length, Length, Length]
     inertia: tuple[float, float, float, float, float, float] = Field(
         description="[ixx, iyy, izz, ixy, ixz, iyz] about the centre of mass [kg m^2]"
     )
@@ -173,10 +228,13 @@ class _Inertial(_Strict):
     ) -> tuple[float, float, float, float, float, float]:
         ixx, iyy, izz, ixy, ixz, iyz = v
         tensor = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+        if float(np.abs(tensor).max()) > MAX_INERTIA_KG_M2:
+            raise ValueError(f"inertia entries must be at most {MAX_INERTIA_KG_M2:g} kg m^2")
         eig = np.linalg.eigvalsh(tensor)
-        if eig[0] <= 0:
+        if eig[0] < MIN_INERTIA_KG_M2:
             raise ValueError(
-                f"inertia tensor must be positive definite (eigenvalues {eig.round(9).tolist()})"
+                "inertia tensor must be positive definite with principal moments >= "
+                f"{MIN_INERTIA_KG_M2:g} kg m^2 (eigenvalues {[float(f'{e:.3g}') for e in eig]})"
             )
         a, b, c = eig
         if a + b < c * (1 - 1e-9):
@@ -188,11 +246,11 @@ class _Inertial(_Strict):
 
 
 class _Collision(_Strict):
-    radius: float = Field(gt=0, allow_inf_nan=False)
+    radius: float = Field(ge=MIN_RADIUS_M, le=MAX_RADIUS_M, allow_inf_nan=False)
 
 
 class _Joint(_Strict):
-    name: str = Field(min_length=1)
+    name: Name
     dh: tuple[float, float, float, float]
     limits: _Limits
     inertial: _Inertial | None = None
@@ -201,18 +259,55 @@ class _Joint(_Strict):
 
 
 class _Robot(_Strict):
-    name: str = Field(min_length=1)
+    name: Name
     convention: Convention
     angle_unit: Literal["rad", "deg"] = "rad"
     joints: list[_Joint] = Field(min_length=1)
 
     @model_validator(mode="after")
+    def _in_range(self) -> _Robot:
+        # angles after the unit: the same bound for a file in degrees and one in radians
+        per_rad = 180.0 / math.pi if self.angle_unit == "deg" else 1.0
+        u = self.angle_unit
+        angle, length = MAX_ANGLE_RAD * per_rad, MAX_LENGTH_M
+        for i, j in enumerate(self.joints):
+            lim = j.limits
+            checks = (  # field, value, bound, unit shown
+                ("dh[0] (alpha)", j.dh[0], angle, u),
+                ("dh[1] (a)", j.dh[1], length, "m"),
+                ("dh[2] (d)", j.dh[2], length, "m"),
+                ("dh[3] (theta_offset)", j.dh[3], angle, u),
+                ("limits.lower", lim.lower, MAX_JOINT_RAD * per_rad, u),
+                ("limits.upper", lim.upper, MAX_JOINT_RAD * per_rad, u),
+                ("limits.velocity", lim.velocity, MAX_VELOCITY_RAD_S * per_rad, f"{u}/s"),
+                ("limits.acceleration", lim.acceleration, MAX_ACCELERATION_RAD_S2 * per_rad,
+                 f"{u}/s^2"),
+            )  # fmt: skip
+            for field_name, value, bound, unit in checks:
+                if abs(value) > bound * (1 + 1e-12):
+                    raise ValueError(
+                        f"joints[{i}].{field_name}: {value!r} is out of range, expected "
+                        f"|value| <= {bound:.6g} {unit}"
+                    )
+        return self
+
+    @model_validator(mode="after")
     def _unique_names(self) -> _Robot:
         seen: set[str] = set()
+        links: dict[str, str] = {}
         for i, j in enumerate(self.joints):
             if j.name in seen:
                 raise ValueError(f"joints[{i}].name: duplicate joint name '{j.name}'")
             seen.add(j.name)
+            # the URDF / tf link a joint moves is named after it (elbow_joint -> elbow_link)
+            link = f"{j.name.removesuffix('_joint')}_link"
+            if link in links or link in ("base_link", "tool0"):
+                clash = f"joint '{links[link]}'" if link in links else "the base frame"
+                raise ValueError(
+                    f"joints[{i}].name: '{j.name}' names its link '{link}', already used by "
+                    f"{clash}; rename the joint"
+                )
+            links[link] = j.name
         return self
 
 

@@ -9,21 +9,30 @@ puts a wall-clock reading into a recording.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import json
 import multiprocessing as mp
+import os
+import re
+import signal
 import subprocess
+import sys
+import threading
 import time
-from collections.abc import Callable, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
+from multiprocessing import connection as mp_connection
+from multiprocessing.connection import Connection
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from pipeline import __version__
 from pipeline.constants import FINAL_WINDOW_S
 from pipeline.errors import ParamsError, PipelineError
+from pipeline.fsutil import ensure_dir, remove_stale
 from pipeline.params import Episode, Params, ScenarioParams
 from pipeline.planning import PlannedPath, TimedTrajectory
 from pipeline.robots.spec import RobotSpec, load_spec
@@ -69,9 +78,11 @@ class EpisodeOutcome:
 # recordings' bytes, and committed results, reproducible from a clone.
 RECORD_CODE = (
     "__init__.py",
+    "__main__.py",
     "cli.py",
     "constants.py",
     "errors.py",
+    "fsutil.py",
     "params.py",
     "settings.py",
     "trajectory.py",
@@ -254,8 +265,13 @@ def run_one(
     force: bool,
     commit: str,
     progress: Callable[[float], None] | None = None,
+    before_write: Callable[[], None] | None = None,
 ) -> EpisodeOutcome:
-    """Run one episode and write its bag. Errors become a failed outcome, not a raise."""
+    """Run one episode and write its bag. Errors become a failed outcome, not a raise.
+
+    ``before_write`` runs after the simulation, right before the bag is written and
+    published (a pool worker exits there if its parent is gone).
+    """
     wall0 = time.perf_counter()
     bag_dir = out_dir / episode.name
     try:
@@ -269,6 +285,7 @@ def run_one(
             force=force,
             commit=commit,
             progress=progress,
+            before_write=before_write,
         )
     except (PipelineError, OSError, MemoryError) as err:
         if isinstance(err, OSError):
@@ -293,6 +310,7 @@ def _run_and_write(
     force: bool,
     commit: str,
     progress: Callable[[float], None] | None,
+    before_write: Callable[[], None] | None = None,
 ) -> EpisodeOutcome:
     from pipeline.control import make_controller
     from pipeline.log.bag import write_episode_bag
@@ -424,6 +442,8 @@ def _run_and_write(
         "status": result.status,
         "settings": json.dumps(settings.to_dict(), sort_keys=True, separators=(",", ":")),
     }
+    if before_write is not None:
+        before_write()
     write_episode_bag(
         bag_dir,
         spec=spec,
@@ -452,7 +472,149 @@ def _run_and_write(
     )
 
 
+# --- resource estimate ----------------------------------------------------------------
+
+# What one control step costs, per joint, measured on the paper scenario (UR5, 1 kHz, full
+# logging): peak RSS of `pipeline record` grows by ~2.8 kB per control step (6 joints) with
+# the episode's length (benches/record_memory.py, docs/robustness.md). The episode is held
+# in memory whole (EpisodeResult arrays, then every CDR message, then the MCAP chunks), so
+# this is what a longer episode adds. 480 B rounds the measured 465 B up.
+BYTES_PER_JOINT_STEP = 480
+# Wall time per physics step and joint: ~43 us per 6-joint step measured (sim + control +
+# writing), rounded up.
+SECONDS_PER_JOINT_STEP = 8e-6
+MAX_EPISODE_WALL_S = 6 * 3600.0
+MEMORY_SHARE = 0.8  # of MemAvailable, split between the episodes that run at once
+
+
+@dataclass(frozen=True)
+class EpisodeEstimate:
+    """What an episode will cost, from its settings alone.
+
+    Attributes:
+        duration_s: simulated time (motion + hold) [s].
+        control_steps: logged rows.
+        physics_steps: MuJoCo steps.
+        memory_bytes: peak memory the episode adds [B].
+        wall_s: wall-clock time [s].
+    """
+
+    duration_s: float
+    control_steps: int
+    physics_steps: int
+    memory_bytes: int
+    wall_s: float
+
+
+def estimate_episode(episode: Episode, *, dof: int, motion_s: float) -> EpisodeEstimate:
+    """Estimate one episode's memory and time (``motion_s``: the reference's duration)."""
+    sim = episode.sim
+    duration_s = motion_s + episode.scenario.hold_s
+    control_s = sim.physics_dt_s * sim.control_period_steps
+    control_steps = int(duration_s / control_s) + 1
+    physics_steps = control_steps * sim.control_period_steps
+    return EpisodeEstimate(
+        duration_s=duration_s,
+        control_steps=control_steps,
+        physics_steps=physics_steps,
+        memory_bytes=control_steps * dof * BYTES_PER_JOINT_STEP,
+        wall_s=physics_steps * dof * SECONDS_PER_JOINT_STEP,
+    )
+
+
+def available_memory_bytes() -> int:
+    """``MemAvailable`` of /proc/meminfo (Linux); 8 GiB where it cannot be read."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return 8 * 1024**3
+
+
+def _size(n_bytes: float) -> str:
+    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6)):
+        if n_bytes >= scale:
+            return f"{n_bytes / scale:.3g} {unit}"
+    return f"{n_bytes / 1e3:.3g} kB"
+
+
+def _duration(seconds: float) -> str:
+    if seconds >= 3600:
+        return f"{seconds / 3600:.3g} h"
+    if seconds >= 60:
+        return f"{seconds / 60:.3g} min"
+    return f"{seconds:.3g} s"
+
+
+def check_budget(
+    params: Params,
+    episodes: Sequence[Episode],
+    *,
+    motion_s: Mapping[str, float],
+    jobs: int,
+    memory_bytes: int | None = None,
+) -> None:
+    """Refuse, before any episode runs, one that cannot fit in memory or time.
+
+    Args:
+        motion_s: reference duration per scenario [s] (0 before planning: a lower bound).
+        jobs: episodes run at once; each gets an equal share of the memory.
+        memory_bytes: memory to share (default: :func:`available_memory_bytes`).
+
+    Raises:
+        ParamsError: one line with the estimate and the fields to change.
+    """
+    parallel = max(1, min(jobs, len(episodes)))
+    share = MEMORY_SHARE * (memory_bytes or available_memory_bytes()) / parallel
+    for episode in episodes:
+        spec = load_spec(episode.scenario.robot)
+        est = estimate_episode(
+            episode, dof=spec.dof, motion_s=motion_s.get(episode.scenario_name, 0.0)
+        )
+        where = f"scenarios.{episode.scenario_name}.hold_s or sim.control_period_steps"
+        what = (
+            f"episode '{episode.name}' is {est.duration_s:.6g} s at "
+            f"{est.control_steps:,} control steps x {spec.dof} joints"
+        )
+        if est.memory_bytes > share:
+            per = f" (each of {parallel} parallel episodes)" if parallel > 1 else ""
+            raise ParamsError(
+                f"{params.source}: {what}: it would hold about {_size(est.memory_bytes)} in "
+                f"memory, more than the {_size(share)} this machine can give it{per}; "
+                f"lower {where}" + (" or --jobs" if parallel > 1 else "")
+            )
+        if est.wall_s > MAX_EPISODE_WALL_S:
+            raise ParamsError(
+                f"{params.source}: {what} ({est.physics_steps:,} physics steps): it would "
+                f"run for about {_duration(est.wall_s)}, more than "
+                f"{_duration(MAX_EPISODE_WALL_S)}; lower {where}, or raise sim.physics_dt_s"
+            )
+
+
 # --- orchestration (parent process) ---------------------------------------------------
+
+
+class Interrupted(PipelineError):
+    """Ctrl-C (SIGINT) during a record run: what finished and what did not.
+
+    Attributes:
+        finished: outcomes of the episodes that ended (ok, diverged or failed).
+        unfinished: names of the episodes that were cancelled (running or queued).
+    """
+
+    exit_code = 130  # what shells report for Ctrl-C
+
+    def __init__(self, finished: Sequence[EpisodeOutcome], unfinished: Sequence[str]) -> None:
+        self.finished = tuple(finished)
+        self.unfinished = tuple(unfinished)
+        done = ", ".join(f"{o.name} ({o.status})" for o in self.finished) or "none"
+        super().__init__(
+            f"interrupted: finished {len(self.finished)} episode(s): {done}; not recorded: "
+            f"{', '.join(self.unfinished) or 'none'}"
+        )
 
 
 def _mp_context() -> mp.context.BaseContext:
@@ -462,42 +624,194 @@ def _mp_context() -> mp.context.BaseContext:
     return mp.get_context("fork" if "fork" in mp.get_all_start_methods() else "spawn")
 
 
-def _progress_proxy(queue: Any, name: str) -> Callable[[float], None]:
-    def report(fraction: float) -> None:
-        queue.put((name, fraction))
-
-    return report
-
-
 def _episode_progress(
     emit: Callable[[str, str, float], None], name: str
 ) -> Callable[[float], None]:
     return lambda fraction: emit("episode", name, fraction)
 
 
-def _episode_worker(
-    episode: Episode, plan: ScenarioPlan, out_dir: str, force: bool, commit: str, queue: Any
-) -> EpisodeOutcome:
-    return run_one(
-        episode,
-        plan,
-        out_dir=Path(out_dir),
-        force=force,
-        commit=commit,
-        progress=_progress_proxy(queue, episode.name),
-    )
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    """Make this (worker) process end when ``parent_pid`` does, however it ends.
+
+    Linux: the kernel sends SIGKILL at the parent's death (``PR_SET_PDEATHSIG``). Elsewhere
+    a daemon thread polls ``getppid``. Either way a worker never outlives its parent.
+    """
+    armed = False
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            armed = libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0
+        except (OSError, AttributeError):
+            armed = False
+    if os.getppid() != parent_pid:  # the parent died before the signal was armed
+        os._exit(1)
+    if not armed:
+
+        def watch() -> None:
+            while os.getppid() == parent_pid:
+                time.sleep(0.2)
+            os._exit(1)
+
+        threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
+def _worker_main(conn: Connection, parent_pid: int, out_dir: str, force: bool, commit: str) -> None:
+    """A pool worker: run the episodes the parent sends until it sends None."""
+    _die_with_parent(parent_pid)
+    # Ctrl-C reaches the whole process group; the parent decides what it cancels.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+    def parent_alive() -> None:
+        if os.getppid() != parent_pid:
+            os._exit(1)  # never publish a recording for a run that is gone
+
+    while True:
+        try:
+            task = conn.recv()
+        except (EOFError, OSError):
+            return
+        if task is None:
+            return
+        episode, plan = task
+
+        def progress(fraction: float, name: str = episode.name) -> None:
+            conn.send(("progress", name, fraction))
+
+        outcome = run_one(
+            episode, plan, out_dir=Path(out_dir), force=force, commit=commit,
+            progress=progress, before_write=parent_alive,
+        )  # fmt: skip
+        conn.send(("done", episode.name, outcome))
+
+
+def _run_pool(
+    episodes: Sequence[Episode],
+    plans: dict[str, ScenarioPlan],
+    *,
+    out_dir: Path,
+    force: bool,
+    commit: str,
+    jobs: int,
+    emit: Callable[[str, str, float], None],
+) -> dict[str, EpisodeOutcome]:
+    """Run episodes on ``jobs`` worker processes, one pipe each (no manager process).
+
+    A worker that dies (out-of-memory killer, a crash in a library) fails its episode
+    and is replaced. Ctrl-C kills every worker and raises :class:`Interrupted`.
+    """
+    ctx = _mp_context()
+    queued = list(episodes)
+    outcomes: dict[str, EpisodeOutcome] = {}
+    workers: dict[Connection, tuple[Any, str | None]] = {}  # conn -> (process, episode)
+
+    def start_worker() -> None:
+        here, there = ctx.Pipe()
+        proc = ctx.Process(  # type: ignore[attr-defined]
+            target=_worker_main,
+            args=(there, os.getpid(), str(out_dir), force, commit),
+            name="pipeline-record-worker",
+            daemon=True,
+        )
+        proc.start()
+        there.close()
+        workers[here] = (proc, None)
+
+    def feed(conn: Connection) -> None:
+        proc, _ = workers[conn]
+        if queued:
+            episode = queued.pop(0)
+            conn.send((episode, plans[episode.scenario_name]))
+            workers[conn] = (proc, episode.name)
+        else:
+            with contextlib.suppress(OSError):
+                conn.send(None)
+            workers[conn] = (proc, None)
+
+    try:
+        for _ in range(min(jobs, len(queued))):
+            start_worker()
+        for conn in list(workers):
+            feed(conn)
+        while len(outcomes) < len(episodes):
+            ready = mp_connection.wait(list(workers), timeout=0.5)
+            for item in ready:
+                conn = cast(Connection, item)
+                proc, current = workers[conn]
+                try:
+                    kind, name, value = conn.recv()
+                except (EOFError, OSError):
+                    proc.join(timeout=5)
+                    if current is not None and current not in outcomes:
+                        outcomes[current] = _worker_died(current, proc.exitcode)
+                        emit("done", current, 1.0)
+                    del workers[conn]
+                    conn.close()
+                    if queued:
+                        start_worker()
+                        feed(list(workers)[-1])
+                    continue
+                if kind == "progress":
+                    emit("episode", name, value)
+                else:
+                    outcomes[name] = value
+                    emit("done", name, 1.0)
+                    feed(conn)
+            if not workers and len(outcomes) < len(episodes):  # pragma: no cover - defensive
+                for e in queued:
+                    outcomes[e.name] = _worker_died(e.name, None)
+                queued.clear()
+    except KeyboardInterrupt:
+        _kill_all(workers)
+        _sweep(out_dir)
+        raise Interrupted(
+            [outcomes[e.name] for e in episodes if e.name in outcomes],
+            [e.name for e in episodes if e.name not in outcomes],
+        ) from None
+    finally:
+        _kill_all(workers)
+    return outcomes
+
+
+def _worker_died(name: str, exitcode: int | None) -> EpisodeOutcome:
+    how = f"killed by signal {-exitcode}" if exitcode is not None and exitcode < 0 else (
+        f"exit code {exitcode}")  # fmt: skip
+    hint = " (out of memory?)" if exitcode == -signal.SIGKILL else ""
+    return EpisodeOutcome(
+        name, "failed", f"its worker process died ({how}){hint}", "", float("nan"),
+        float("nan"), 0.0, 0.0,
+    )  # fmt: skip
+
+
+def _kill_all(workers: dict[Connection, tuple[Any, str | None]]) -> None:
+    for conn, (proc, _) in list(workers.items()):
+        if proc.is_alive():
+            proc.kill()
+        proc.join(timeout=5)
+        conn.close()
+    workers.clear()
+
+
+# Work folders of the bag writer (pipeline/log/bag.py: ``.<name>.partial-<pid>`` while
+# writing, ``.<name>.old-<pid>`` while replacing with --force).
+_STALE_BAG = re.compile(r"\..+\.(?:partial|old)-(?P<pid>\d+)")
+
+
+def _sweep(out_dir: Path, *, mine: bool = True) -> None:
+    """Remove work folders of writers that are gone (and this process's own, if ``mine``)."""
+    remove_stale(out_dir, _STALE_BAG, also_pids=frozenset({os.getpid()} if mine else ()))
 
 
 def check_outputs_free(episodes: Sequence[Episode], out_dir: Path, *, force: bool) -> None:
-    """Refuse up front (before any work) a bad --out or to overwrite a recording."""
-    if out_dir.exists() and not out_dir.is_dir():
-        raise PipelineError(f"{out_dir}: --out is a file, expected a directory")
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise PipelineError(
-            f"{out_dir}: cannot create the output directory ({err.strerror})"
-        ) from err
+    """Refuse up front (before any work) a bad --out or to overwrite a recording.
+
+    Also removes what killed runs left in ``out_dir`` (hidden work folders whose process
+    is gone).
+    """
+    ensure_dir(out_dir)
+    _sweep(out_dir, mine=False)
     if force:
         return
     taken = [e.name for e in episodes if (out_dir / e.name).exists()]
@@ -546,48 +860,22 @@ def validate_episodes(params: Params, episodes: Sequence[Episode]) -> None:
         )
 
 
-def _run_pool(
-    episodes: Sequence[Episode],
-    plans: dict[str, ScenarioPlan],
+def prepare(
+    params: Params,
     *,
     out_dir: Path,
-    force: bool,
-    commit: str,
-    jobs: int,
-    emit: Callable[[str, str, float], None],
-) -> dict[str, EpisodeOutcome]:
-    ctx = _mp_context()
-    manager = ctx.Manager()
-    queue = manager.Queue()
-    outcomes: dict[str, EpisodeOutcome] = {}
-    try:
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
-            running: dict[str, Future[EpisodeOutcome]] = {
-                e.name: pool.submit(
-                    _episode_worker, e, plans[e.scenario_name], str(out_dir), force, commit, queue
-                )
-                for e in episodes
-            }
-            while len(outcomes) < len(running):
-                while not queue.empty():
-                    name, fraction = queue.get_nowait()
-                    emit("episode", name, fraction)
-                for name, fut in running.items():
-                    if name not in outcomes and fut.done():
-                        outcomes[name] = fut.result()
-                        emit("done", name, 1.0)
-                time.sleep(0.05)
-    finally:
-        manager.shutdown()
-    return outcomes
-
-
-def prepare(
-    params: Params, *, out_dir: Path, only: list[str] | None = None, force: bool = False
+    only: list[str] | None = None,
+    force: bool = False,
+    jobs: int = 1,
 ) -> tuple[Episode, ...]:
-    """The selected episodes, validated, with --out usable: every input error, before work."""
+    """The selected episodes, validated, with --out usable: every input error, before work.
+
+    The resource estimate here knows only ``hold_s`` (the motion is not planned yet): a
+    lower bound. :func:`record` checks again with the planned durations.
+    """
     episodes = params.select(only)
     validate_episodes(params, episodes)
+    check_budget(params, episodes, motion_s={}, jobs=jobs)
     check_outputs_free(episodes, out_dir, force=force)
     return episodes
 
@@ -605,26 +893,43 @@ def record(
 
     ``on_event(kind, name, value)`` reports progress: kind is "plan" (value 0/1),
     "episode" (fraction done) or "done".
+
+    Raises:
+        ParamsError: an episode would not fit in memory or time (before any runs).
+        Interrupted: Ctrl-C; nothing half-written is left under a final name.
     """
     emit = on_event or (lambda kind, name, value: None)
     commit = git_commit()
     plans: dict[str, ScenarioPlan] = {}
-    for name in sorted({e.scenario_name for e in episodes}):
-        plans[name] = plan_scenario(name, params.scenarios[name], params.source)
-        emit("plan", name, 1.0)
     outcomes: dict[str, EpisodeOutcome] = {}
-    if jobs <= 1 or len(episodes) == 1:
-        for e in episodes:
-            outcomes[e.name] = run_one(
-                e,
-                plans[e.scenario_name],
-                out_dir=out_dir,
-                force=force,
-                commit=commit,
-                progress=_episode_progress(emit, e.name),
-            )
-            emit("done", e.name, 1.0)
-    else:
-        outcomes = _run_pool(episodes, plans, out_dir=out_dir, force=force, commit=commit,
-                             jobs=jobs, emit=emit)  # fmt: skip
+    try:
+        for name in sorted({e.scenario_name for e in episodes}):
+            plans[name] = plan_scenario(name, params.scenarios[name], params.source)
+            emit("plan", name, 1.0)
+        motion_s = {
+            name: float(p.trajectory.duration_s)
+            for name, p in plans.items()
+            if p.trajectory is not None
+        }
+        check_budget(params, episodes, motion_s=motion_s, jobs=jobs)
+        if jobs <= 1 or len(episodes) == 1:
+            for e in episodes:
+                outcomes[e.name] = run_one(
+                    e,
+                    plans[e.scenario_name],
+                    out_dir=out_dir,
+                    force=force,
+                    commit=commit,
+                    progress=_episode_progress(emit, e.name),
+                )
+                emit("done", e.name, 1.0)
+        else:
+            outcomes = _run_pool(episodes, plans, out_dir=out_dir, force=force, commit=commit,
+                                 jobs=jobs, emit=emit)  # fmt: skip
+    except KeyboardInterrupt:
+        _sweep(out_dir)
+        raise Interrupted(
+            [outcomes[e.name] for e in episodes if e.name in outcomes],
+            [e.name for e in episodes if e.name not in outcomes],
+        ) from None
     return [outcomes[e.name] for e in episodes]

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import shutil
 import tempfile
 from collections.abc import Callable
@@ -23,7 +24,8 @@ import polars as pl
 from pipeline.analysis.episodes import episode_table, limits_table
 from pipeline.analysis.metrics import check_baseline, comparisons, joint_metrics
 from pipeline.analysis.protocol import protocol_view
-from pipeline.errors import RecordingError, ReportError
+from pipeline.errors import PipelineError, RecordingError, ReportError
+from pipeline.fsutil import OutputLock, remove_stale
 from pipeline.log.reader import Recording, find_recordings, read_recording
 from pipeline.report.figures import (
     FIGURES_DIR,
@@ -188,9 +190,50 @@ def run_report(
 ) -> ReportResult:
     """Read the recordings, compute metrics and write every report output.
 
+    One run at a time writes a given ``out_dir`` (a second one refuses at once); staging
+    folders that killed runs left beside it are removed first.
+
     Raises:
-        ReportError / RecordingError: see :func:`read_all`; unknown baseline controller.
+        ReportError / RecordingError: see :func:`read_all`; unknown baseline controller;
+            another report is writing ``out_dir``.
     """
+    out_dir = Path(out_dir)
+    try:
+        out_dir.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ReportError(f"{out_dir.parent}: cannot write the report there ({err})") from err
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ReportError(f"{out_dir}: --out is a file, expected a directory")
+    try:
+        with OutputLock(out_dir, command="`pipeline report`"):
+            remove_stale(out_dir.parent, _staging_pattern(out_dir))
+            return _run_report_locked(
+                recordings_dir=recordings_dir,
+                out_dir=out_dir,
+                baseline=baseline,
+                skip_bad=skip_bad,
+                progress=progress,
+            )
+    except PipelineError as err:
+        if isinstance(err, RecordingError | ReportError):
+            raise
+        raise ReportError(str(err)) from err
+
+
+def _staging_pattern(out_dir: Path) -> re.Pattern[str]:
+    # ``.<out>.tmp-<pid>-<random>``; older runs wrote ``.<out>.tmp-<random>`` (no pid: stale
+    # whenever we hold the lock)
+    return re.compile(rf"\.{re.escape(out_dir.name)}\.tmp-(?:(?P<pid>\d+)-)?[A-Za-z0-9_]+")
+
+
+def _run_report_locked(
+    *,
+    recordings_dir: Path,
+    out_dir: Path,
+    baseline: str,
+    skip_bad: bool,
+    progress: Progress,
+) -> ReportResult:
     raw, bad = read_all(recordings_dir, skip_bad=skip_bad, progress=progress)
     views = {rec.episode: protocol_view(rec)[0] for rec in raw}
     recordings = [views[rec.episode].recording for rec in raw]
@@ -212,10 +255,10 @@ def run_report(
         recordings_dir=recordings_dir,
         protocol=views,
     )
-    out_dir = Path(out_dir)
     try:
-        out_dir.parent.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=out_dir.parent))
+        staging = Path(
+            tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-{os.getpid()}-", dir=out_dir.parent)
+        )
     except OSError as err:
         raise ReportError(f"{out_dir.parent}: cannot write the report there ({err})") from err
     try:

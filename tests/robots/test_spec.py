@@ -76,7 +76,7 @@ def test_unknown_name_lists_available_and_closest():
         ),
         (
             lambda d: d["joints"][2]["inertial"].update(mass=-1.0),
-            r"joints\[2\]\.inertial\.mass: .*greater than 0",
+            r"joints\[2\]\.inertial\.mass: .*greater than or equal to 0.000001",
         ),
         (
             lambda d: d["joints"][0].update(dh=[0.0, float("nan"), 0.0, 0.0]),

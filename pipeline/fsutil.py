@@ -1,0 +1,188 @@
+"""File-system guards shared by the stages: output folders, locks, leftovers of killed runs.
+
+- :func:`ensure_dir` turns "--out is a file" or "cannot create it" into one line.
+- :class:`OutputLock` lets one ``pipeline record`` / ``pipeline report`` at a time write
+  into a folder; a second one refuses at once, naming the holder (``flock``: the kernel
+  releases it when the holder dies, however it dies).
+- :func:`remove_stale` deletes the hidden work folders (``.<name>.partial-<pid>``,
+  ``.reports.tmp-<pid>-...``) that a killed process left behind, once their process is gone.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import re
+import shutil
+from pathlib import Path
+from types import TracebackType
+
+from pipeline.errors import PipelineError
+
+try:  # POSIX; elsewhere the lock is a no-op (documented in docs/robustness.md)
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None  # type: ignore[assignment]
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether a process with this id exists (a zombie counts as gone)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process
+        return True
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as f:
+            return f.read().rsplit(")", 1)[-1].split()[0] != "Z"
+    except OSError:
+        return True  # no /proc: trust kill()
+
+
+def remove_stale(
+    folder: Path, pattern: re.Pattern[str], *, also_pids: frozenset[int] = frozenset()
+) -> list[Path]:
+    """Delete entries of ``folder`` whose name fully matches ``pattern`` and whose owner is gone.
+
+    Args:
+        folder: where to look (missing folder: nothing to do).
+        pattern: a regex with a named group ``pid`` (the owner's process id); an entry
+            matching without a ``pid`` group value counts as ownerless, hence stale.
+        also_pids: owners to treat as gone although alive (the caller's own leftovers).
+
+    Returns:
+        The entries removed.
+    """
+    removed: list[Path] = []
+    try:
+        entries = list(folder.iterdir())
+    except OSError:
+        return removed
+    for entry in entries:
+        match = pattern.fullmatch(entry.name)
+        if match is None:
+            continue
+        pid_text = match.groupdict().get("pid")
+        pid = int(pid_text) if pid_text else 0
+        if pid in also_pids or not pid_alive(pid):
+            if entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry, ignore_errors=True)
+            else:
+                with contextlib.suppress(OSError):
+                    entry.unlink()
+            removed.append(entry)
+    return removed
+
+
+def ensure_dir(path: Path, *, option: str = "--out") -> Path:
+    """Create ``path`` (and parents) as a writable folder.
+
+    Raises:
+        PipelineError: it is a file, or cannot be created or written.
+    """
+    if path.exists() and not path.is_dir():
+        raise PipelineError(f"{path}: {option} is a file, expected a directory")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise PipelineError(
+            f"{path}: cannot create the {option} directory ({err.strerror or err})"
+        ) from err
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise PipelineError(f"{path}: {option} directory is not writable")
+    return path
+
+
+class OutputLock:
+    """An exclusive lock on an output folder, held for one stage run.
+
+    The lock file is ``.<folder name>.lock`` beside the folder (its parent must exist),
+    where staging folders live too, and records the holder's pid for the message. It is
+    removed on release; an acquirer that finds the file replaced while it waited for
+    ``flock`` retries, so removal cannot let two holders in. A SIGKILLed holder leaves
+    the file, unlocked: the next run takes it.
+
+    Example::
+
+        with OutputLock(out_dir, command="`pipeline record`"):
+            ...
+    """
+
+    def __init__(self, folder: Path, *, command: str) -> None:
+        self.folder = Path(folder)
+        self.command = command
+        self.path = self.folder.parent / f".{self.folder.name}.lock"
+        self._fd: int | None = None
+
+    def acquire(self) -> None:
+        """Take the lock or raise at once.
+
+        Raises:
+            PipelineError: another process holds it (names its pid), or the lock file
+                cannot be created.
+        """
+        if fcntl is None:  # pragma: no cover - Windows
+            return
+        for _ in range(10):
+            try:
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as err:
+                raise PipelineError(
+                    f"{self.path}: cannot create the lock file ({err.strerror or err})"
+                ) from err
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError as err:
+                holder = _read_pid(fd)
+                os.close(fd)
+                if err.errno not in (errno.EWOULDBLOCK, errno.EACCES):
+                    raise PipelineError(f"{self.path}: cannot lock ({err.strerror})") from err
+                who = f" (pid {holder})" if holder else ""
+                raise PipelineError(
+                    f"{self.folder}: another {self.command}{who} is writing to this folder; "
+                    "wait for it to finish or choose another --out"
+                ) from None
+            try:
+                same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                os.ftruncate(fd, 0)
+                os.write(fd, f"{os.getpid()}\n".encode())
+                self._fd = fd
+                return
+            os.close(fd)  # the holder released and removed it meanwhile: take the new one
+        raise PipelineError(f"{self.path}: lock file keeps changing; is another run looping?")
+
+    def release(self) -> None:
+        """Remove the lock file and drop the lock (idempotent)."""
+        if self._fd is None:
+            return
+        with contextlib.suppress(OSError):
+            os.unlink(self.path)
+        os.close(self._fd)
+        self._fd = None
+
+    def __enter__(self) -> OutputLock:
+        self.acquire()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.release()
+
+
+def _read_pid(fd: int) -> int:
+    try:
+        text = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+        return int(text) if text.isdigit() else 0
+    except OSError:
+        return 0
