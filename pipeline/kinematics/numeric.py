@@ -155,6 +155,7 @@ class NumericLMSolver:
             _, dq, info = lapack.dposv(jtj + lam * eye, g)
             if info != 0:  # not positive definite: only with a non-finite Jacobian
                 break
+            dq = dq.reshape(-1)  # LAPACK returns a 0-d array for a one-joint arm
             q_new = np.minimum(np.maximum(q + dq, lower), upper)
             pin.computeJointJacobians(model, data, q_new)
             dm_new = pin.updateFramePlacement(model, data, fid).actInv(goal)

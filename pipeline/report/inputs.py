@@ -16,6 +16,7 @@ from pipeline.analysis.aggregate import (
     reduction_aggregates,
     runs_per_controller,
 )
+from pipeline.analysis.checks import duplicate_stamp_notes
 from pipeline.analysis.protocol import ProtocolView
 from pipeline.log.reader import Recording
 
@@ -87,8 +88,12 @@ class ReportData:
         return any(n > 1 for (sc, _), n in self.runs.items() if sc == scenario)
 
     def warnings(self) -> list[tuple[str, str]]:
-        """(episode, note) for every non-fatal oddity the reader noted."""
-        return [(rec.episode, note) for rec in self.recordings for note in rec.notes]
+        """(episode, note) for every non-fatal oddity the reader or the frame checks noted."""
+        return [
+            (rec.episode, note)
+            for rec in self.recordings
+            for note in (*rec.notes, *duplicate_stamp_notes(rec))
+        ]
 
     @cached_property
     def _metric_rows(self) -> dict[tuple[str, str], dict[str, Any]]:
