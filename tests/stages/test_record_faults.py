@@ -1,0 +1,225 @@
+"""`pipeline record` under faults: SIGKILL, Ctrl-C, a second run, leftovers of killed runs.
+
+Each test runs the real command in its own session (so a failing test can clean up the
+whole process group) and watches processes through /proc.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from pipeline.fsutil import OutputLock, pid_alive
+from pipeline.stages.record import check_outputs_free
+
+REPO = Path(__file__).parents[2]
+pytestmark = pytest.mark.skipif(
+    not sys.platform.startswith("linux"), reason="process checks read /proc"
+)
+
+
+def _params(tmp_path: Path, *, episodes: int, hold_s: float) -> Path:
+    data = yaml.safe_load((REPO / "params.yaml").read_text())
+    data["scenarios"]["paper"]["hold_s"] = hold_s
+    data["episodes"] = {
+        f"e{i}": {"scenario": "paper", "controller": ("pid", "ctc")[i % 2], "seed": i}
+        for i in range(episodes)
+    }
+    path = tmp_path / "params.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def _start(params: Path, out: Path, *extra: str) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "pipeline", "record", "--params", str(params), "--out", str(out),
+         *extra],
+        cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        start_new_session=True,
+    )  # fmt: skip
+
+
+def _children(pid: int) -> list[int]:
+    kids = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                stat = Path(f"/proc/{entry}/stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                kids.append(int(entry))
+    return kids
+
+
+def _wait_for(predicate, timeout_s: float) -> bool:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(0.02)
+    return predicate()
+
+
+def _visible(out: Path) -> set[str]:
+    return {p.name for p in out.iterdir() if not p.name.startswith(".")} if out.exists() else set()
+
+
+def _partials(out: Path) -> list[str]:
+    return [p.name for p in out.iterdir() if ".partial-" in p.name] if out.exists() else []
+
+
+@pytest.fixture
+def cleanup():
+    procs: list[subprocess.Popen[str]] = []
+    yield procs
+    for p in procs:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("trial", range(2))
+def test_sigkill_of_the_parent_takes_its_workers_and_publishes_nothing_after(
+    tmp_path, cleanup, trial
+):
+    out = tmp_path / "rec"
+    proc = _start(_params(tmp_path, episodes=6, hold_s=30.0), out, "--jobs", "2")
+    cleanup.append(proc)
+    # kill while a worker is writing a bag: the moment a late publish would happen
+    assert _wait_for(lambda: bool(_partials(out)), 120), proc.stderr.read() if proc.stderr else ""
+    workers = _children(proc.pid)
+    assert len(workers) == 2
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    published = _visible(out)
+    assert _wait_for(lambda: not any(pid_alive(w) for w in workers), 5), "a worker outlived it"
+    time.sleep(2.0)  # a surviving writer would rename its bag into place by now
+    assert _visible(out) == published, "a recording appeared after the parent was killed"
+    # the next run clears what the killed one left
+    check_outputs_free([], out, force=True)
+    assert _partials(out) == []
+
+
+def _interrupted(proc: subprocess.Popen[str], out: Path) -> tuple[list[str], list[str]]:
+    """Wait for the run to end after SIGINT; return (finished, not recorded) from its line."""
+    _, err = proc.communicate(timeout=20)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    match = re.fullmatch(r"interrupted: finished (\d+) episode\(s\): (.*); not recorded: (.*)",
+                         lines[0])  # fmt: skip
+    assert match, lines[0]
+    finished = [] if match[2] == "none" else [s.split(" ")[0] for s in match[2].split(", ")]
+    pending = [] if match[3] == "none" else match[3].split(", ")
+    assert int(match[1]) == len(finished)
+    return finished, pending
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("jobs", "to_group"), [(2, False), (2, True), (1, True)], ids=["parent", "group", "serial"]
+)
+def test_ctrl_c_stops_the_run_says_what_finished_and_leaves_nothing_half_done(
+    tmp_path, cleanup, jobs, to_group
+):
+    out = tmp_path / "rec"
+    proc = _start(_params(tmp_path, episodes=6, hold_s=20.0), out, "--jobs", str(jobs))
+    cleanup.append(proc)
+    assert _wait_for(lambda: bool(_visible(out)), 120)  # one episode done, others queued
+    workers = _children(proc.pid)
+    (os.killpg if to_group else os.kill)(proc.pid, signal.SIGINT)
+    t0 = time.monotonic()
+    finished, pending = _interrupted(proc, out)
+    assert time.monotonic() - t0 < 10, "queued episodes must be cancelled, not run"
+    assert pending, "the run was interrupted early: some episodes must be left"
+    assert sorted(finished + pending) == [f"e{i}" for i in range(6)]
+    assert _visible(out) == set(finished)
+    assert not _partials(out)
+    assert not any(pid_alive(w) for w in workers)
+    assert not (tmp_path / ".rec.lock").exists()
+
+
+def test_ctrl_c_while_starting_up_prints_no_traceback(tmp_path):
+    proc = _start(_params(tmp_path, episodes=2, hold_s=1.0), tmp_path / "rec")
+    time.sleep(0.3)  # Python is importing the libraries
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode in (130, -signal.SIGINT), err
+    assert "Traceback" not in err, err
+
+
+def test_a_second_record_into_the_same_out_refuses_at_once(tmp_path):
+    out = tmp_path / "rec"
+    out.mkdir()
+    with OutputLock(out, command="`pipeline record`"):
+        result = subprocess.run(
+            [sys.executable, "-m", "pipeline", "record", "--params",
+             str(_params(tmp_path, episodes=1, hold_s=0.1)), "--out", str(out)],
+            cwd=REPO, capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+    assert result.returncode == 1
+    assert result.stderr.strip() == (
+        f"error: {out}: another `pipeline record` (pid {os.getpid()}) is writing to this "
+        "folder; wait for it to finish or choose another --out"
+    )
+    assert _visible(out) == set()
+
+
+def test_a_second_report_into_the_same_out_refuses_at_once(tmp_path):
+    from tests.analysis.bagfactory import paper_like, write_bag
+
+    write_bag(tmp_path / "rec", paper_like("paper-pid", "pid", duration_s=0.3, motion_end_s=0.2))
+    out = tmp_path / "rep"
+    with OutputLock(out, command="`pipeline report`"):
+        result = subprocess.run(
+            [sys.executable, "-m", "pipeline", "report", "--recordings", str(tmp_path / "rec"),
+             "--out", str(out)],
+            cwd=REPO, capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+    assert result.returncode == 1
+    assert "another `pipeline report`" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def _dead_pid() -> int:
+    proc = subprocess.Popen(["true"])
+    proc.wait()
+    return proc.pid
+
+
+def test_work_folders_of_dead_runs_are_removed_and_live_ones_kept(tmp_path):
+    out = tmp_path / "rec"
+    out.mkdir()
+    dead, alive = _dead_pid(), os.getppid()
+    for name in (f".e0.partial-{dead}", f".e1.old-{dead}", f".e2.partial-{alive}", "e3"):
+        (out / name).mkdir()
+    check_outputs_free([], out, force=True)
+    assert sorted(p.name for p in out.iterdir()) == [f".e2.partial-{alive}", "e3"]
+
+
+def test_report_removes_staging_folders_of_killed_reports(tmp_path):
+    from pipeline.stages.report import run_report
+    from tests.analysis.bagfactory import paper_like, write_bag
+
+    write_bag(tmp_path / "rec", paper_like("paper-pid", "pid", duration_s=0.3, motion_end_s=0.2))
+    dead, alive = _dead_pid(), os.getppid()
+    stale = [f".rep.tmp-{dead}-abc123", ".rep.tmp-k2j3h4g5"]  # new and pre-pid names
+    kept = [f".rep.tmp-{alive}-abc123", ".other.tmp-xyz"]
+    for name in stale + kept:
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "recording.rrd").write_bytes(b"x" * 1000)
+    run_report(recordings_dir=tmp_path / "rec", out_dir=tmp_path / "rep")
+    left = {p.name for p in tmp_path.iterdir() if p.name.startswith(".")}
+    assert left == set(kept)
