@@ -26,6 +26,8 @@ PerJoint = NonNegative | list[NonNegative]  # one value for every joint, or one 
 MAX_HOLD_S = 3600.0
 MIN_PHYSICS_DT_S = 1e-5  # 100 kHz: finer than any arm simulation needs
 MAX_CONTROL_PERIOD_S = 0.1  # 10 Hz: slower is not joint-level control
+MAX_WORLD_M = 100.0  # obstacles: centres and sizes, a robot cell is metres wide
+MIN_BOX_M = 1e-4
 MAX_GAIN = 1e9  # |gain| above this is a typo: no actuator realises it
 MAX_EPISODE_CHARS = 100  # keys become file names (with a .partial-<pid> prefix, < 255 bytes)
 _RESERVED_GEOMS = ("ground", "pedestal")  # the plant's own geoms (pipeline/model/mjcf.py)
@@ -67,27 +69,32 @@ class Goal(_Strict):
         return self
 
 
+Metres = Annotated[float, Field(ge=-MAX_WORLD_M, le=MAX_WORLD_M)]
+
+
 class BoxParams(_Strict):
     name: Name
-    center: tuple[float, float, float]
-    half_size: tuple[float, float, float]
+    center: tuple[Metres, Metres, Metres]
+    half_size: tuple[Metres, Metres, Metres]
 
     @model_validator(mode="after")
     def _positive(self) -> BoxParams:
-        if min(self.half_size) <= 0:
-            raise ValueError(f"half_size must be > 0 on every axis, got {list(self.half_size)}")
+        if min(self.half_size) < MIN_BOX_M:
+            raise ValueError(
+                f"half_size must be >= {MIN_BOX_M:g} m on every axis, got {list(self.half_size)}"
+            )
         return self
 
 
 class PlannerParams(_Strict):
-    time_limit_s: float = Field(default=5.0, gt=0, le=600)
+    time_limit_s: float = Field(default=5.0, ge=0.001, le=600)
     simplify: bool = True
     seed: int = Field(default=0, ge=0, le=MAX_SEED)
 
 
 class TimingParams(_Strict):
-    velocity_scaling: float = Field(default=1.0, gt=0, le=1)
-    acceleration_scaling: float = Field(default=1.0, gt=0, le=1)
+    velocity_scaling: float = Field(default=1.0, ge=0.001, le=1)
+    acceleration_scaling: float = Field(default=1.0, ge=0.001, le=1)
 
 
 RelativeSpread = Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)]

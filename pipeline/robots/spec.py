@@ -184,6 +184,7 @@ MAX_JOINT_RAD = 4 * math.pi  # |lower|, |upper|: two turns each way
 MAX_VELOCITY_RAD_S = 100.0
 MAX_ACCELERATION_RAD_S2 = 1e4
 MAX_EFFORT_NM = 1e5
+MIN_LIMIT = 1e-3  # velocity [rad/s or deg/s], acceleration, effort [N m]
 MIN_MASS_KG, MAX_MASS_KG = 1e-6, 1e4
 MIN_INERTIA_KG_M2, MAX_INERTIA_KG_M2 = 1e-12, 1e4
 MIN_RADIUS_M, MAX_RADIUS_M = 1e-3, 1.0
@@ -203,9 +204,10 @@ class _Strict(BaseModel):
 class _Limits(_Strict):
     lower: float
     upper: float
-    velocity: float = Field(gt=0, allow_inf_nan=False)
-    acceleration: float = Field(gt=0, allow_inf_nan=False)
-    effort: float = Field(gt=0, le=MAX_EFFORT_NM, allow_inf_nan=False)
+    # lower bounds: a limit of 1e-300 plans a motion of 1e300 s
+    velocity: float = Field(ge=MIN_LIMIT, allow_inf_nan=False)
+    acceleration: float = Field(ge=MIN_LIMIT, allow_inf_nan=False)
+    effort: float = Field(ge=MIN_LIMIT, le=MAX_EFFORT_NM, allow_inf_nan=False)
 
     @model_validator(mode="after")
     def _ordered(self) -> _Limits:
