@@ -113,7 +113,7 @@ class OutputLock:
     """
 
     def __init__(self, folder: Path, *, command: str) -> None:
-        self.folder = Path(folder)
+        self.folder = Path(os.path.abspath(folder))  # "--out ." has a name too
         self.command = command
         self.path = self.folder.parent / f".{self.folder.name}.lock"
         self._fd: int | None = None

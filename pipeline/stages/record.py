@@ -773,6 +773,7 @@ def _run_pool(
         ) from None
     finally:
         _kill_all(workers)
+        _sweep(out_dir, mine=False)  # what a worker that died mid-write left
     return outcomes
 
 
