@@ -493,7 +493,7 @@ class EpisodeEstimate:
     """What an episode will cost, from its settings alone.
 
     Attributes:
-        duration_s: simulated time (motion + hold) [s].
+        duration_s: simulated time (pre-roll + motion + hold) [s].
         control_steps: logged rows.
         physics_steps: MuJoCo steps.
         memory_bytes: peak memory the episode adds [B].
@@ -510,7 +510,7 @@ class EpisodeEstimate:
 def estimate_episode(episode: Episode, *, dof: int, motion_s: float) -> EpisodeEstimate:
     """Estimate one episode's memory and time (``motion_s``: the reference's duration)."""
     sim = episode.sim
-    duration_s = motion_s + episode.scenario.hold_s
+    duration_s = episode.scenario.preroll_s + motion_s + episode.scenario.hold_s
     control_s = sim.physics_dt_s * sim.control_period_steps
     control_steps = int(duration_s / control_s) + 1
     physics_steps = control_steps * sim.control_period_steps
@@ -659,15 +659,23 @@ def _die_with_parent(parent_pid: int) -> None:
         threading.Thread(target=watch, name="parent-watch", daemon=True).start()
 
 
-def _worker_main(conn: Connection, parent_pid: int, out_dir: str, force: bool, commit: str) -> None:
+class _Cancelled(BaseException):
+    """Raised inside a worker's episode once the parent cancelled the run (not an error)."""
+
+
+def _worker_main(
+    conn: Connection, cancel: Any, parent_pid: int, out_dir: str, force: bool, commit: str
+) -> None:
     """A pool worker: run the episodes the parent sends until it sends None."""
     _die_with_parent(parent_pid)
     # Ctrl-C reaches the whole process group; the parent decides what it cancels.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
-    def parent_alive() -> None:
+    def before_write() -> None:
         if os.getppid() != parent_pid:
             os._exit(1)  # never publish a recording for a run that is gone
+        if cancel.is_set():
+            raise _Cancelled
 
     while True:
         try:
@@ -679,12 +687,18 @@ def _worker_main(conn: Connection, parent_pid: int, out_dir: str, force: bool, c
         episode, plan = task
 
         def progress(fraction: float, name: str = episode.name) -> None:
+            if cancel.is_set():
+                raise _Cancelled
             conn.send(("progress", name, fraction))
 
-        outcome = run_one(
-            episode, plan, out_dir=Path(out_dir), force=force, commit=commit,
-            progress=progress, before_write=parent_alive,
-        )  # fmt: skip
+        try:
+            outcome = run_one(
+                episode, plan, out_dir=Path(out_dir), force=force, commit=commit,
+                progress=progress, before_write=before_write,
+            )  # fmt: skip
+        except _Cancelled:
+            conn.send(("cancelled", episode.name, None))
+            continue
         conn.send(("done", episode.name, outcome))
 
 
@@ -697,13 +711,18 @@ def _run_pool(
     commit: str,
     jobs: int,
     emit: Callable[[str, str, float], None],
+    started_s: float,
 ) -> dict[str, EpisodeOutcome]:
     """Run episodes on ``jobs`` worker processes, one pipe each (no manager process).
 
     A worker that dies (out-of-memory killer, a crash in a library) fails its episode
-    and is replaced. Ctrl-C kills every worker and raises :class:`Interrupted`.
+    and is replaced. Ctrl-C cancels the run: workers abandon their episodes at the next
+    progress report (or just before writing), those already writing get
+    :data:`CANCEL_GRACE_S` to finish, then every worker is killed and
+    :class:`Interrupted` raised.
     """
     ctx = _mp_context()
+    cancel = ctx.Event()
     queued = list(episodes)
     outcomes: dict[str, EpisodeOutcome] = {}
     workers: dict[Connection, tuple[Any, str | None]] = {}  # conn -> (process, episode)
@@ -712,7 +731,7 @@ def _run_pool(
         here, there = ctx.Pipe()
         proc = ctx.Process(  # type: ignore[attr-defined]
             target=_worker_main,
-            args=(there, os.getpid(), str(out_dir), force, commit),
+            args=(there, cancel, os.getpid(), str(out_dir), force, commit),
             name="pipeline-record-worker",
             daemon=True,
         )
@@ -765,16 +784,70 @@ def _run_pool(
                     outcomes[e.name] = _worker_died(e.name, None)
                 queued.clear()
     except KeyboardInterrupt:
+        cancel.set()
+        _collect_until_idle(workers, outcomes, timeout_s=CANCEL_GRACE_S)
         _kill_all(workers)
         _sweep(out_dir)
-        raise Interrupted(
-            [outcomes[e.name] for e in episodes if e.name in outcomes],
-            [e.name for e in episodes if e.name not in outcomes],
-        ) from None
+        raise _interrupted(episodes, outcomes, out_dir, started_s=started_s) from None
     finally:
         _kill_all(workers)
         _sweep(out_dir, mine=False)  # what a worker that died mid-write left
     return outcomes
+
+
+CANCEL_GRACE_S = 3.0  # a worker writing its bag when Ctrl-C comes may finish it
+
+
+def _collect_until_idle(
+    workers: dict[Connection, tuple[Any, str | None]],
+    outcomes: dict[str, EpisodeOutcome],
+    *,
+    timeout_s: float,
+) -> None:
+    """After a cancel: take the outcomes busy workers still send, until none is busy."""
+    busy = [conn for conn, (_, current) in workers.items() if current is not None]
+    deadline = time.monotonic() + timeout_s
+    while busy and time.monotonic() < deadline:
+        for item in mp_connection.wait(busy, timeout=max(0.0, deadline - time.monotonic())):
+            conn = cast(Connection, item)
+            try:
+                kind, name, value = conn.recv()
+            except (EOFError, OSError):
+                busy.remove(conn)
+                continue
+            if kind == "done":
+                outcomes[name] = value
+            if kind in ("done", "cancelled"):
+                busy.remove(conn)
+
+
+def _interrupted(
+    episodes: Sequence[Episode],
+    outcomes: Mapping[str, EpisodeOutcome],
+    out_dir: Path,
+    *,
+    started_s: float,
+) -> Interrupted:
+    """What finished: the outcomes received, plus any recording this run published whose
+    summary the interrupt cut off (its folder is newer than the run)."""
+    finished = [outcomes[e.name] for e in episodes if e.name in outcomes]
+    unfinished = []
+    for e in episodes:
+        if e.name in outcomes:
+            continue
+        try:
+            # file times may lag time.time() by a clock tick
+            published = (out_dir / e.name).stat().st_mtime >= started_s - 0.05
+        except OSError:
+            published = False
+        if published:
+            finished.append(
+                EpisodeOutcome(e.name, "recorded", "summary lost to the interrupt", "",
+                               float("nan"), float("nan"), 0.0, 0.0)
+            )  # fmt: skip
+        else:
+            unfinished.append(e.name)
+    return Interrupted(finished, unfinished)
 
 
 def _worker_died(name: str, exitcode: int | None) -> EpisodeOutcome:
@@ -901,6 +974,7 @@ def record(
         Interrupted: Ctrl-C; nothing half-written is left under a final name.
     """
     emit = on_event or (lambda kind, name, value: None)
+    started_s = time.time()
     commit = git_commit()
     plans: dict[str, ScenarioPlan] = {}
     outcomes: dict[str, EpisodeOutcome] = {}
@@ -927,11 +1001,8 @@ def record(
                 emit("done", e.name, 1.0)
         else:
             outcomes = _run_pool(episodes, plans, out_dir=out_dir, force=force, commit=commit,
-                                 jobs=jobs, emit=emit)  # fmt: skip
+                                 jobs=jobs, emit=emit, started_s=started_s)  # fmt: skip
     except KeyboardInterrupt:
         _sweep(out_dir)
-        raise Interrupted(
-            [outcomes[e.name] for e in episodes if e.name in outcomes],
-            [e.name for e in episodes if e.name not in outcomes],
-        ) from None
+        raise _interrupted(episodes, outcomes, out_dir, started_s=started_s) from None
     return [outcomes[e.name] for e in episodes]

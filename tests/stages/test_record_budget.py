@@ -35,13 +35,13 @@ def _data(**sim: float) -> dict:
 
 def test_estimate_counts_control_steps_and_physics_steps():
     data = _data(physics_dt_s=0.0005, control_period_steps=4)
-    data["scenarios"]["paper"]["hold_s"] = 3.0
+    data["scenarios"]["paper"].update(hold_s=3.0, preroll_s=1.0)
     episode = parse_params(data, source="p.yaml").episodes[0]
     est = estimate_episode(episode, dof=6, motion_s=1.0)
-    assert est.duration_s == 4.0
-    assert est.control_steps == 2001  # 4 s at 2 ms, both ends
-    assert est.physics_steps == 8004
-    assert est.memory_bytes == 2001 * 6 * BYTES_PER_JOINT_STEP
+    assert est.duration_s == 5.0  # pre-roll + motion + hold
+    assert est.control_steps == 2501  # 5 s at 2 ms, both ends
+    assert est.physics_steps == 10004
+    assert est.memory_bytes == 2501 * 6 * BYTES_PER_JOINT_STEP
 
 
 def test_an_hour_at_100_khz_is_refused_up_front_in_one_line(tmp_path):
@@ -56,7 +56,8 @@ def test_an_hour_at_100_khz_is_refused_up_front_in_one_line(tmp_path):
     )  # fmt: skip
     lines = result.stderr.strip().splitlines()
     assert result.returncode == 1 and len(lines) == 1, result.stderr
-    assert "360,000,001 control steps x 6 joints" in lines[0]
+    assert re.search(r"episode 'paper-\w+' is 36\d\d s at 36\d,\d{3},\d{3} control steps x 6 "
+                     r"joints: ", lines[0])  # fmt: skip
     assert re.search(r"would hold about [\d.]+ TB in memory, more than the ", lines[0])
     assert "lower scenarios.paper.hold_s or sim.control_period_steps" in lines[0]
     assert not (tmp_path / "rec").exists()
