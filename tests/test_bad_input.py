@@ -174,15 +174,25 @@ PARAMS_CASES: list[tuple[str, Callable[[dict[str, Any]], None], str]] = [
 ]
 
 
-@pytest.mark.filterwarnings("error::RuntimeWarning")
-@pytest.mark.parametrize(
-    ("mutate", "expected"), [c[1:] for c in PARAMS_CASES], ids=[c[0] for c in PARAMS_CASES]
-)
-def test_bad_params_fail_in_one_line(tmp_path, capsys, mutate, expected):
-    data = copy.deepcopy(PARAMS)
+def battery(cases: list[tuple[str, Callable[[dict[str, Any]], None], str]]) -> Any:
+    """Parametrize (mutate, expected) over named cases."""
+    return pytest.mark.parametrize(
+        ("mutate", "expected"), [c[1:] for c in cases], ids=[c[0] for c in cases]
+    )
+
+
+def mutated(base: dict[str, Any], mutate: Callable[[dict[str, Any]], None], path: Path) -> Path:
+    """Write a mutated copy of ``base`` as YAML to ``path``."""
+    data = copy.deepcopy(base)
     mutate(data)
-    params = tmp_path / "params.yaml"
-    params.write_text(yaml.safe_dump(data))
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+@battery(PARAMS_CASES)
+def test_bad_params_fail_in_one_line(tmp_path, capsys, mutate, expected):
+    params = mutated(PARAMS, mutate, tmp_path / "params.yaml")
     out = tmp_path / "rec"
     code, err = run_cli(["record", "--params", str(params), "--out", str(out)], capsys)
     assert_one_line(code, err, expected)
@@ -266,14 +276,9 @@ ROBOT_CASES: list[tuple[str, Callable[[dict[str, Any]], None], str]] = [
 
 
 @pytest.mark.filterwarnings("error::RuntimeWarning")
-@pytest.mark.parametrize(
-    ("mutate", "expected"), [c[1:] for c in ROBOT_CASES], ids=[c[0] for c in ROBOT_CASES]
-)
+@battery(ROBOT_CASES)
 def test_bad_robot_files_fail_in_one_line(tmp_path, capsys, mutate, expected):
-    data = copy.deepcopy(UR5)
-    mutate(data)
-    robot = tmp_path / "arm.yaml"
-    robot.write_text(yaml.safe_dump(data))
+    robot = mutated(UR5, mutate, tmp_path / "arm.yaml")
     code, err = run_cli(["fk", str(robot), *Q0], capsys)
     assert_one_line(code, err, expected)
     assert str(robot) in err

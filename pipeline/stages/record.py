@@ -475,15 +475,16 @@ def _run_and_write(
 # --- resource estimate ----------------------------------------------------------------
 
 # What one control step costs, per joint, measured on the paper scenario (UR5, 1 kHz, full
-# logging): peak RSS of `pipeline record` grows by ~2.8 kB per control step (6 joints) with
-# the episode's length (benches/record_memory.py, docs/robustness.md). The episode is held
-# in memory whole (EpisodeResult arrays, then every CDR message, then the MCAP chunks), so
-# this is what a longer episode adds. 600 B is the measured ~465 B plus a margin, so the
-# estimate stays an upper bound (tests/stages/test_record_budget.py checks both).
-BYTES_PER_JOINT_STEP = 600
-# Wall time per physics step and joint: 43-56 us per 6-joint step measured (sim, control
-# and writing; idle vs shared machine), rounded up.
-SECONDS_PER_JOINT_STEP = 1e-5
+# logging incl. the true state): peak RSS of `pipeline record` grows by ~3.6 kB per control
+# step (6 joints) with the episode's length (benches/record_memory.py, docs/BENCHMARKS.md).
+# The episode is held in memory whole (EpisodeResult arrays, then every CDR message, then
+# the MCAP chunks), so this is what a longer episode adds. 800 B is the measured ~595 B
+# plus a margin, so the estimate stays an upper bound when logging grows a little
+# (tests/stages/test_record_budget.py fails when it no longer is).
+BYTES_PER_JOINT_STEP = 800
+# Wall time per physics step and joint: ~14 us measured for a whole process on a shared
+# machine (simulation, control, safety checks and writing), rounded up.
+SECONDS_PER_JOINT_STEP = 2e-5
 MAX_EPISODE_WALL_S = 2 * 3600.0  # longer is a typo in hold_s or physics_dt_s, not a study
 MEMORY_SHARE = 0.8  # of MemAvailable, split between the episodes that run at once
 
