@@ -23,6 +23,7 @@ from pipeline.model import transforms as tf
 from pipeline.robots.spec import JointSpec, RobotSpec
 
 Op = tuple[str, float]
+MIN_SEGMENT_M = 1e-6
 
 
 def _ops(joint: JointSpec, convention: str) -> tuple[list[Op], list[Op]]:
@@ -79,7 +80,9 @@ def _segments(
     out = []
     pts = [(to_frame @ np.append(p, 1.0))[:3] for p in points]
     for a, b in pairwise(pts):
-        if np.linalg.norm(b - a) > 1e-9:
+        # MuJoCo refuses a capsule shorter than 1e-6 m ("fromto points too close"); a
+        # sub-micron DH offset draws no geometry
+        if np.linalg.norm(b - a) > MIN_SEGMENT_M:
             out.append(Segment((a[0], a[1], a[2]), (b[0], b[1], b[2]), radius))
     return out
 
