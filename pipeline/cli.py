@@ -7,7 +7,9 @@ Errors that are the user's input (:class:`PipelineError`) print one
 from __future__ import annotations
 
 import json
+import signal
 import sys
+import threading
 from typing import Annotated, Any
 
 import typer
@@ -420,6 +422,10 @@ def main() -> None:
     debug = "--debug" in sys.argv[1:]
     if debug:  # accepted anywhere on the line, not only before the command
         sys.argv = [sys.argv[0], "--debug", *(a for a in sys.argv[1:] if a != "--debug")]
+    # A job started in the background by a non-interactive shell inherits SIGINT ignored;
+    # `kill -INT` must still stop a run (and say what it finished).
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         app()
     except KeyboardInterrupt:

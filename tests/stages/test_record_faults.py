@@ -38,12 +38,18 @@ def _params(tmp_path: Path, *, episodes: int, hold_s: float) -> Path:
     return path
 
 
-def _start(params: Path, out: Path, *extra: str) -> subprocess.Popen[str]:
+def _ignore_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # as a shell does for a background job
+
+
+def _start(
+    params: Path, out: Path, *extra: str, sigint_ignored: bool = False
+) -> subprocess.Popen[str]:
     return subprocess.Popen(
         [sys.executable, "-m", "pipeline", "record", "--params", str(params), "--out", str(out),
          *extra],
         cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-        start_new_session=True,
+        start_new_session=True, preexec_fn=_ignore_sigint if sigint_ignored else None,
     )  # fmt: skip
 
 
@@ -128,13 +134,16 @@ def _interrupted(proc: subprocess.Popen[str], out: Path) -> tuple[list[str], lis
 
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    ("jobs", "to_group"), [(2, False), (2, True), (1, True)], ids=["parent", "group", "serial"]
+    ("jobs", "to_group", "ignored"),
+    [(2, False, False), (2, True, False), (1, True, False), (2, False, True)],
+    ids=["parent", "group", "serial", "background-job"],
 )
 def test_ctrl_c_stops_the_run_says_what_finished_and_leaves_nothing_half_done(
-    tmp_path, cleanup, jobs, to_group
+    tmp_path, cleanup, jobs, to_group, ignored
 ):
     out = tmp_path / "rec"
-    proc = _start(_params(tmp_path, episodes=6, hold_s=20.0), out, "--jobs", str(jobs))
+    params = _params(tmp_path, episodes=6, hold_s=20.0)
+    proc = _start(params, out, "--jobs", str(jobs), sigint_ignored=ignored)
     cleanup.append(proc)
     assert _wait_for(lambda: bool(_visible(out)), 120)  # one episode done, others queued
     workers = _children(proc.pid)
