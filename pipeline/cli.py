@@ -423,6 +423,15 @@ def record_cmd(
     force: Annotated[
         bool, typer.Option("--force", help="Overwrite recordings that already exist.")
     ] = False,
+    ros_distro: Annotated[
+        str | None,
+        typer.Option(
+            "--ros-distro",
+            help="Write the message definitions and metadata of this ROS 2 distribution "
+            "(jazzy or humble) so its subscribers decode every topic. Default: sim.ros_distro "
+            "in PARAMS (jazzy).",
+        ),
+    ] = None,
 ) -> None:
     """Plan, simulate and record every episode in PARAMS as a ROS 2 bag (MCAP).
 
@@ -440,6 +449,12 @@ def record_cmd(
     from pipeline.stages.record import prepare, record
 
     loaded = load_params(params)
+    if ros_distro is not None:
+        if ros_distro not in ("jazzy", "humble"):
+            from pipeline.errors import ParamsError
+
+            raise ParamsError(f"--ros-distro: {ros_distro!r}, expected jazzy or humble")
+        loaded = loaded.with_ros_distro("humble" if ros_distro == "humble" else "jazzy")
     selected = prepare(loaded, out_dir=Path(out), only=only, force=force)
     with Progress(
         TextColumn("{task.description:<32}"),
