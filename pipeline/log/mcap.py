@@ -7,22 +7,27 @@ all messages of a topic come pre-encoded as a byte matrix, their 31-byte message
 headers are filled with numpy, and a chunk is one ``bytes.join`` of slices. The file is a
 complete, indexed MCAP: chunk CRCs, message indexes, chunk/metadata indexes, statistics,
 summary offsets, data-section and summary CRCs, validated in tests by the ``mcap`` reader.
-Reading is :mod:`pipeline.log.mcap_read`.
+Reading (:class:`McapScan`) streams a file chunk by chunk and checks every CRC.
 """
 
 from __future__ import annotations
 
+import contextlib
 import enum
+import hashlib
 import itertools
 import struct
 import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import BinaryIO
+from pathlib import Path
+from typing import IO, BinaryIO
 
 import numpy as np
 import zstandard
 from numpy.typing import NDArray
+
+from pipeline.errors import RecordingError
 
 MAGIC = b"\x89MCAP0\r\n"
 PROFILE = "ros2"
@@ -352,3 +357,399 @@ def _write_chunks(
             )
         )
     return chunk_indexes, counts, int(times.min()), int(times.max())
+
+
+# --- reading ----------------------------------------------------------------------------------
+
+# Loose (unchunked) messages are batched into pseudo-chunks of this size.
+_LOOSE_BATCH_BYTES = 4 << 20
+
+
+@dataclass(frozen=True)
+class McapSchema:
+    id: int
+    name: str
+    encoding: str
+    data: bytes
+
+
+@dataclass(frozen=True)
+class McapChannel:
+    id: int
+    topic: str
+    schema_id: int
+    encoding: str
+
+
+@dataclass(frozen=True)
+class Salvage:
+    """Where a salvaged scan stopped: the damage, and how much of the file it left unread.
+
+    Attributes:
+        at_byte: offset of the first damaged record.
+        problem: what is wrong there.
+        lost_bytes: bytes from the damage to the end of the file.
+    """
+
+    at_byte: int
+    problem: str
+    lost_bytes: int
+
+
+def gather_rows(u8: NDArray[np.uint8], starts: NDArray[np.int64], size: int) -> NDArray[np.uint8]:
+    """Copy ``size`` bytes at each start into an (N, size) matrix.
+
+    Rows of a read-only strided view are gathered whole (one memcpy each), which
+    is some 40x faster than gathering every byte with its own index.
+    """
+    windows = np.lib.stride_tricks.as_strided(
+        u8, shape=(u8.size - size + 1, size), strides=(1, 1), writeable=False
+    )
+    return windows[starts]
+
+
+def gather_u64(u8: NDArray[np.uint8], offsets: NDArray[np.int64]) -> NDArray[np.uint64]:
+    return gather_rows(u8, offsets, 8).view("<u8").reshape(-1)
+
+
+class McapScan:
+    """Streams one MCAP file, validating it: every record, chunk CRC, data and summary CRC.
+
+    One chunk is in memory at a time. Subclasses receive the messages through
+    :meth:`on_messages` (per chunk, the message record starts of each channel), with
+    :attr:`schemas` and :attr:`channels` known by then. With ``salvage``, damage after the
+    first intact chunk ends the scan instead of failing it: :attr:`salvaged` then says where
+    and why, and everything before it has been delivered.
+    """
+
+    def __init__(self, path: Path, *, salvage: bool = False) -> None:
+        self.path = path
+        self.schemas: dict[int, McapSchema] = {}
+        self.channels: dict[int, McapChannel] = {}
+        self.metadata: dict[str, dict[str, str]] = {}
+        self.topic_counts: dict[str, int] = {}
+        self.sha = hashlib.sha256()
+        self.size = 0
+        self.salvage = salvage
+        self.salvaged: Salvage | None = None
+        self.chunks_read = 0
+        self._damage_at = 0
+        # The chunk read last and its message indexes, decoded once the indexes are in.
+        self._pending: tuple[bytes, int] | None = None
+        self._index: dict[int, NDArray[np.uint64]] = {}
+
+    # ---- errors
+    def _fail(self, problem: str) -> RecordingError:
+        return RecordingError(f"{self.path}: {problem}")
+
+    # ---- the record loop
+    def run(self) -> None:
+        try:
+            self.size = self.path.stat().st_size
+            fh = open(self.path, "rb")  # noqa: SIM115 - closed in finally below
+        except OSError as err:
+            raise self._fail(f"cannot read ({err.strerror})") from err
+        try:
+            self._run(fh)
+        except RecordingError as err:
+            if not (self.salvage and (self.chunks_read or self._pending)):
+                raise
+            self._salvaged(str(err))
+        finally:
+            fh.close()
+
+    def _salvaged(self, problem: str) -> None:
+        """End a salvaged scan at the damage: deliver the last intact chunk, note the rest."""
+        at = self._damage_at
+        # A pending chunk whose own records are damaged is lost with the rest.
+        with contextlib.suppress(RecordingError):
+            self._flush()
+        self.salvaged = Salvage(
+            at_byte=at,
+            problem=problem.removeprefix(f"{self.path}: "),
+            lost_bytes=self.size - at,
+        )
+
+    def _read(self, fh: IO[bytes], n: int) -> bytes:
+        data = fh.read(n)
+        self.sha.update(data)
+        return data
+
+    def _run(self, fh: IO[bytes]) -> None:
+        if self.size == 0:
+            raise self._fail("empty file (0 bytes); expected an MCAP recording")
+        magic = self._read(fh, 8)
+        if magic != MAGIC:
+            raise self._fail("not an MCAP file (the first bytes are not the MCAP magic)")
+        crc = zlib.crc32(magic)
+        pos = 8
+        loose = bytearray()
+        while True:
+            self._damage_at = pos
+            head = self._read(fh, 9)
+            if len(head) < 9:
+                raise self._fail(
+                    f"truncated: the file ends at byte {self.size} before the data section "
+                    "is closed (no DataEnd record, no footer)"
+                )
+            op = head[0]
+            (length,) = struct.unpack_from("<Q", head, 1)
+            if pos + 9 + length > self.size:
+                raise self._fail(
+                    f"truncated: record at byte {pos} claims {length} bytes but the file "
+                    f"ends at byte {self.size}"
+                )
+            if op != Op.MESSAGE_INDEX:
+                self._flush()
+            if op == Op.DATA_END:
+                body = self._read(fh, length)
+                if length < 4:
+                    raise self._fail(
+                        f"corrupt: DataEnd record at byte {pos} has {length} bytes, expected 4"
+                    )
+                (expected,) = struct.unpack_from("<I", body, 0)
+                if expected and expected != crc:
+                    raise self._fail(
+                        f"corrupt: data section CRC mismatch (recorded {expected:#010x}, "
+                        f"computed {crc:#010x})"
+                    )
+                pos += 9 + length
+                break
+            body = self._read(fh, length)
+            crc = zlib.crc32(body, zlib.crc32(head, crc))
+            if op == Op.CHUNK:
+                self._pending = (self._chunk(body, pos), pos)
+            elif op == Op.MESSAGE_INDEX:
+                self._message_index(body, pos)
+            elif op == Op.MESSAGE:
+                loose += head + body
+                if len(loose) >= _LOOSE_BATCH_BYTES:
+                    self._records(bytes(loose), pos)
+                    loose.clear()
+            elif op in (Op.SCHEMA, Op.CHANNEL):
+                self._records(head + body, pos)
+            elif op == Op.METADATA:
+                self._metadata(body, pos)
+            elif op == Op.FOOTER:
+                raise self._fail(f"corrupt: footer at byte {pos} before the DataEnd record")
+            pos += 9 + length
+        if loose:
+            self._records(bytes(loose), pos)
+        self._damage_at = pos
+        self._finish_file(fh, pos)
+
+    def _finish_file(self, fh: IO[bytes], pos: int) -> None:
+        """Check the end of the file: footer + magic, and the summary CRC if recorded.
+
+        The summary itself is not needed here, but a damaged one misleads other tools.
+        It holds indexes and statistics only (a few bytes per chunk), so it is read whole.
+        """
+        rest = self._read(fh, self.size - pos)
+        if len(rest) < FOOTER_RECORD + 8:
+            raise self._fail(f"truncated: no footer after the data section (ends at byte {pos})")
+        footer = rest[-(FOOTER_RECORD + 8) :]
+        if footer[-8:] != MAGIC or footer[0] != Op.FOOTER:
+            raise self._fail("truncated or corrupt: the file does not end with a footer and magic")
+        start, _, expected = struct.unpack_from("<QQI", footer, 9)
+        # The summary (if any) starts right after DataEnd, else the footer does: anything
+        # else is a damaged footer or DataEnd record, which other readers refuse too.
+        if start == 0 and len(rest) != FOOTER_RECORD + 8:
+            raise self._fail(
+                f"corrupt: {len(rest) - FOOTER_RECORD - 8} bytes between the data section "
+                f"(ends at byte {pos}) and the footer, which records no summary"
+            )
+        if start not in (0, pos):
+            raise self._fail(
+                f"corrupt: the footer's summary_start ({start}) is not where the data section "
+                f"ends (byte {pos})"
+            )
+        if not expected or start == 0:
+            return  # no summary, or no CRC recorded for it
+        covered = rest[start - pos : len(rest) - 8 - 4]  # up to the footer's CRC field
+        crc = zlib.crc32(covered)
+        if crc != expected:
+            raise self._fail(
+                f"corrupt: summary section CRC mismatch (recorded {expected:#010x}, "
+                f"computed {crc:#010x})"
+            )
+
+    # ---- record bodies
+    @staticmethod
+    def _str(body: bytes, off: int) -> tuple[str, int]:
+        (n,) = struct.unpack_from("<I", body, off)
+        end = off + 4 + n
+        if end > len(body):
+            raise ValueError("string runs past its record")
+        return body[off + 4 : end].decode("utf-8"), end
+
+    def _metadata(self, body: bytes, pos: int) -> None:
+        try:
+            name, off = self._str(body, 0)
+            (nbytes,) = struct.unpack_from("<I", body, off)
+            off += 4
+            end = off + nbytes
+            values: dict[str, str] = {}
+            while off < end:
+                key, off = self._str(body, off)
+                value, off = self._str(body, off)
+                values[key] = value
+        except (struct.error, ValueError, UnicodeDecodeError) as err:
+            raise self._fail(f"corrupt: metadata record at byte {pos} ({err})") from err
+        self.metadata[name] = values
+
+    def _chunk(self, body: bytes, pos: int) -> bytes:
+        try:
+            _, _, usize, ucrc = struct.unpack_from("<QQQI", body, 0)
+            compression, off = self._str(body, 28)
+            (clen,) = struct.unpack_from("<Q", body, off)
+            off += 8
+        except (struct.error, ValueError, UnicodeDecodeError) as err:
+            raise self._fail(f"corrupt: chunk header at byte {pos} ({err})") from err
+        if off + clen > len(body):
+            raise self._fail(f"corrupt: chunk at byte {pos} is shorter than it claims")
+        raw = body[off : off + clen]
+        try:
+            if compression == "zstd":
+                import zstandard
+
+                data = zstandard.ZstdDecompressor().decompress(raw, max_output_size=usize)
+            elif compression == "lz4":
+                import lz4.frame  # type: ignore[import-untyped]
+
+                data = lz4.frame.decompress(raw)
+            elif compression == "":
+                data = raw
+            else:
+                raise self._fail(
+                    f"chunk at byte {pos} uses unsupported compression '{compression}' "
+                    "(expected zstd, lz4 or none)"
+                )
+        except RecordingError:
+            raise
+        except Exception as err:  # zstd / lz4 raise their own error types
+            raise self._fail(
+                f"corrupt: chunk at byte {pos} cannot be decompressed ({compression}: {err})"
+            ) from err
+        if len(data) != usize:
+            raise self._fail(
+                f"corrupt: chunk at byte {pos} decompresses to {len(data)} bytes, expected {usize}"
+            )
+        if ucrc:
+            got = zlib.crc32(data)
+            if got != ucrc:
+                raise self._fail(
+                    f"corrupt: chunk at byte {pos} fails its CRC check "
+                    f"(recorded {ucrc:#010x}, computed {got:#010x})"
+                )
+        return bytes(data)
+
+    def _message_index(self, body: bytes, pos: int) -> None:
+        if self._pending is None:
+            return
+        try:
+            (cid, nbytes) = struct.unpack_from("<HI", body, 0)
+            if 6 + nbytes > len(body) or nbytes % 16:
+                raise ValueError("entries overrun the record")
+        except (struct.error, ValueError) as err:
+            raise self._fail(f"corrupt: message index at byte {pos} ({err})") from err
+        entries = np.frombuffer(body, dtype="<u8", count=nbytes // 8, offset=6)
+        self._index[cid] = entries[1::2]
+
+    def _flush(self) -> None:
+        """Decode the chunk read last, now that its message indexes (if any) are known."""
+        if self._pending is None:
+            return
+        data, pos = self._pending
+        index, self._index, self._pending = self._index, {}, None
+        self.chunks_read += 1
+        positions = self._indexed_positions(data, index) if index else None
+        self._records(data, pos, positions)
+
+    def _indexed_positions(
+        self, buf: bytes, index: dict[int, NDArray[np.uint64]]
+    ) -> dict[int, NDArray[np.int64]] | None:
+        """Message starts per channel from the chunk's message indexes, if they provably
+        tile the whole chunk with message records; None (walk instead) otherwise."""
+        if any(cid not in self.channels for cid in index):
+            return None
+        u8 = np.frombuffer(buf, dtype=np.uint8)
+        offsets = np.concatenate(list(index.values())).astype(np.int64)
+        if offsets.size == 0 or int(offsets.max()) + 9 + MESSAGE_PREFIX > u8.size:
+            return None
+        order = np.sort(offsets)
+        lengths = gather_u64(u8, order + 1).astype(np.int64)
+        ends = order + 9 + lengths
+        if order[0] != 0 or ends[-1] != u8.size or not np.array_equal(ends[:-1], order[1:]):
+            return None
+        if not (u8[order] == Op.MESSAGE).all():
+            return None
+        out: dict[int, NDArray[np.int64]] = {}
+        for cid, offs in index.items():
+            starts = np.sort(offs.astype(np.int64)) + 9
+            ids = gather_rows(u8, starts, 2).view("<u2").reshape(-1)
+            if not (ids == cid).all():
+                return None
+            out[cid] = starts
+        return out
+
+    def _records(
+        self, buf: bytes, pos: int, indexed: dict[int, NDArray[np.int64]] | None = None
+    ) -> None:
+        """Find the message records of a chunk (or a batch of loose records) and decode."""
+        if indexed is not None:
+            self._decode_positions(buf, pos, indexed)
+            return
+        positions: dict[int, list[int]] = {}
+        n = len(buf)
+        off = 0
+        unpack = struct.unpack_from
+        try:
+            while off < n:
+                op = buf[off]
+                (length,) = unpack("<Q", buf, off + 1)
+                start = off + 9
+                if op == Op.MESSAGE:
+                    (cid,) = unpack("<H", buf, start)
+                    lst = positions.get(cid)
+                    if lst is None:
+                        lst = positions[cid] = []
+                    lst.append(start)
+                elif op == Op.SCHEMA:
+                    self._schema(buf[start : start + length])
+                elif op == Op.CHANNEL:
+                    self._channel(buf[start : start + length])
+                off = start + length
+        except (struct.error, ValueError, UnicodeDecodeError) as err:
+            raise self._fail(f"corrupt: bad record inside the chunk at byte {pos} ({err})") from err
+        if off != n:
+            raise self._fail(f"corrupt: records overrun the chunk at byte {pos}")
+        self._decode_positions(
+            buf, pos, {cid: np.asarray(v, dtype=np.int64) for cid, v in positions.items()}
+        )
+
+    def on_messages(self, channel: McapChannel, buf: bytes, starts: NDArray[np.int64]) -> None:
+        """Messages of ``channel`` in ``buf``: record bodies start at ``starts`` (the channel
+        id), payloads at ``starts + MESSAGE_PREFIX``, body lengths at ``starts - 8``."""
+
+    def _decode_positions(
+        self, buf: bytes, pos: int, positions: dict[int, NDArray[np.int64]]
+    ) -> None:
+        for cid, starts in positions.items():
+            channel = self.channels.get(cid)
+            if channel is None:
+                raise self._fail(f"corrupt: message on unknown channel {cid} (chunk at byte {pos})")
+            self.topic_counts[channel.topic] = self.topic_counts.get(channel.topic, 0) + len(starts)
+            self.on_messages(channel, buf, starts)
+
+    def _schema(self, body: bytes) -> None:
+        (sid,) = struct.unpack_from("<H", body, 0)
+        name, off = self._str(body, 2)
+        encoding, off = self._str(body, off)
+        (n,) = struct.unpack_from("<I", body, off)
+        self.schemas[sid] = McapSchema(sid, name, encoding, body[off + 4 : off + 4 + n])
+
+    def _channel(self, body: bytes) -> None:
+        cid, sid = struct.unpack_from("<HH", body, 0)
+        topic, off = self._str(body, 4)
+        encoding, off = self._str(body, off)
+        self.channels[cid] = McapChannel(cid, topic, sid, encoding)

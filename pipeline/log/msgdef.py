@@ -147,7 +147,8 @@ def parse_fields(name: str, text: str) -> MsgType:
         rest = rest.strip()
         if not rest:
             raise ValueError(f"{name}: cannot parse line {raw_line!r}")
-        if "=" in rest and (rest.index("=") < (rest.index(" ") if " " in rest else len(rest))):
+        head, _, tail = rest.partition(" ")
+        if "=" in head or tail.lstrip().startswith("="):
             cname, _, value = rest.partition("=")
             base = normalize_type(type_token, package)
             constants.append(MsgConstant(cname.strip(), base, value.strip()))

@@ -231,3 +231,71 @@ def write_bag_dir(bag_dir: Path, write: Callable[[Path], None], *, force: bool) 
             shutil.rmtree(tmp)
         raise
     return size
+
+
+# --- finding bags -------------------------------------------------------------------------
+
+STORAGE_SUFFIXES = (".mcap", ".db3")
+
+
+def find_recordings(root: Path) -> list[Path]:
+    """Every rosbag2 directory (has ``metadata.yaml``) and bare ``.mcap`` file under ``root``.
+
+    Hidden files and folders (temporary names of a writer at work) are ignored.
+    A ``root`` that is itself a recording is returned alone.
+    """
+    root = Path(root)
+    if root.is_file():
+        return [root]
+    if (root / METADATA_FILE).is_file():
+        return [root]
+    found: list[Path] = []
+    for dirpath, dirnames, filenames in os.walk(root):
+        dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
+        here = Path(dirpath)
+        if here != root and METADATA_FILE in filenames:
+            found.append(here)
+            dirnames[:] = []
+            continue
+        found.extend(
+            here / f for f in sorted(filenames) if f.endswith(".mcap") and not f.startswith(".")
+        )
+    return sorted(found)
+
+
+def storage_files(source: Path) -> list[Path]:
+    """The storage files of a recording, in order: a bare file, or the files a rosbag2
+    directory's ``metadata.yaml`` lists (several for a split bag), else its ``*.mcap``.
+
+    Raises:
+        RecordingError: missing, unreadable metadata, no storage file, a listed file missing.
+    """
+    if not source.exists():
+        raise RecordingError(f"{source}: no such file or directory")
+    if source.is_file():
+        return [source]
+    meta = source / METADATA_FILE
+    names: list[str] = []
+    if meta.is_file():
+        try:
+            info = yaml.safe_load(meta.read_text(encoding="utf-8"))
+            rel = info["rosbag2_bagfile_information"]["relative_file_paths"]
+            names = [str(r) for r in rel]
+        except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError) as err:
+            raise RecordingError(
+                f"{meta}: not a rosbag2 metadata file (expected "
+                "rosbag2_bagfile_information.relative_file_paths)"
+            ) from err
+    else:
+        names = sorted(p.name for p in source.glob("*.mcap"))
+    if not names:
+        raise RecordingError(f"{source}: no .mcap file in this rosbag2 directory")
+    paths = [source / name for name in names]
+    for path in paths:
+        if not path.is_file():
+            raise RecordingError(f"{path}: listed in metadata.yaml but missing")
+        if path.suffix not in STORAGE_SUFFIXES:
+            raise RecordingError(
+                f"{path}: unknown storage file (expected {' or '.join(STORAGE_SUFFIXES)})"
+            )
+    return paths
