@@ -307,14 +307,20 @@ class _Walk:
                     self.walk(f.base, f"{path}[{k}].")
 
 
-def walk(types: MsgTypes, root: str, data: bytes | memoryview) -> Layout:
+def walk(types: MsgTypes, root: str, data: bytes | memoryview, *, exact: bool = False) -> Layout:
     """The layout of one CDR message of type ``root`` (read from its bytes).
+
+    Args:
+        exact: also refuse bytes left over after the last field (beyond alignment
+            padding): tells apart definitions that share a prefix.
 
     Raises:
         ValueError: the bytes do not fit the type (truncated or corrupt).
     """
     w = _Walk(types, data)
     w.walk(_resolve(types, root))
+    if exact and w.end - w.pos > 3:
+        raise ValueError(f"{w.end - w.pos} bytes left after the last field")
     return Layout(len(data), w.leaves, w.texts, tuple(w.check))
 
 

@@ -18,9 +18,10 @@ import hashlib
 import json
 import struct
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+from xml.etree import ElementTree
 
 import numpy as np
 import polars as pl
@@ -40,6 +41,7 @@ from pipeline.constants import (
 )
 from pipeline.errors import RecordingError
 from pipeline.log import cdr
+from pipeline.log.db3 import Db3Scan
 from pipeline.log.decode import DecodeError, TopicDecoder, Want
 from pipeline.log.mcap import MESSAGE_PREFIX, McapChannel, McapScan, Salvage
 from pipeline.log.msgdef import MsgTypes, parse_msgdef, root_type_name
@@ -101,6 +103,26 @@ ROLES: dict[str, Role] = {
     "robot_description": Role(TYPE_STRING, TOPIC_ROBOT_DESCRIPTION, False),
     "ground_truth": Role(TYPE_JOINT_STATE, TOPIC_GROUND_TRUTH, False),
 }
+
+
+@dataclass(frozen=True)
+class ReadOptions:
+    """How to read recordings we did not write.
+
+    Attributes:
+        topics: role -> topic remaps (roles: :data:`ROLES`), for bags whose topics are
+            neither ours nor the only one of their type.
+        salvage: read every intact chunk before damage instead of refusing the file.
+        controller: controller label (default: our metadata, else the bag's name).
+        scenario: scenario label (default: our metadata, else "external").
+    """
+
+    topics: Mapping[str, str] = field(default_factory=dict)
+    salvage: bool = False
+    controller: str | None = None
+    scenario: str | None = None
+
+
 # Our names of the roles' topics: never a by-type candidate for another role.
 _OUR_TOPICS = frozenset(r.default_topic for r in ROLES.values())
 
@@ -265,7 +287,7 @@ class _Collector:
     def fail(self, problem: str) -> RecordingError:
         return RecordingError(f"{self.path}: {problem}")
 
-    def type_of(self, scan: McapScan, channel: McapChannel) -> tuple[str, MsgTypes]:
+    def type_of(self, scan: McapScan | Db3Scan, channel: McapChannel) -> tuple[str, MsgTypes]:
         if channel.topic in self.types:
             return self.types[channel.topic]
         schema = scan.schemas.get(channel.schema_id)
@@ -303,7 +325,11 @@ class _Collector:
         return False
 
     def on_messages(
-        self, scan: McapScan, channel: McapChannel, buf: bytes, starts: NDArray[np.int64]
+        self,
+        scan: McapScan | Db3Scan,
+        channel: McapChannel,
+        buf: bytes,
+        starts: NDArray[np.int64],
     ) -> None:
         schema = scan.schemas.get(channel.schema_id)
         if schema is None or not self._wanted(channel.topic, root_type_name(schema.name)):
@@ -325,18 +351,39 @@ class _Collector:
             raise self.fail(str(err)) from err
 
 
-class _Scan(McapScan):
+def _deliver(
+    scan: McapScan | Db3Scan,
+    collector: _Collector,
+    channel: McapChannel,
+    buf: bytes,
+    starts: NDArray[np.int64],
+) -> None:
+    try:
+        collector.on_messages(scan, channel, buf, starts)
+    except RecordingError:
+        raise
+    except Exception as err:  # a decoder bug or an input it did not foresee
+        raise RecordingError(
+            f"{scan.path}: cannot decode {channel.topic}: {type(err).__name__}: {err}"
+        ) from err
+
+
+class _McapFile(McapScan):
     def __init__(self, path: Path, collector: _Collector, *, salvage: bool) -> None:
         super().__init__(path, salvage=salvage)
         self.collector = collector
 
     def on_messages(self, channel: McapChannel, buf: bytes, starts: NDArray[np.int64]) -> None:
-        try:
-            self.collector.on_messages(self, channel, buf, starts)
-        except RecordingError:
-            raise
-        except Exception as err:  # a decoder bug or an input it did not foresee
-            raise self._fail(f"cannot decode {channel.topic}: {type(err).__name__}: {err}") from err
+        _deliver(self, self.collector, channel, buf, starts)
+
+
+class _Db3File(Db3Scan):
+    def __init__(self, path: Path, collector: _Collector, *, salvage: bool) -> None:
+        super().__init__(path, salvage=salvage)
+        self.collector = collector
+
+    def on_messages(self, channel: McapChannel, buf: bytes, starts: NDArray[np.int64]) -> None:
+        _deliver(self, self.collector, channel, buf, starts)
 
 
 def _pick(role_name: str, collector: _Collector, present: Mapping[str, str]) -> str | None:
@@ -402,6 +449,38 @@ def _planned(collector: _Collector, topic: str | None) -> PlannedTrajectory | No
     )
 
 
+def _urdf_root(urdf: str) -> ElementTree.Element | None:
+    try:
+        root = ElementTree.fromstring(urdf)
+    except ElementTree.ParseError:
+        return None
+    return root if root.tag == "robot" else None
+
+
+def urdf_robot_name(urdf: str) -> str | None:
+    """The ``<robot name=...>`` of a URDF, None if it is not one."""
+    root = _urdf_root(urdf)
+    return root.get("name") if root is not None else None
+
+
+def urdf_effort_limits(urdf: str) -> dict[str, float]:
+    """``<limit effort=...>`` per joint of a URDF [N m] (joints without one left out)."""
+    root = _urdf_root(urdf)
+    limits: dict[str, float] = {}
+    for joint in root.iter("joint") if root is not None else ():
+        limit = joint.find("limit")
+        name = joint.get("name")
+        if limit is None or name is None:
+            continue
+        try:
+            value = float(limit.get("effort", "nan"))
+        except ValueError:
+            continue
+        if np.isfinite(value) and value > 0:
+            limits[name] = value
+    return limits
+
+
 def _robot_description(collector: _Collector, topic: str | None) -> str | None:
     data = collector.singles.get(topic or "")
     if topic is None or data is None:
@@ -430,9 +509,7 @@ def _match_stamps(
     return np.flatnonzero(ok), pick[ok]
 
 
-def read_recording(
-    source: Path, *, topics: Mapping[str, str] | None = None, salvage: bool = False
-) -> Recording:
+def read_recording(source: Path, options: ReadOptions | None = None) -> Recording:
     """Read one recording (rosbag2 directory or bare ``.mcap``) into a :class:`Recording`.
 
     Times (``time_s``) count from the recording's first control-rate stamp, so header
@@ -441,10 +518,8 @@ def read_recording(
 
     Args:
         source: the recording.
-        topics: role -> topic remaps (roles: :data:`ROLES`), for bags whose topics are
-            not ours and not the only one of their type.
-        salvage: read every intact chunk before damage (truncation, CRC) instead of
-            refusing the file; the recording then says what was lost.
+        options: remaps, salvage and labels for bags we did not write (see
+            :class:`ReadOptions`); with ``salvage`` the recording says what was lost.
 
     Raises:
         RecordingError: missing, empty, not MCAP, truncated, corrupt (CRC), lacking
@@ -453,7 +528,8 @@ def read_recording(
             wrapped into one, naming the file.
     """
     source = Path(source)
-    unknown = sorted(set(topics or {}) - set(ROLES))
+    options = options or ReadOptions()
+    unknown = sorted(set(options.topics) - set(ROLES))
     if unknown:
         raise RecordingError(f"--topic {unknown[0]}=...: unknown role (roles: {', '.join(ROLES)})")
     try:
@@ -461,7 +537,7 @@ def read_recording(
     except OSError as err:
         raise RecordingError(f"{source}: cannot read ({err.strerror or err})") from err
     try:
-        return _read(source, files, topics or {}, salvage)
+        return _read(source, files, options)
     except RecordingError:
         raise
     except Exception as err:  # the boundary: nothing else may escape a per-recording read
@@ -480,21 +556,21 @@ def _missing_array_notes(arrays: dict[str, F64], topic: str, fields: dict[str, s
     return notes
 
 
-def _read(source: Path, files: list[Path], topics: Mapping[str, str], salvage: bool) -> Recording:
+def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
     mcap_path = files[0]
-    collector = _Collector(topics)
+    salvage = options.salvage
+    collector = _Collector(options.topics)
     sha = hashlib.sha256()
     size = 0
     present: dict[str, str] = {}
     salvaged: list[tuple[Path, Salvage]] = []
     for path in files:
-        if path.suffix == ".db3":
-            raise RecordingError(
-                f"{path}: rosbag2 sqlite3 storage is not supported yet; convert the bag with "
-                "`ros2 bag convert` to MCAP"
-            )
         collector.path = path
-        scan = _Scan(path, collector, salvage=salvage)
+        scan: McapScan | Db3Scan
+        if path.suffix == ".db3":
+            scan = _Db3File(path, collector, salvage=salvage)
+        else:
+            scan = _McapFile(path, collector, salvage=salvage)
         scan.sha = sha
         scan.run()
         size += scan.size
@@ -564,7 +640,21 @@ def _read(source: Path, files: list[Path], topics: Mapping[str, str], salvage: b
         notes.append(f"{dropped} joint-state samples without a controller state were dropped")
     notes += _missing_array_notes(js_a, js_topic, {"velocity": "velocity", "effort": "effort"})
 
-    raw_meta = collector.metadata.get(METADATA_EPISODE, {})
+    raw_meta = dict(collector.metadata.get(METADATA_EPISODE, {}))
+    ours = METADATA_EPISODE in collector.metadata
+    labels = {"controller": options.controller, "scenario": options.scenario}
+    if not ours:
+        raw_meta = {
+            "episode": source.name.removesuffix(".mcap"),
+            "controller": source.name.removesuffix(".mcap"),
+            "scenario": "external",
+        }
+    raw_meta |= {k: v for k, v in labels.items() if v}
+    urdf = _robot_description(collector, chosen["robot_description"])
+    if not ours and urdf is not None:
+        robot = urdf_robot_name(urdf)
+        if robot:
+            raw_meta["robot"] = robot
     settings: dict[str, Any] = {}
     if "settings" in raw_meta:
         try:
@@ -580,10 +670,13 @@ def _read(source: Path, files: list[Path], topics: Mapping[str, str], salvage: b
                 f"'{METADATA_EPISODE}' settings is not valid JSON ({err.msg} at char {err.pos}): "
                 "settings are n/a"
             )
-    elif METADATA_EPISODE not in collector.metadata:
+    elif not ours:
         notes.append(
-            f"no '{METADATA_EPISODE}' metadata record: episode name from the file name, "
-            "settings n/a"
+            f"no '{METADATA_EPISODE}' metadata record (not recorded by armlab): episode "
+            f"'{raw_meta['episode']}', controller '{raw_meta['controller']}' and scenario "
+            f"'{raw_meta['scenario']}' from "
+            + ("the command line" if any(labels.values()) else "the bag's name")
+            + "; settings (gains, plant, planner, motion start) are n/a"
         )
 
     # Relative times: wall-clock header stamps (1.7e9 s) would otherwise swamp float64
@@ -683,7 +776,7 @@ def _read(source: Path, files: list[Path], topics: Mapping[str, str], salvage: b
         samples=samples,
         controller_states=controller_states,
         planned=_planned(collector, chosen["planned_trajectory"]),
-        robot_description=_robot_description(collector, chosen["robot_description"]),
+        robot_description=urdf,
         topic_counts=dict(collector.topic_counts),
         decoded_messages=js_group.count + cs_group.count + (truth.count if truth else 0),
         notes=tuple(notes),

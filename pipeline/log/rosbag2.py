@@ -239,7 +239,8 @@ STORAGE_SUFFIXES = (".mcap", ".db3")
 
 
 def find_recordings(root: Path) -> list[Path]:
-    """Every rosbag2 directory (has ``metadata.yaml``) and bare ``.mcap`` file under ``root``.
+    """Every rosbag2 directory (has ``metadata.yaml``) and bare ``.mcap``/``.db3`` file
+    under ``root``.
 
     Hidden files and folders (temporary names of a writer at work) are ignored.
     A ``root`` that is itself a recording is returned alone.
@@ -258,7 +259,9 @@ def find_recordings(root: Path) -> list[Path]:
             dirnames[:] = []
             continue
         found.extend(
-            here / f for f in sorted(filenames) if f.endswith(".mcap") and not f.startswith(".")
+            here / f
+            for f in sorted(filenames)
+            if f.endswith(STORAGE_SUFFIXES) and not f.startswith(".")
         )
     return sorted(found)
 
@@ -287,9 +290,9 @@ def storage_files(source: Path) -> list[Path]:
                 "rosbag2_bagfile_information.relative_file_paths)"
             ) from err
     else:
-        names = sorted(p.name for p in source.glob("*.mcap"))
+        names = sorted(p.name for p in source.iterdir() if p.suffix in STORAGE_SUFFIXES)
     if not names:
-        raise RecordingError(f"{source}: no .mcap file in this rosbag2 directory")
+        raise RecordingError(f"{source}: no .mcap or .db3 file in this rosbag2 directory")
     paths = [source / name for name in names]
     for path in paths:
         if not path.is_file():

@@ -144,6 +144,21 @@ _PRIMITIVES = frozenset(
 )
 
 
+def controller_state_candidates() -> list[str]:
+    """Full definitions of every JointTrajectoryControllerState generation, newest first
+    (Jazzy >= 5.3, Humble 4.8, control_msgs 5.0-5.2, 4.0-4.3): for storage that does not
+    carry definitions (Humble's sqlite3), the one a message's bytes fit is its layout."""
+    jazzy = full_definition(TYPE_CONTROLLER_STATE, "jazzy")
+    humble = full_definition(TYPE_CONTROLLER_STATE, "humble")
+    old = _controller_state(("desired", "actual", "error"), "")
+    return [
+        jazzy,
+        humble,
+        jazzy.replace("float64 speed_scaling_factor\n", "", 1),
+        humble.replace(humble.split("\n" + _DELIMITER)[0] + "\n", old, 1),
+    ]
+
+
 def check_distro(distro: str) -> RosDistro:
     """``distro`` if we write it, else a ValueError listing the valid ones."""
     for d in ROS_DISTROS:

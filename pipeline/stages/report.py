@@ -24,7 +24,7 @@ from pipeline.analysis.episodes import episode_table, limits_table
 from pipeline.analysis.metrics import check_baseline, comparisons, joint_metrics
 from pipeline.analysis.protocol import protocol_view
 from pipeline.errors import RecordingError, ReportError
-from pipeline.log.reader import Recording, find_recordings, read_recording
+from pipeline.log.reader import ReadOptions, Recording, find_recordings, read_recording
 from pipeline.report.figures import (
     FIGURES_DIR,
     MAX_FIGURE_SCENARIOS,
@@ -68,9 +68,14 @@ def _noop(step: str, done: int, total: int) -> None:
 
 
 def read_all(
-    recordings_dir: Path, *, skip_bad: bool, progress: Progress = _noop
+    recordings_dir: Path,
+    *,
+    skip_bad: bool,
+    progress: Progress = _noop,
+    options: ReadOptions | None = None,
 ) -> tuple[list[Recording], list[tuple[str, str]]]:
-    """Read every recording under ``recordings_dir``.
+    """Read every recording under ``recordings_dir`` (with ``options`` for bags we did not
+    write: remaps, salvage, labels).
 
     Raises:
         ReportError: no such folder, or nothing in it; duplicate episode names.
@@ -91,7 +96,7 @@ def read_all(
     for k, source in enumerate(sources):
         progress("reading recordings", k, len(sources))
         try:
-            good.append(read_recording(source))
+            good.append(read_recording(source, options))
         except RecordingError as err:
             if not skip_bad:
                 raise RecordingError(f"{err} (use --skip-bad to report without it)") from err
@@ -185,13 +190,14 @@ def run_report(
     baseline: str = "pid",
     skip_bad: bool = False,
     progress: Progress = _noop,
+    options: ReadOptions | None = None,
 ) -> ReportResult:
     """Read the recordings, compute metrics and write every report output.
 
     Raises:
         ReportError / RecordingError: see :func:`read_all`; unknown baseline controller.
     """
-    raw, bad = read_all(recordings_dir, skip_bad=skip_bad, progress=progress)
+    raw, bad = read_all(recordings_dir, skip_bad=skip_bad, progress=progress, options=options)
     views = {rec.episode: protocol_view(rec)[0] for rec in raw}
     recordings = [views[rec.episode].recording for rec in raw]
     episodes = episode_table(recordings, views)

@@ -12,7 +12,7 @@ from mcap.reader import make_reader
 from pipeline.errors import RecordingError
 from pipeline.log import bag
 from pipeline.log.mcap import FOOTER_RECORD, MAGIC, Op
-from pipeline.log.reader import read_recording
+from pipeline.log.reader import ReadOptions, read_recording
 from pipeline.robots import RobotSpec
 from tests.log.test_writer import analytic_episode, episode_metadata
 
@@ -46,7 +46,7 @@ def test_truncated_bag_is_refused_then_salvaged_up_to_the_damage(
         read_recording(long_bag.path)
     assert "\n" not in str(err.value)
 
-    rec = read_recording(long_bag.path, salvage=True)
+    rec = read_recording(long_bag.path, ReadOptions(salvage=True))
     assert rec.salvaged
     [note] = [n for n in rec.notes if n.startswith("salvaged")]
     assert f"{cut - starts[2]} bytes" in note  # lost: from the damaged chunk to the cut
@@ -69,7 +69,7 @@ def test_a_corrupt_chunk_is_refused_and_salvage_keeps_the_chunks_before_it(
     path.write_bytes(bytes(data))
     with pytest.raises(RecordingError, match="corrupt"):
         read_recording(long_bag.path)
-    rec = read_recording(long_bag.path, salvage=True)
+    rec = read_recording(long_bag.path, ReadOptions(salvage=True))
     assert rec.salvaged and 0 < rec.samples["stamp_ns"].n_unique() < N_STEPS
 
 
@@ -78,7 +78,7 @@ def test_damage_before_any_chunk_cannot_be_salvaged(long_bag: bag.BagSummary) ->
     starts = chunk_offsets(path)
     path.write_bytes(path.read_bytes()[: starts[0] + 100])
     with pytest.raises(RecordingError, match="truncated"):
-        read_recording(long_bag.path, salvage=True)
+        read_recording(long_bag.path, ReadOptions(salvage=True))
 
 
 def footer_fields(data: bytes) -> tuple[int, int, int]:
