@@ -330,3 +330,134 @@ def decode(types: MsgTypes, root: str, data: bytes | memoryview) -> dict[str, An
     out: dict[str, Any] = {p: layout.values(data, p) for p in layout.leaves}
     out.update(layout.texts)
     return out
+
+
+# --- reading many messages at once -----------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ManyLayout:
+    """Where each numeric field sits in each of N messages of possibly different shapes.
+
+    Attributes:
+        leaves: path -> (byte offsets (N,) in the buffer, numpy dtype, element counts (N,));
+            for elements of nested sequences only messages that have them count (offset -1
+            and count 0 elsewhere).
+        regions: path of every string and string sequence -> (start, end) (N,) byte ranges
+            in the buffer: equal bytes there mean equal strings.
+    """
+
+    leaves: dict[str, tuple[NDArray[np.int64], str, NDArray[np.int64]]]
+    regions: dict[str, tuple[NDArray[np.int64], NDArray[np.int64]]]
+
+
+class _ManyWalk:
+    """The :class:`_Walk` over N messages in lockstep: numpy per field, not per message."""
+
+    def __init__(
+        self,
+        types: MsgTypes,
+        u8: NDArray[np.uint8],
+        base: NDArray[np.int64],
+        size: NDArray[np.int64],
+    ) -> None:
+        self.types = types
+        self.u8 = u8
+        self.base = base  # buffer offset of each message's first byte (its CDR header)
+        self.size = size
+        self.leaves: dict[str, tuple[NDArray[np.int64], str, NDArray[np.int64]]] = {}
+        self.regions: dict[str, tuple[NDArray[np.int64], NDArray[np.int64]]] = {}
+
+    def _check(
+        self,
+        rel: NDArray[np.int64],
+        nbytes: NDArray[np.int64] | int,
+        path: str,
+        live: NDArray[np.bool_],
+    ) -> None:
+        if np.any(live & (rel + nbytes > self.size)):
+            raise ValueError(f"message ends inside field {path}")
+
+    def _u32(self, rel: NDArray[np.int64], path: str, live: NDArray[np.bool_]) -> NDArray[np.int64]:
+        self._check(rel, 4, path, live)
+        at = np.where(live, self.base + rel, 0)
+        idx = at[:, None] + np.arange(4)
+        values: NDArray[np.int64] = (
+            np.ascontiguousarray(self.u8[idx]).view("<u4").reshape(-1).astype(np.int64)
+        )
+        return np.where(live, values, 0)
+
+    def walk(
+        self,
+        type_name: str,
+        rel: NDArray[np.int64],
+        live: NDArray[np.bool_],
+        prefix: str = "",
+    ) -> NDArray[np.int64]:
+        """Advance ``rel`` (positions inside each message) over one ``type_name`` value, in
+        the ``live`` messages (the others have no such value: their counts are 0)."""
+        for f in self.types[type_name].fields:
+            path = f"{prefix}{f.name}"
+            if f.array is None or f.array >= 0:
+                count = np.where(live, 1 if f.array is None else f.array, 0).astype(np.int64)
+            else:
+                rel = np.where(live, _aligned_v(rel, 4), rel)
+                count = self._u32(rel, path, live)
+                rel = np.where(live, rel + 4, rel)
+            if f.is_primitive:
+                dtype = PRIMITIVES[f.base]
+                size = int(dtype[1])
+                rel = np.where(count > 0, _aligned_v(rel, size), rel)
+                self._check(rel, count * size, path, live)
+                self.leaves[path] = (np.where(live, self.base + rel, -1), "<" + dtype, count)
+                rel = rel + count * size
+            elif f.is_string:
+                if f.base == "wstring":
+                    raise ValueError(f"wstring field {path} is not supported")
+                start = rel.copy()
+                for k in range(int(count.max(initial=0))):
+                    has = k < count
+                    at = np.where(has, _aligned_v(rel, 4), rel)
+                    n = self._u32(at, path, has)
+                    rel = np.where(has, at + 4 + n, rel)
+                    self._check(rel, 0, path, has)
+                self.regions[path] = (self.base + start, self.base + rel)
+            elif f.array is None:
+                rel = self.walk(f.base, rel, live, f"{path}.")
+            else:
+                for k in range(int(count.max(initial=0))):
+                    rel = self.walk(f.base, rel, k < count, f"{path}[{k}].")
+        return rel
+
+
+def _aligned_v(rel: NDArray[np.int64], size: int) -> NDArray[np.int64]:
+    a = min(size, 8)
+    return 4 + ((rel - 4 + a - 1) // a) * a
+
+
+def walk_many(
+    types: MsgTypes,
+    root: str,
+    u8: NDArray[np.uint8],
+    starts: NDArray[np.int64],
+    sizes: NDArray[np.int64],
+) -> ManyLayout:
+    """The layouts of N little-endian CDR messages of type ``root`` at once.
+
+    Args:
+        u8: the buffer holding the messages.
+        starts: each message's first byte (its CDR header) in ``u8``.
+        sizes: each message's length [bytes].
+
+    Raises:
+        ValueError: a message that does not fit the type, or is not little-endian CDR.
+    """
+    if np.any(sizes < 4) or not np.all(u8[starts + 1] == 1):
+        raise ValueError("not little-endian CDR (encapsulation header)")
+    w = _ManyWalk(types, u8, starts.astype(np.int64), sizes.astype(np.int64))
+    w.walk(
+        _resolve(types, root),
+        np.full(starts.size, 4, dtype=np.int64),
+        np.ones(starts.size, dtype=bool),
+    )
+    return ManyLayout(w.leaves, w.regions)

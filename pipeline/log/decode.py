@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.log.cdr import Layout, walk
+from pipeline.log.cdr import Layout, ManyLayout, walk, walk_many
 from pipeline.log.mcap import MESSAGE_PREFIX, gather_rows, gather_u64
 from pipeline.log.msgdef import MsgTypes
 
@@ -112,11 +112,67 @@ class TopicDecoder:
             if same.any():
                 self._append(group, matrix[same])
                 left[idx[same]] = False
-        for i in np.flatnonzero(left):  # the generic path: one message at a time
-            layout = self._walk(buf, int(data_start[i]), int(lengths[i]))
-            s = int(data_start[i])
-            row = u8[s : s + layout.size]
-            self._append(self._group(layout, row), row[None, :], layout)
+        rest = np.flatnonzero(left)
+        if rest.size:
+            self._add_generic(buf, u8, data_start[rest], lengths[rest])
+
+    def _add_generic(
+        self, buf: bytes, u8: NDArray[np.uint8], starts: NDArray[np.int64], sizes: NDArray[np.int64]
+    ) -> None:
+        """Messages of differing shapes: walked all at once (:func:`walk_many`), grouped by
+        their joint-name bytes; one message at a time only if that fails (to name it)."""
+        try:
+            many = walk_many(self.types, self.type_name, u8, starts, sizes)
+            region = next(many.regions[p] for p in self.want.names if p in many.regions)
+        except (ValueError, StopIteration):
+            for s, n in zip(starts.tolist(), sizes.tolist(), strict=True):
+                layout = self._walk(buf, s, n)
+                row = u8[s : s + layout.size]
+                self._append(self._group(layout, row), row[None, :], layout)
+            return
+        a, b = region
+        span = b - a
+        for length in np.unique(span).tolist():
+            sel = np.flatnonzero(span == length)
+            rows = gather_rows(u8, a[sel], int(length)) if length else np.zeros((sel.size, 0))
+            _, first, inverse = np.unique(rows, axis=0, return_index=True, return_inverse=True)
+            for g, k in enumerate(first.tolist()):
+                i = int(sel[k])
+                s, n = int(starts[i]), int(sizes[i])
+                group = self._group(self._walk(buf, s, n), u8[s : s + n])
+                self._append_many(group, u8, many, sel[inverse.reshape(-1) == g])
+
+    def _append_many(
+        self, group: Group, u8: NDArray[np.uint8], many: ManyLayout, idx: NDArray[np.intp]
+    ) -> None:
+        def column(path: str) -> NDArray[Any]:
+            off, dtype, _ = many.leaves[path]
+            return gather_rows(u8, off[idx], int(dtype[2])).view(dtype)
+
+        n = idx.size
+        group.stamps.append(
+            column(STAMP_SEC)[:, 0].astype(np.int64) * 1_000_000_000
+            + column(STAMP_NSEC)[:, 0].astype(np.int64)
+        )
+        width = len(group.names)
+        for key, aliases in self.want.arrays.items():
+            out = np.full((n, width), np.nan)
+            todo = np.ones(n, dtype=bool)
+            for path in aliases:  # per message, the first alias with values wins
+                if path not in many.leaves or not width:
+                    continue
+                off, dtype, count = many.leaves[path]
+                cnt = count[idx]
+                bad = todo & (cnt != width) & (cnt != 0)
+                if bad.any():
+                    raise DecodeError(f"{path} has {int(cnt[bad].max())} values for {width} joints")
+                take = todo & (cnt == width)
+                if take.any():
+                    block = gather_rows(u8, off[idx[take]], int(dtype[2]) * width)
+                    out[take] = np.ascontiguousarray(block).view(dtype).astype(np.float64)
+                    todo &= ~take
+            group.arrays.setdefault(key, []).append(out)
+        group.count += n
 
     def _walk(self, buf: bytes, start: int, length: int) -> Layout:
         data = buf[start : start + length]
