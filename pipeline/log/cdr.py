@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from pipeline.log.gather import gather_u32
 from pipeline.log.msgdef import PRIMITIVES, MsgField, MsgTypes, root_type_name
 
 ENCAPSULATION_CDR_LE = b"\x00\x01\x00\x00"
@@ -380,12 +381,9 @@ class _ManyWalk:
 
     def _u32(self, rel: NDArray[np.int64], path: str, live: NDArray[np.bool_]) -> NDArray[np.int64]:
         self._check(rel, 4, path, live)
-        at = np.where(live, self.base + rel, 0)
-        idx = at[:, None] + np.arange(4)
-        values: NDArray[np.int64] = (
-            np.ascontiguousarray(self.u8[idx]).view("<u4").reshape(-1).astype(np.int64)
-        )
-        return np.where(live, values, 0)
+        values = gather_u32(self.u8, np.where(live, self.base + rel, 0)).astype(np.int64)
+        out: NDArray[np.int64] = np.where(live, values, 0)
+        return out
 
     def walk(
         self,

@@ -20,7 +20,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.log.cdr import Layout, ManyLayout, walk, walk_many
-from pipeline.log.mcap import MESSAGE_PREFIX, gather_rows, gather_u64
+from pipeline.log.gather import gather_rows, gather_u64
+from pipeline.log.mcap import MESSAGE_PREFIX
 from pipeline.log.msgdef import MsgTypes
 
 F64 = NDArray[np.float64]
@@ -134,13 +135,14 @@ class TopicDecoder:
         span = b - a
         for length in np.unique(span).tolist():
             sel = np.flatnonzero(span == length)
-            rows = gather_rows(u8, a[sel], int(length)) if length else np.zeros((sel.size, 0))
-            _, first, inverse = np.unique(rows, axis=0, return_index=True, return_inverse=True)
-            for g, k in enumerate(first.tolist()):
-                i = int(sel[k])
+            rows = gather_rows(u8, a[sel], int(length))
+            while sel.size:  # one joint list at a time (usually one in all)
+                same = (rows == rows[0]).all(axis=1)
+                i = int(sel[0])
                 s, n = int(starts[i]), int(sizes[i])
                 group = self._group(self._walk(buf, s, n), u8[s : s + n])
-                self._append_many(group, u8, many, sel[inverse.reshape(-1) == g])
+                self._append_many(group, u8, many, sel[same])
+                sel, rows = sel[~same], rows[~same]
 
     def _append_many(
         self, group: Group, u8: NDArray[np.uint8], many: ManyLayout, idx: NDArray[np.intp]

@@ -85,6 +85,7 @@ RECORD_CODE = (
     "log/__init__.py",
     "log/bag.py",
     "log/cdr.py",
+    "log/gather.py",
     "log/mcap.py",
     "log/msgdef.py",
     "log/rosbag2.py",
