@@ -59,9 +59,16 @@ class Group:
     count: int = 0
 
     def concat(self) -> tuple[NDArray[np.int64], dict[str, F64]]:
-        """All rows in time order: stamps [ns] and (N, joints) arrays."""
+        """All rows in time order: stamps [ns] and (N, joints) arrays.
+
+        The per-chunk pieces are replaced by the result, so the rows are held once.
+        """
         stamps = np.concatenate(self.stamps)
-        arrays = {k: np.concatenate(v) for k, v in self.arrays.items()}
+        self.stamps = [stamps]
+        arrays = {}
+        for k in list(self.arrays):
+            arrays[k] = np.concatenate(self.arrays[k])
+            self.arrays[k] = [arrays[k]]
         if stamps.size > 1 and not (np.diff(stamps) > 0).all():
             order = np.argsort(stamps, kind="stable")
             stamps = stamps[order]

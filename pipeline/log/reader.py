@@ -613,10 +613,10 @@ def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
     js_t, js_all = js_group.concat()
     cs_t, cs_a = cs_group.concat()
     js_cols = [js_group.names.index(n) for n in cs_names]
-    js_a = {k: v[:, js_cols] for k, v in js_all.items()}
+    same_order = js_cols == list(range(len(js_group.names)))
+    js_a = js_all if same_order else {k: v[:, js_cols] for k, v in js_all.items()}
     names = cs_names
     js_topic, cs_topic = js_dec.topic, cs_dec.topic
-    perm = list(range(len(names)))
     rows_js, rows_cs = _match_stamps(js_t, cs_t)
     if rows_js.size == 0:
         raise RecordingError(
@@ -706,7 +706,7 @@ def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
             pl.col(*columns).fill_nan(None),
         )
 
-    cs_all = {k: v[:, perm] for k, v in cs_a.items()}
+    cs_all = cs_a
     # error = reference - feedback: whichever of the two the controller left out.
     error = np.where(
         np.isnan(cs_all["error"]),
@@ -738,19 +738,28 @@ def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
                 f"{cs_t.size - rows_cs_gt.size} {cs_topic} samples have no "
                 f"{TOPIC_GROUND_TRUTH} sample at their time"
             )
-    cs_rows = {k: v[rows_cs] for k, v in cs_all.items()}
+    every_cs = rows_cs.size == cs_t.size and bool(np.all(rows_cs == np.arange(cs_t.size)))
+    every_js = rows_js.size == js_t.size and bool(np.all(rows_js == np.arange(js_t.size)))
+
+    def at_cs(a: F64) -> F64:
+        return a if every_cs else a[rows_cs]
+
+    def at_js(a: F64) -> F64:
+        return a if every_js else a[rows_js]
+
+    cs_rows = {k: at_cs(v) for k, v in cs_all.items()}
     samples = tidy(
-        js_t[rows_js],
+        js_t if every_js else js_t[rows_js],
         {
-            "position_rad": js_a["position"][rows_js],
-            "velocity_rad_s": js_a["velocity"][rows_js],
-            "effort_nm": js_a["effort"][rows_js],
+            "position_rad": at_js(js_a["position"]),
+            "velocity_rad_s": at_js(js_a["velocity"]),
+            "effort_nm": at_js(js_a["effort"]),
             "reference_position_rad": cs_rows["reference_position"],
             "reference_velocity_rad_s": cs_rows["reference_velocity"],
-            "error_rad": error[rows_cs],
+            "error_rad": at_cs(error),
             "commanded_effort_nm": cs_rows["commanded_effort"],
-            "true_position_rad": truth_pos[rows_cs],
-            "true_velocity_rad_s": truth_vel[rows_cs],
+            "true_position_rad": at_cs(truth_pos),
+            "true_velocity_rad_s": at_cs(truth_vel),
         },
     )
     controller_states = tidy(

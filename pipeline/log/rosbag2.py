@@ -281,7 +281,9 @@ def storage_files(source: Path) -> list[Path]:
     names: list[str] = []
     if meta.is_file():
         try:
-            info = yaml.safe_load(meta.read_text(encoding="utf-8"))
+            # the C loader when built: metadata.yaml carries the settings JSON (~10 ms in Python)
+            loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+            info = yaml.load(meta.read_text(encoding="utf-8"), Loader=loader)
             rel = info["rosbag2_bagfile_information"]["relative_file_paths"]
             names = [str(r) for r in rel]
         except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError) as err:

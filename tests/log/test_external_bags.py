@@ -35,14 +35,14 @@ def store_for(distro: str) -> Typestore:
     return store
 
 
-def signals() -> dict[str, np.ndarray]:
-    """Known reference, error and effort per joint (N, 3)."""
-    t = np.arange(N)[:, None] / RATE_HZ
+def signals(t0_ns: int = WALL_T0_NS) -> dict[str, np.ndarray]:
+    """Known reference, error and effort per joint (N, 3), from ``t0_ns``."""
+    t = (np.arange(N)[:, None] / RATE_HZ) + (t0_ns - WALL_T0_NS) * 1e-9
     k = np.arange(3)[None, :]
     ref = 0.5 * np.sin(2.0 * t + k)
     err = (1.0 + k) * 1e-3 * np.sin(9.0 * t)  # max |e| = 1e-3, 2e-3, 3e-3
     return {
-        "t_ns": WALL_T0_NS + (np.arange(N) * (1e9 / RATE_HZ)).astype(np.int64),
+        "t_ns": t0_ns + (np.arange(N) * (1e9 / RATE_HZ)).astype(np.int64),
         "ref": ref,
         "err": err,
         "q": ref - err,
@@ -59,11 +59,12 @@ def write_external_bag(
     extra_cs_topic: str | None = None,
     with_gripper: bool = True,
     drop_definitions: bool = False,
+    t0_ns: int = WALL_T0_NS,
 ) -> dict[str, np.ndarray]:
     """A Humble or Jazzy robot's bag: JTC state + joint_states (arm+gripper in shuffled order,
     plus a gripper-only publisher at a lower rate) + a URDF."""
     store = store_for(distro)
-    s = signals()
+    s = signals(t0_ns)
     T = store.types
     Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
     Point, Duration = (
@@ -223,3 +224,22 @@ def test_several_controller_states_need_a_remap(tmp_path: Path) -> None:
     assert rec.joint_names == JOINTS
     with pytest.raises(RecordingError, match="no such topic"):
         read_recording(path, ReadOptions(topics={"controller_state": "/nope"}))
+
+
+def test_a_split_bag_reads_file_after_file(tmp_path: Path) -> None:
+    s1 = write_external_bag(tmp_path / "a", distro="jazzy", storage=StoragePlugin.MCAP)
+    t1 = WALL_T0_NS + N * 2_000_000  # the second file continues where the first ends
+    s2 = write_external_bag(tmp_path / "b", distro="jazzy", storage=StoragePlugin.MCAP, t0_ns=t1)
+    split = tmp_path / "split"
+    split.mkdir()
+    for k, part in enumerate("ab"):
+        [f] = (tmp_path / part).glob("*.mcap")
+        f.rename(split / f"split_{k}.mcap")
+    (split / "metadata.yaml").write_text(
+        "rosbag2_bagfile_information:\n  relative_file_paths: [split_0.mcap, split_1.mcap]\n"
+    )
+    rec = read_recording(split)
+    wrist = rec.samples.filter(rec.samples["joint"] == "wrist").sort("stamp_ns")
+    assert np.array_equal(wrist["stamp_ns"].to_numpy(), np.concatenate([s1["t_ns"], s2["t_ns"]]))
+    expected = np.concatenate([s1["err"][:, 2], s2["err"][:, 2]])
+    np.testing.assert_array_equal(wrist["error_rad"].to_numpy(), expected)
