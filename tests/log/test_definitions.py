@@ -123,3 +123,26 @@ def test_metadata_has_the_distros_layout(distro_bag: tuple[str, bag.BagSummary])
         assert all(c.metadata["topic_type_hash"].startswith("RIHS01_") for c in channels)
     with Reader(summary.path) as reader:  # rosbags' own rosbag2 reader accepts both
         assert reader.message_count == sum(summary.message_counts.values())
+
+
+def test_ros_distro_option_reaches_every_episode_and_rejects_others(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    from pipeline.params import load_params
+
+    repo = Path(__file__).resolve().parents[2]
+    params = load_params(repo / "params.yaml")
+    assert params.sim.ros_distro == "jazzy"
+    humble = params.with_ros_distro("humble")
+    assert {e.sim.ros_distro for e in humble.episodes} == {"humble"}
+    proc = subprocess.run(
+        [sys.executable, "-m", "pipeline", "record", "--params", str(repo / "params.yaml"),
+         "--out", str(tmp_path / "rec"), "--ros-distro", "foxy"],
+        capture_output=True, text=True, cwd=repo, check=False,
+    )  # fmt: skip
+    assert proc.returncode == 1
+    assert proc.stderr.strip().splitlines() == [
+        "error: --ros-distro: 'foxy', expected jazzy or humble"
+    ]
+    assert not (tmp_path / "rec").exists()
