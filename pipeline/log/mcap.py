@@ -364,6 +364,9 @@ def _write_chunks(
 
 # Loose (unchunked) messages are batched into pseudo-chunks of this size.
 _LOOSE_BATCH_BYTES = 4 << 20
+# Validated chunks are handed on in batches of about this size: decoding costs a few numpy
+# calls per topic and batch, which would dominate at ~200 messages a topic in one chunk.
+BATCH_BYTES = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -419,6 +422,8 @@ class McapScan:
         self.salvaged: Salvage | None = None
         self.chunks_read = 0
         self._damage_at = 0
+        self._batch: list[tuple[bytes, dict[int, NDArray[np.int64]]]] = []
+        self._batch_bytes = 0
         # The chunk read last and its message indexes, decoded once the indexes are in.
         self._pending: tuple[bytes, int] | None = None
         self._index: dict[int, NDArray[np.uint64]] = {}
@@ -449,6 +454,7 @@ class McapScan:
         # A pending chunk whose own records are damaged is lost with the rest.
         with contextlib.suppress(RecordingError):
             self._flush()
+        self._deliver()
         self.salvaged = Salvage(
             at_byte=at,
             problem=problem.removeprefix(f"{self.path}: "),
@@ -520,6 +526,7 @@ class McapScan:
             pos += 9 + length
         if loose:
             self._records(bytes(loose), pos)
+        self._deliver()
         self._damage_at = pos
         self._finish_file(fh, pos)
 
@@ -719,10 +726,31 @@ class McapScan:
     def _decode_positions(
         self, buf: bytes, pos: int, positions: dict[int, NDArray[np.int64]]
     ) -> None:
-        for cid, starts in positions.items():
-            channel = self.channels.get(cid)
-            if channel is None:
+        for cid in positions:
+            if cid not in self.channels:
                 raise self._fail(f"corrupt: message on unknown channel {cid} (chunk at byte {pos})")
+        self._batch.append((buf, positions))
+        self._batch_bytes += len(buf)
+        if self._batch_bytes >= BATCH_BYTES:
+            self._deliver()
+
+    def _deliver(self) -> None:
+        """Hand the batched chunks' messages on, one call per channel."""
+        batch, self._batch, self._batch_bytes = self._batch, [], 0
+        if not batch:
+            return
+        if len(batch) == 1:
+            buf, positions = batch[0]
+        else:
+            shift = np.cumsum([0] + [len(b) for b, _ in batch[:-1]])
+            buf = b"".join(b for b, _ in batch)
+            merged: dict[int, list[NDArray[np.int64]]] = {}
+            for offset, (_, pos) in zip(shift.tolist(), batch, strict=True):
+                for cid, starts in pos.items():
+                    merged.setdefault(cid, []).append(starts + offset)
+            positions = {cid: np.concatenate(parts) for cid, parts in merged.items()}
+        for cid, starts in positions.items():
+            channel = self.channels[cid]
             self.topic_counts[channel.topic] = self.topic_counts.get(channel.topic, 0) + len(starts)
             self.on_messages(channel, buf, starts)
 
