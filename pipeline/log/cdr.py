@@ -374,13 +374,18 @@ class _ManyWalk:
         rel: NDArray[np.int64],
         nbytes: NDArray[np.int64] | int,
         path: str,
-        live: NDArray[np.bool_],
+        live: NDArray[np.bool_] | None,
     ) -> None:
-        if np.any(live & (rel + nbytes > self.size)):
+        over = rel + nbytes > self.size
+        if np.any(over if live is None else live & over):
             raise ValueError(f"message ends inside field {path}")
 
-    def _u32(self, rel: NDArray[np.int64], path: str, live: NDArray[np.bool_]) -> NDArray[np.int64]:
+    def _u32(
+        self, rel: NDArray[np.int64], path: str, live: NDArray[np.bool_] | None
+    ) -> NDArray[np.int64]:
         self._check(rel, 4, path, live)
+        if live is None:
+            return gather_u32(self.u8, self.base + rel).astype(np.int64)
         values = gather_u32(self.u8, np.where(live, self.base + rel, 0)).astype(np.int64)
         out: NDArray[np.int64] = np.where(live, values, 0)
         return out
@@ -389,25 +394,41 @@ class _ManyWalk:
         self,
         type_name: str,
         rel: NDArray[np.int64],
-        live: NDArray[np.bool_],
+        live: NDArray[np.bool_] | None,
         prefix: str = "",
     ) -> NDArray[np.int64]:
         """Advance ``rel`` (positions inside each message) over one ``type_name`` value, in
-        the ``live`` messages (the others have no such value: their counts are 0)."""
+        the ``live`` messages (None: all; the others have no such value, their counts are 0)."""
+
+        def pick(new: NDArray[np.int64], old: NDArray[np.int64]) -> NDArray[np.int64]:
+            return new if live is None else np.where(live, new, old)
+
         for f in self.types[type_name].fields:
             path = f"{prefix}{f.name}"
             if f.array is None or f.array >= 0:
-                count = np.where(live, 1 if f.array is None else f.array, 0).astype(np.int64)
+                fixed = 1 if f.array is None else f.array
+                count = (
+                    np.full(rel.size, fixed, dtype=np.int64)
+                    if live is None
+                    else np.where(live, fixed, 0).astype(np.int64)
+                )
             else:
-                rel = np.where(live, _aligned_v(rel, 4), rel)
+                rel = pick(_aligned_v(rel, 4), rel)
                 count = self._u32(rel, path, live)
-                rel = np.where(live, rel + 4, rel)
+                rel = pick(rel + 4, rel)
             if f.is_primitive:
                 dtype = PRIMITIVES[f.base]
                 size = int(dtype[1])
-                rel = np.where(count > 0, _aligned_v(rel, size), rel)
+                if live is None and f.array is None:
+                    rel = _aligned_v(rel, size)
+                else:
+                    rel = np.where(count > 0, _aligned_v(rel, size), rel)
                 self._check(rel, count * size, path, live)
-                self.leaves[path] = (np.where(live, self.base + rel, -1), "<" + dtype, count)
+                self.leaves[path] = (
+                    pick(self.base + rel, np.full(rel.size, -1)),
+                    "<" + dtype,
+                    count,
+                )
                 rel = rel + count * size
             elif f.is_string:
                 if f.base == "wstring":
@@ -415,6 +436,11 @@ class _ManyWalk:
                 start = rel.copy()
                 for k in range(int(count.max(initial=0))):
                     has = k < count
+                    if has.all():
+                        at = _aligned_v(rel, 4)
+                        rel = at + 4 + self._u32(at, path, None)
+                        self._check(rel, 0, path, None)
+                        continue
                     at = np.where(has, _aligned_v(rel, 4), rel)
                     n = self._u32(at, path, has)
                     rel = np.where(has, at + 4 + n, rel)
@@ -424,13 +450,17 @@ class _ManyWalk:
                 rel = self.walk(f.base, rel, live, f"{path}.")
             else:
                 for k in range(int(count.max(initial=0))):
-                    rel = self.walk(f.base, rel, k < count, f"{path}[{k}].")
+                    has = k < count
+                    rel = self.walk(f.base, rel, None if has.all() else has, f"{path}[{k}].")
         return rel
 
 
 def _aligned_v(rel: NDArray[np.int64], size: int) -> NDArray[np.int64]:
     a = min(size, 8)
-    return 4 + ((rel - 4 + a - 1) // a) * a
+    if a == 1:
+        return rel
+    out: NDArray[np.int64] = 4 + ((rel - 4 + (a - 1)) & -a)
+    return out
 
 
 def walk_many(
@@ -453,9 +483,5 @@ def walk_many(
     if np.any(sizes < 4) or not np.all(u8[starts + 1] == 1):
         raise ValueError("not little-endian CDR (encapsulation header)")
     w = _ManyWalk(types, u8, starts.astype(np.int64), sizes.astype(np.int64))
-    w.walk(
-        _resolve(types, root),
-        np.full(starts.size, 4, dtype=np.int64),
-        np.ones(starts.size, dtype=bool),
-    )
+    w.walk(_resolve(types, root), np.full(starts.size, 4, dtype=np.int64), None)
     return ManyLayout(w.leaves, w.regions)
