@@ -461,6 +461,15 @@ def record_cmd(
     force: Annotated[
         bool, typer.Option("--force", help="Overwrite recordings that already exist.")
     ] = False,
+    ros_distro: Annotated[
+        str | None,
+        typer.Option(
+            "--ros-distro",
+            help="Write the message definitions and metadata of this ROS 2 distribution "
+            "(jazzy or humble) so its subscribers decode every topic. Default: sim.ros_distro "
+            "in PARAMS (jazzy).",
+        ),
+    ] = None,
 ) -> None:
     """Plan, simulate and record every episode in PARAMS as a ROS 2 bag (MCAP).
 
@@ -477,6 +486,12 @@ def record_cmd(
     from pipeline.stages.record import check_outputs_free, prepare
 
     loaded = load_params(params)
+    if ros_distro is not None:
+        if ros_distro not in ("jazzy", "humble"):
+            from pipeline.errors import ParamsError
+
+            raise ParamsError(f"--ros-distro: {ros_distro!r}, expected jazzy or humble")
+        loaded = loaded.with_ros_distro("humble" if ros_distro == "humble" else "jazzy")
     # every input error first: a refused run creates nothing
     selected = prepare(loaded, out_dir=Path(out), only=only, force=force, jobs=jobs)
     # One run per --out at a time: two runs would mix episodes of two params files.
@@ -533,6 +548,22 @@ def _record_with_progress(
         return record(loaded, selected, out_dir=out, jobs=jobs, force=force, on_event=on_event)
 
 
+def _remaps(items: list[str]) -> dict[str, str]:
+    """``ROLE=/name`` options -> {role: topic}."""
+    from pipeline.errors import RecordingError
+    from pipeline.log.reader import ROLES
+
+    remaps: dict[str, str] = {}
+    for item in items:
+        role, sep, name = item.partition("=")
+        if not sep or not name.startswith("/") or role not in ROLES:
+            raise RecordingError(
+                f"--topic {item}: expected ROLE=/topic with ROLE one of {', '.join(ROLES)}"
+            )
+        remaps[role] = name
+    return remaps
+
+
 @app.command("report")
 def report_cmd(
     recordings: Annotated[
@@ -548,17 +579,63 @@ def report_cmd(
         bool,
         typer.Option("--skip-bad", help="Skip unreadable recordings (listed in the report)."),
     ] = False,
+    topic: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--topic",
+            help="ROLE=/name: the topic serving a role (joint_states, controller_state, "
+            "planned_trajectory, robot_description, ground_truth) when it is neither ours "
+            "nor the only one of its message type. Repeatable.",
+        ),
+    ] = None,
+    controller: Annotated[
+        str | None,
+        typer.Option(
+            "--controller",
+            help="Controller label for bags without our metadata (default: the bag's name).",
+        ),
+    ] = None,
+    scenario: Annotated[
+        str | None,
+        typer.Option(
+            "--scenario",
+            help="Scenario label for bags without our metadata (default: 'external').",
+        ),
+    ] = None,
+    salvage: Annotated[
+        bool,
+        typer.Option(
+            "--salvage",
+            help="Read a truncated or damaged bag up to the damage (every intact chunk); "
+            "the report says how much was lost. Default: refuse it.",
+        ),
+    ] = False,
 ) -> None:
     """Read every recording and write OUT/report.md (+ figures), metrics.json, plot CSVs
     and recording.rrd (open it with `rerun OUT/recording.rrd`).
 
     Outputs are staged and moved into place only when all succeeded: a failed run
     leaves earlier reports untouched.
+
+    \b
+    Your own robot's bag (ROS 2 Humble or Jazzy, MCAP; any topic names):
+      pipeline report --recordings my_bags/ --baseline jtc \\
+        --topic controller_state=/arm_controller/controller_state \\
+        --controller jtc --scenario pick
+    Topics are found by message type: sensor_msgs/msg/JointState and
+    control_msgs/msg/JointTrajectoryControllerState (Humble's desired/actual
+    or Jazzy's reference/feedback, told apart by the schema); --topic picks
+    one when a bag has several. The joints analysed are the controller's,
+    picked by name from /joint_states (extra joints and other publishers are
+    left out). Robot name and effort limits come from /robot_description if
+    the bag has it; what needs our metadata (gains, plant, motion start) is
+    n/a, with the reason in the report.
     """
     from pathlib import Path
 
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
+    from pipeline.log.reader import ReadOptions
     from pipeline.stages.report import run_report
 
     progress_console = Console(stderr=True)
@@ -584,6 +661,12 @@ def report_cmd(
             baseline=baseline,
             skip_bad=skip_bad,
             progress=on_progress,
+            options=ReadOptions(
+                topics=_remaps(topic or []),
+                salvage=salvage,
+                controller=controller,
+                scenario=scenario,
+            ),
         )
     from rich import box
     from rich.markup import escape

@@ -10,9 +10,9 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -182,6 +182,9 @@ class SimParams(_Strict):
     control_period_steps: int = Field(default=1, ge=1, le=1000)
     joint_state_decimation: int = Field(default=1, ge=1, le=1000)
     tf_rate_hz: float = Field(default=50.0, gt=0, le=1000)
+    # Whose message definitions and metadata layout the bags use (Humble subscribers need
+    # control_msgs 4.x's JointTrajectoryControllerState, Jazzy ones 5.3's).
+    ros_distro: Literal["jazzy", "humble"] = "jazzy"
 
     @model_validator(mode="after")
     def _rates(self) -> SimParams:
@@ -266,6 +269,12 @@ class Params:
                 f"{self.source}: unknown episode '{missing[0]}' (episodes: {', '.join(known)})"
             )
         return tuple(known[n] for n in only)
+
+    def with_ros_distro(self, ros_distro: Literal["jazzy", "humble"]) -> Params:
+        """These params with ``sim.ros_distro`` replaced (the CLI's --ros-distro)."""
+        sim = self.sim.model_copy(update={"ros_distro": ros_distro})
+        episodes = tuple(replace(e, sim=sim) for e in self.episodes)
+        return replace(self, sim=sim, episodes=episodes)
 
 
 def parse_params(data: Any, *, source: str) -> Params:

@@ -15,7 +15,7 @@ import polars as pl
 
 from pipeline.analysis.protocol import ProtocolView
 from pipeline.errors import SpecError
-from pipeline.log.reader import Recording
+from pipeline.log.reader import Recording, urdf_effort_limits
 from pipeline.robots import RobotSpec, builtin_robot_names, load_spec, parse_spec
 
 EPISODE_COLUMNS = (
@@ -188,6 +188,12 @@ def effort_limits(rec: Recording, spec: RobotSpec | None) -> dict[str, float | N
                 limits[j.name] = j.limits.effort
         return limits
     data = rec.settings.get("robot")
+    if data is None and rec.robot_description:
+        # a bag we did not write: the limits its /robot_description (URDF) declares
+        for name, urdf_limit in urdf_effort_limits(rec.robot_description).items():
+            if name in limits:
+                limits[name] = urdf_limit
+        return limits
     joints = data.get("joints") if isinstance(data, dict) else None
     for j in joints if isinstance(joints, list) else []:
         if not isinstance(j, dict):

@@ -1,386 +1,487 @@
-"""Vectorized CDR encoders for the fixed-layout messages of a recording.
+"""CDR (XCDR1) for any parsed ROS 2 message type: one layout, written and read.
 
-ROS 2 serializes messages as little-endian plain CDR (XCDR1): a 4-byte encapsulation header
-``00 01 00 00``, then the fields, each aligned to its own size (float64: 8, int32/uint32 and
-sequence/string lengths: 4) relative to the byte *after* the header; a string is a uint32
-length that counts its NUL, the UTF-8 bytes and the NUL; a sequence is a uint32 count then its
-elements (an empty float64 sequence adds no alignment padding).
+ROS 2 serializes messages as plain CDR: a 4-byte encapsulation header (``00 01 00 00`` for
+little-endian), then the fields in definition order, each primitive aligned to its own size
+(at most 8) relative to the byte *after* the header; a string is a uint32 length that counts
+its NUL, the UTF-8 bytes and the NUL; a sequence is a uint32 count then its elements (an
+empty sequence adds no alignment padding); fixed arrays have no count.
 
-For a given joint-name list (and fixed sequence lengths) a message's layout never changes, so
-we lay out one message with :class:`CdrWriter`, remember where the per-message values go
-(:class:`Template` slots), and fill N copies at once with numpy: no per-message Python work.
-Generic encoders (mcap_ros2's) cost tens of microseconds per message; this costs well under
-one (see ``benches/log_encode.py``).
+A message's :class:`Layout` says where every numeric leaf (``header.stamp.sec``,
+``reference.positions``, ``points[3].velocities``) and every string sits. The two sides
+derive it the same way from the :mod:`~pipeline.log.msgdef` types:
+
+- the writer lays out one sample message (:func:`encode`), keeps the bytes as a
+  :class:`Template` and fills N copies at once with numpy (:meth:`Template.fill`): the
+  joint names and sequence lengths of a topic do not change, so neither does the layout;
+- the reader walks the first message of a channel (:func:`walk`) and gathers the leaves of
+  every same-shaped message at once (see :mod:`pipeline.log.decode`).
 """
 
 from __future__ import annotations
 
-import functools
+import struct
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from pipeline.log.gather import gather_u32
+from pipeline.log.msgdef import PRIMITIVES, MsgField, MsgTypes, root_type_name
 
 ENCAPSULATION_CDR_LE = b"\x00\x01\x00\x00"
 _NS_PER_S = 1_000_000_000
 
 U8 = NDArray[np.uint8]
+Leaf = tuple[int, str, int]  # (byte offset in the message, numpy dtype with byte order, count)
 
 
-class CdrWriter:
-    """Appends CDR fields to a buffer, and records named slots to fill later.
+@dataclass(frozen=True)
+class Layout:
+    """Where each field of one message sits; shared by every same-shaped message.
 
-    Args:
-        header: start with the encapsulation header (a whole message); without it the writer
-            produces a fragment that is appended to a message at body offset ``origin``.
-        origin: body offset (after the header) at which a fragment starts [bytes].
+    Attributes:
+        size: message length [bytes], CDR header included.
+        leaves: path -> (byte offset, numpy dtype string, element count) of numeric fields.
+        texts: path -> string (or tuple of strings for string arrays).
+        check: byte ranges (length prefixes, strings) that must be equal for another message
+            to share this layout.
     """
 
-    def __init__(self, *, header: bool = True, origin: int = 0) -> None:
-        self._buf = bytearray(ENCAPSULATION_CDR_LE if header else b"")
-        self._shift = origin - (4 if header else 0)
-        self.slots: dict[str, tuple[int, int]] = {}
+    size: int
+    leaves: dict[str, Leaf]
+    texts: dict[str, str | tuple[str, ...]]
+    check: tuple[tuple[int, int], ...]
 
-    @property
-    def body_offset(self) -> int:
-        """Bytes written after the encapsulation header (plus ``origin`` for fragments)."""
-        return len(self._buf) + self._shift
+    def values(self, data: bytes | memoryview, path: str) -> NDArray[Any]:
+        """The array at ``path`` in ``data`` (a message with this layout)."""
+        off, dtype, count = self.leaves[path]
+        return np.frombuffer(data, dtype=dtype, count=count, offset=off)
 
-    def align(self, size: int) -> None:
-        """Pad to a multiple of ``size`` bytes, counted after the encapsulation header."""
-        self._buf += b"\x00" * (-self.body_offset % size)
+    def check_cols(self) -> NDArray[np.intp]:
+        if not self.check:
+            return np.zeros(0, dtype=np.intp)
+        return np.concatenate([np.arange(a, b, dtype=np.intp) for a, b in self.check])
 
-    def raw(self, data: bytes) -> None:
-        """Append already encoded bytes (a fragment laid out for this offset)."""
-        self._buf += data
 
-    def _slot(self, name: str | None, offset: int, nbytes: int) -> None:
-        if name is not None:
-            if name in self.slots:
-                raise ValueError(f"duplicate CDR slot {name!r}")
-            self.slots[name] = (offset, nbytes)
+def _aligned(pos: int, size: int) -> int:
+    a = min(size, 8)
+    return 4 + ((pos - 4 + a - 1) // a) * a
 
-    def uint32(self, value: int) -> None:
-        self.align(4)
-        self._buf += int(value).to_bytes(4, "little")
 
-    def time(self, stamp_ns: int = 0, *, slot: str | None = None) -> None:
-        """builtin_interfaces Time/Duration: int32 sec, uint32 nanosec (floor division)."""
-        self.align(4)
-        self._slot(slot, len(self._buf), 8)
-        self._buf += stamp_pairs(np.array([stamp_ns])).tobytes()
+def _resolve(types: MsgTypes, root: str) -> str:
+    if root in types:
+        return root
+    full = root_type_name(root)
+    if full not in types:
+        raise ValueError(f"type {root} is not defined by the schema")
+    return full
 
-    def string(self, text: str) -> None:
+
+# --- writing --------------------------------------------------------------------------------
+
+
+class _Encoder:
+    """Lays one message out from nested values, recording every leaf's place."""
+
+    def __init__(self, types: MsgTypes) -> None:
+        self.types = types
+        self.buf = bytearray(ENCAPSULATION_CDR_LE)
+        self.leaves: dict[str, Leaf] = {}
+        self.texts: dict[str, str | tuple[str, ...]] = {}
+        self.check: list[tuple[int, int]] = []
+
+    def _pad(self, size: int) -> None:
+        self.buf += b"\x00" * (_aligned(len(self.buf), size) - len(self.buf))
+
+    def _u32(self, value: int, *, structural: bool = True) -> None:
+        self._pad(4)
+        if structural:
+            self.check.append((len(self.buf), len(self.buf) + 4))
+        self.buf += struct.pack("<I", value)
+
+    def _string(self, text: str) -> None:
+        self._pad(4)
+        start = len(self.buf)
         data = text.encode("utf-8")
-        self.uint32(len(data) + 1)
-        self._buf += data + b"\x00"
+        self.buf += struct.pack("<I", len(data) + 1) + data + b"\x00"
+        self.check.append((start, len(self.buf)))
 
-    def strings(self, items: Sequence[str]) -> None:
-        self.uint32(len(items))
-        for item in items:
-            self.string(item)
+    def message(self, type_name: str, value: Mapping[str, Any], prefix: str = "") -> None:
+        for f in self.types[type_name].fields:
+            self.field(f, value.get(f.name), f"{prefix}{f.name}")
 
-    def float64s(self, values: ArrayLike, *, slot: str | None = None) -> None:
-        """A fixed-size float64 array (e.g. the fields of a Vector3), no length prefix."""
-        arr = np.ascontiguousarray(values, dtype="<f8").reshape(-1)
-        if arr.size:
-            self.align(8)
-        self._slot(slot, len(self._buf), 8 * arr.size)
-        self._buf += arr.tobytes()
+    def field(self, f: MsgField, value: Any, path: str) -> None:
+        if f.is_primitive:
+            dtype = "<" + PRIMITIVES[f.base]
+            if f.array is None:
+                arr = np.asarray(_default(f) if value is None else value, dtype=dtype).reshape(1)
+            else:
+                arr = np.asarray([] if value is None else value, dtype=dtype).reshape(-1)
+                if f.array >= 0 and value is None:
+                    arr = np.zeros(f.array, dtype=dtype)
+                if f.array >= 0 and arr.size != f.array:
+                    raise ValueError(f"{path}: {arr.size} values for a fixed array of {f.array}")
+                if f.array < 0:
+                    self._u32(arr.size)
+            if arr.size:
+                self._pad(arr.dtype.itemsize)
+            self.leaves[path] = (len(self.buf), dtype, int(arr.size))
+            self.buf += arr.tobytes()
+        elif f.is_string:
+            if f.base == "wstring":
+                raise ValueError(f"{path}: wstring is not supported")
+            if f.array is None:
+                text = f.default.strip("'\"") if value is None and f.default else (value or "")
+                self.texts[path] = str(text)
+                self._string(str(text))
+            else:
+                items = tuple(str(s) for s in (value or ()))
+                if f.array < 0:
+                    self._u32(len(items))
+                self.texts[path] = items
+                for s in items:
+                    self._string(s)
+        elif f.array is None:
+            self.message(f.base, value or {}, f"{path}.")
+        else:
+            items_m: Sequence[Mapping[str, Any]] = value or ()
+            if f.array >= 0:
+                items_m = list(items_m) + [{}] * (f.array - len(items_m))
+            else:
+                self._u32(len(items_m))
+            for k, item in enumerate(items_m):
+                self.message(f.base, item, f"{path}[{k}].")
 
-    def float64_seq(self, values: ArrayLike, *, slot: str | None = None) -> None:
-        """A float64 sequence: uint32 count, then (8-aligned if non-empty) the values."""
-        arr = np.ascontiguousarray(values, dtype="<f8").reshape(-1)
-        self.uint32(arr.size)
-        self.float64s(arr, slot=slot)
 
-    def getvalue(self) -> bytes:
-        return bytes(self._buf)
+def _default(f: MsgField) -> Any:
+    if f.default is None:
+        return 0
+    text = f.default.strip()
+    if f.base == "bool":
+        return text.lower() in ("true", "1")
+    return float(text) if f.base.startswith("float") else int(text, 0)
 
-    def template(self) -> Template:
-        return Template(np.frombuffer(self.getvalue(), dtype=np.uint8), dict(self.slots))
+
+def encode(types: MsgTypes, root: str, value: Mapping[str, Any]) -> tuple[bytes, Layout]:
+    """CDR bytes of one message and its layout.
+
+    Args:
+        types: parsed definitions (:func:`pipeline.log.msgdef.parse_msgdef`).
+        root: the message type.
+        value: field values by name; nested messages as mappings, arrays as sequences or
+            numpy arrays. Missing fields take their default (0, "", empty, or the
+            definition's default value).
+    """
+    enc = _Encoder(types)
+    enc.message(_resolve(types, root), value)
+    data = bytes(enc.buf)
+    return data, Layout(len(data), enc.leaves, enc.texts, tuple(enc.check))
 
 
 @dataclass(frozen=True)
 class Template:
-    """One encoded message plus the byte ranges (offset, length) that vary per message."""
+    """One encoded message and its layout; :meth:`fill` writes N messages at once."""
 
     data: U8
-    slots: Mapping[str, tuple[int, int]]
+    layout: Layout
 
     @property
     def size(self) -> int:
         return int(self.data.size)
 
-    def fill(self, count: int, values: Mapping[str, NDArray[np.generic]]) -> U8:
-        """``count`` messages as a (count, size) byte matrix, slot rows taken from ``values``.
+    def fill(self, count: int, values: Mapping[str, ArrayLike]) -> U8:
+        """``count`` messages as a (count, size) byte matrix.
 
-        Each value is an array with ``count`` rows whose row bytes equal the slot length
-        (e.g. (count, n) float64 for an n-element float64 slot); slots not given keep the
-        template bytes.
+        Args:
+            count: messages.
+            values: leaf path -> (count, k) array of that leaf's k elements per message
+                (cast to the leaf's wire type); leaves not given keep the template's values.
         """
         out = np.empty((count, self.size), dtype=np.uint8)
         out[:] = self.data
-        for name, arr in values.items():
-            offset, nbytes = self.slots[name]
-            flat = np.ascontiguousarray(arr).view(np.uint8).reshape(-1)
-            if flat.size != count * nbytes:
-                raise ValueError(f"slot {name!r}: {flat.size} bytes for {count}x{nbytes}")
-            out[:, offset : offset + nbytes] = flat.reshape(count, nbytes)
+        for path, arr in values.items():
+            if path not in self.layout.leaves:
+                raise ValueError(f"no numeric field {path!r} in the message")
+            offset, dtype, n = self.layout.leaves[path]
+            cast = np.ascontiguousarray(np.asarray(arr).astype(dtype, copy=False))
+            if cast.size != count * n:
+                raise ValueError(f"{path}: shape {cast.shape}, expected ({count}, {n})")
+            nbytes = n * cast.dtype.itemsize
+            out[:, offset : offset + nbytes] = cast.view(np.uint8).reshape(count, nbytes)
         return out
 
 
-def stamp_pairs(stamp_ns: ArrayLike) -> NDArray[np.uint32]:
-    """(N, 2) uint32 (sec, nanosec) of int64 nanosecond times, nanosec in [0, 1e9).
+def template(types: MsgTypes, root: str, sample: Mapping[str, Any]) -> Template:
+    """A :class:`Template` laid out from ``sample`` (its strings and sequence lengths)."""
+    data, layout = encode(types, root, sample)
+    return Template(np.frombuffer(data, dtype=np.uint8), layout)
 
-    ``sec`` is an int32 on the wire; its two's complement bits are stored.
+
+def time_values(path: str, stamp_ns: ArrayLike) -> dict[str, NDArray[np.int64]]:
+    """``{path.sec, path.nanosec}`` columns of builtin_interfaces Time/Duration values.
+
+    Nanoseconds are floored into [0, 1e9) as rclcpp does.
+
+    Raises:
+        ValueError: a time whose seconds do not fit int32.
     """
     ns = np.asarray(stamp_ns, dtype=np.int64).reshape(-1)
     sec, nsec = np.divmod(ns, _NS_PER_S)
     if ns.size and (sec.min() < -(2**31) or sec.max() >= 2**31):
         raise ValueError("time does not fit builtin_interfaces int32 seconds")
-    out = np.empty((ns.size, 2), dtype=np.uint32)
-    out[:, 0] = sec.astype(np.int32).view(np.uint32)
-    out[:, 1] = nsec.astype(np.uint32)
+    return {f"{path}.sec": sec, f"{path}.nanosec": nsec}
+
+
+def time_value(stamp_ns: int) -> dict[str, int]:
+    """One builtin_interfaces Time/Duration as a field mapping."""
+    sec, nsec = divmod(int(stamp_ns), _NS_PER_S)
+    return {"sec": sec, "nanosec": nsec}
+
+
+# --- reading --------------------------------------------------------------------------------
+
+
+class _Walk:
+    """Walks one CDR message, recording where each numeric leaf and string sits."""
+
+    __slots__ = ("buf", "check", "end", "endian", "leaves", "pos", "texts", "types")
+
+    def __init__(self, types: MsgTypes, buf: bytes | memoryview) -> None:
+        if len(buf) < 4:
+            raise ValueError("shorter than the CDR encapsulation header")
+        kind = buf[1]
+        if kind not in (0, 1):
+            raise ValueError(f"unsupported CDR encapsulation kind {kind}")
+        self.endian = "<" if kind == 1 else ">"
+        self.types = types
+        self.buf = buf
+        self.end = len(buf)
+        self.pos = 4
+        self.leaves: dict[str, Leaf] = {}
+        self.texts: dict[str, str | tuple[str, ...]] = {}
+        self.check: list[tuple[int, int]] = []
+
+    def _u32(self, structural: bool = True) -> int:
+        self.pos = _aligned(self.pos, 4)
+        if self.pos + 4 > self.end:
+            raise ValueError("message ends inside a length field")
+        (value,) = struct.unpack_from(self.endian + "I", self.buf, self.pos)
+        if structural:
+            self.check.append((self.pos, self.pos + 4))
+        self.pos += 4
+        return int(value)
+
+    def _string(self) -> str:
+        start = _aligned(self.pos, 4)
+        n = self._u32(structural=False)
+        if self.pos + n > self.end:
+            raise ValueError("message ends inside a string")
+        raw = bytes(self.buf[self.pos : self.pos + n])
+        self.pos += n
+        self.check.append((start, self.pos))
+        return raw.rstrip(b"\x00").decode("utf-8", errors="replace")
+
+    def walk(self, type_name: str, prefix: str = "") -> None:
+        for f in self.types[type_name].fields:
+            path = f"{prefix}{f.name}"
+            count = 1 if f.array is None else (self._u32() if f.array < 0 else f.array)
+            if f.is_primitive:
+                dtype = PRIMITIVES[f.base]
+                size = int(dtype[1])
+                if count:
+                    self.pos = _aligned(self.pos, size)
+                if self.pos + size * count > self.end:
+                    raise ValueError(f"message ends inside field {path}")
+                self.leaves[path] = (self.pos, self.endian + dtype, count)
+                self.pos += size * count
+            elif f.is_string:
+                if f.base == "wstring":
+                    raise ValueError(f"wstring field {path} is not supported")
+                values = tuple(self._string() for _ in range(count))
+                self.texts[path] = values[0] if f.array is None else values
+            elif f.array is None:
+                self.walk(f.base, f"{path}.")
+            else:
+                for k in range(count):
+                    self.walk(f.base, f"{path}[{k}].")
+
+
+def walk(types: MsgTypes, root: str, data: bytes | memoryview, *, exact: bool = False) -> Layout:
+    """The layout of one CDR message of type ``root`` (read from its bytes).
+
+    Args:
+        exact: also refuse bytes left over after the last field (beyond alignment
+            padding): tells apart definitions that share a prefix.
+
+    Raises:
+        ValueError: the bytes do not fit the type (truncated or corrupt).
+    """
+    w = _Walk(types, data)
+    w.walk(_resolve(types, root))
+    if exact and w.end - w.pos > 3:
+        raise ValueError(f"{w.end - w.pos} bytes left after the last field")
+    return Layout(len(data), w.leaves, w.texts, tuple(w.check))
+
+
+def decode(types: MsgTypes, root: str, data: bytes | memoryview) -> dict[str, Any]:
+    """Every field of one message as a flat mapping: leaf path -> array or string(s)."""
+    layout = walk(types, root, data)
+    out: dict[str, Any] = {p: layout.values(data, p) for p in layout.leaves}
+    out.update(layout.texts)
     return out
 
 
-def _f64(values: ArrayLike, count: int, width: int, what: str) -> NDArray[np.float64]:
-    arr = np.ascontiguousarray(values, dtype="<f8")
-    if arr.shape != (count, width):
-        raise ValueError(f"{what}: shape {arr.shape}, expected {(count, width)}")
-    return arr
+# --- reading many messages at once -----------------------------------------------------------
 
 
-# --- sensor_msgs/msg/JointState -----------------------------------------------------------
+@dataclass(frozen=True)
+class ManyLayout:
+    """Where each numeric field sits in each of N messages of possibly different shapes.
+
+    Attributes:
+        leaves: path -> (byte offsets (N,) in the buffer, numpy dtype, element counts (N,));
+            for elements of nested sequences only messages that have them count (offset -1
+            and count 0 elsewhere).
+        regions: path of every string and string sequence -> (start, end) (N,) byte ranges
+            in the buffer: equal bytes there mean equal strings.
+    """
+
+    leaves: dict[str, tuple[NDArray[np.int64], str, NDArray[np.int64]]]
+    regions: dict[str, tuple[NDArray[np.int64], NDArray[np.int64]]]
 
 
-@functools.lru_cache(maxsize=32)
-def joint_state_template(joint_names: tuple[str, ...]) -> Template:
-    """header (stamp, frame_id ""), name, position, velocity, effort (all ``len(names)``)."""
-    n = len(joint_names)
-    w = CdrWriter()
-    w.time(slot="stamp")
-    w.string("")
-    w.strings(joint_names)
-    w.float64_seq(np.zeros(n), slot="position")
-    w.float64_seq(np.zeros(n), slot="velocity")
-    w.float64_seq(np.zeros(n), slot="effort")
-    return w.template()
+class _ManyWalk:
+    """The :class:`_Walk` over N messages in lockstep: numpy per field, not per message."""
 
+    def __init__(
+        self,
+        types: MsgTypes,
+        u8: NDArray[np.uint8],
+        base: NDArray[np.int64],
+        size: NDArray[np.int64],
+    ) -> None:
+        self.types = types
+        self.u8 = u8
+        self.base = base  # buffer offset of each message's first byte (its CDR header)
+        self.size = size
+        self.leaves: dict[str, tuple[NDArray[np.int64], str, NDArray[np.int64]]] = {}
+        self.regions: dict[str, tuple[NDArray[np.int64], NDArray[np.int64]]] = {}
 
-def encode_joint_states(
-    joint_names: Sequence[str],
-    stamp_ns: ArrayLike,
-    *,
-    position: ArrayLike,
-    velocity: ArrayLike,
-    effort: ArrayLike,
-) -> U8:
-    """N JointState messages as an (N, L) byte matrix (row k = CDR bytes of message k)."""
-    names = tuple(joint_names)
-    stamps = stamp_pairs(stamp_ns)
-    count, n = stamps.shape[0], len(names)
-    return joint_state_template(names).fill(
-        count,
-        {
-            "stamp": stamps,
-            "position": _f64(position, count, n, "position"),
-            "velocity": _f64(velocity, count, n, "velocity"),
-            "effort": _f64(effort, count, n, "effort"),
-        },
-    )
+    def _check(
+        self,
+        rel: NDArray[np.int64],
+        nbytes: NDArray[np.int64] | int,
+        path: str,
+        live: NDArray[np.bool_] | None,
+    ) -> None:
+        over = rel + nbytes > self.size
+        if np.any(over if live is None else live & over):
+            raise ValueError(f"message ends inside field {path}")
 
+    def _u32(
+        self, rel: NDArray[np.int64], path: str, live: NDArray[np.bool_] | None
+    ) -> NDArray[np.int64]:
+        self._check(rel, 4, path, live)
+        if live is None:
+            return gather_u32(self.u8, self.base + rel).astype(np.int64)
+        values = gather_u32(self.u8, np.where(live, self.base + rel, 0)).astype(np.int64)
+        out: NDArray[np.int64] = np.where(live, values, 0)
+        return out
 
-# --- control_msgs/msg/JointTrajectoryControllerState (Jazzy) ------------------------------
+    def walk(
+        self,
+        type_name: str,
+        rel: NDArray[np.int64],
+        live: NDArray[np.bool_] | None,
+        prefix: str = "",
+    ) -> NDArray[np.int64]:
+        """Advance ``rel`` (positions inside each message) over one ``type_name`` value, in
+        the ``live`` messages (None: all; the others have no such value, their counts are 0)."""
 
-# Which JointTrajectoryPoint fields each point of the controller state carries; the others are
-# empty sequences (as ros2_controllers' JTC leaves them).
-_CS_POINT_FIELDS: dict[str, tuple[str, ...]] = {
-    "reference": ("positions", "velocities", "accelerations"),
-    "feedback": ("positions", "velocities"),
-    "error": ("positions", "velocities"),
-    "output": ("effort",),
-}
-_POINT_SEQUENCES = ("positions", "velocities", "accelerations", "effort")
+        def pick(new: NDArray[np.int64], old: NDArray[np.int64]) -> NDArray[np.int64]:
+            return new if live is None else np.where(live, new, old)
 
-
-@functools.lru_cache(maxsize=32)
-def controller_state_template(joint_names: tuple[str, ...]) -> Template:
-    n = len(joint_names)
-    w = CdrWriter()
-    w.time(slot="stamp")
-    w.string("")
-    w.strings(joint_names)
-    for point, fields in _CS_POINT_FIELDS.items():
-        for seq in _POINT_SEQUENCES:
-            if seq in fields:
-                w.float64_seq(np.zeros(n), slot=f"{point}.{seq}")
+        for f in self.types[type_name].fields:
+            path = f"{prefix}{f.name}"
+            if f.array is None or f.array >= 0:
+                fixed = 1 if f.array is None else f.array
+                count = (
+                    np.full(rel.size, fixed, dtype=np.int64)
+                    if live is None
+                    else np.where(live, fixed, 0).astype(np.int64)
+                )
             else:
-                w.float64_seq(np.zeros(0))
-        w.time(slot=f"{point}.time_from_start")
-    w.strings(())  # multi_dof_joint_names
-    for _ in range(4):  # multi_dof_reference, _feedback, _error, _output: empty points
-        for _seq in range(3):  # transforms, velocities, accelerations
-            w.uint32(0)
-        w.time(0)
-    return w.template()
+                rel = pick(_aligned_v(rel, 4), rel)
+                count = self._u32(rel, path, live)
+                rel = pick(rel + 4, rel)
+            if f.is_primitive:
+                dtype = PRIMITIVES[f.base]
+                size = int(dtype[1])
+                if live is None and f.array is None:
+                    rel = _aligned_v(rel, size)
+                else:
+                    rel = np.where(count > 0, _aligned_v(rel, size), rel)
+                self._check(rel, count * size, path, live)
+                self.leaves[path] = (
+                    pick(self.base + rel, np.full(rel.size, -1)),
+                    "<" + dtype,
+                    count,
+                )
+                rel = rel + count * size
+            elif f.is_string:
+                if f.base == "wstring":
+                    raise ValueError(f"wstring field {path} is not supported")
+                start = rel.copy()
+                for k in range(int(count.max(initial=0))):
+                    has = k < count
+                    if has.all():
+                        at = _aligned_v(rel, 4)
+                        rel = at + 4 + self._u32(at, path, None)
+                        self._check(rel, 0, path, None)
+                        continue
+                    at = np.where(has, _aligned_v(rel, 4), rel)
+                    n = self._u32(at, path, has)
+                    rel = np.where(has, at + 4 + n, rel)
+                    self._check(rel, 0, path, has)
+                self.regions[path] = (self.base + start, self.base + rel)
+            elif f.array is None:
+                rel = self.walk(f.base, rel, live, f"{path}.")
+            else:
+                for k in range(int(count.max(initial=0))):
+                    has = k < count
+                    rel = self.walk(f.base, rel, None if has.all() else has, f"{path}[{k}].")
+        return rel
 
 
-def encode_controller_states(
-    joint_names: Sequence[str],
-    stamp_ns: ArrayLike,
-    *,
-    reference: tuple[ArrayLike, ArrayLike, ArrayLike],
-    feedback: tuple[ArrayLike, ArrayLike],
-    error: tuple[ArrayLike, ArrayLike],
-    output_effort: ArrayLike,
-    time_from_start_ns: ArrayLike,
-) -> U8:
-    """N JointTrajectoryControllerState messages as an (N, L) byte matrix.
-
-    Args:
-        reference: (positions, velocities, accelerations), each (N, n).
-        feedback: (positions, velocities), each (N, n).
-        error: (positions, velocities), each (N, n).
-        output_effort: (N, n) commanded effort.
-        time_from_start_ns: (N,) time along the trajectory, written to every point [ns].
-    """
-    names = tuple(joint_names)
-    stamps = stamp_pairs(stamp_ns)
-    count, n = stamps.shape[0], len(names)
-    tfs = stamp_pairs(time_from_start_ns)
-    if tfs.shape[0] != count:
-        raise ValueError("time_from_start_ns: one value per message expected")
-    values: dict[str, NDArray[np.generic]] = {"stamp": stamps}
-    given = {
-        "reference": reference,
-        "feedback": feedback,
-        "error": error,
-        "output": (output_effort,),
-    }
-    for point, fields in _CS_POINT_FIELDS.items():
-        for seq, arr in zip(fields, given[point], strict=True):
-            values[f"{point}.{seq}"] = _f64(arr, count, n, f"{point}.{seq}")
-        values[f"{point}.time_from_start"] = tfs
-    return controller_state_template(names).fill(count, values)
+def _aligned_v(rel: NDArray[np.int64], size: int) -> NDArray[np.int64]:
+    a = min(size, 8)
+    if a == 1:
+        return rel
+    out: NDArray[np.int64] = 4 + ((rel - 4 + (a - 1)) & -a)
+    return out
 
 
-# --- tf2_msgs/msg/TFMessage ---------------------------------------------------------------
-
-
-@functools.lru_cache(maxsize=32)
-def tf_template(frames: tuple[tuple[str, str], ...]) -> Template:
-    """TFMessage with one TransformStamped per (parent, child) frame pair."""
-    w = CdrWriter()
-    w.uint32(len(frames))
-    for i, (parent, child) in enumerate(frames):
-        w.time(slot=f"stamp{i}")
-        w.string(parent)
-        w.string(child)
-        # translation (x, y, z) and rotation (x, y, z, w): 7 contiguous 8-aligned float64
-        w.float64s(np.zeros(7), slot=f"transform{i}")
-    return w.template()
-
-
-def encode_tf(
-    frames: Sequence[tuple[str, str]],
-    stamp_ns: ArrayLike,
-    *,
-    translation: ArrayLike,
-    rotation_xyzw: ArrayLike,
-) -> U8:
-    """M TFMessage messages as an (M, L) byte matrix.
+def walk_many(
+    types: MsgTypes,
+    root: str,
+    u8: NDArray[np.uint8],
+    starts: NDArray[np.int64],
+    sizes: NDArray[np.int64],
+) -> ManyLayout:
+    """The layouts of N little-endian CDR messages of type ``root`` at once.
 
     Args:
-        frames: E (parent frame_id, child_frame_id) pairs, the same in every message.
-        stamp_ns: (M,) header stamps [ns], shared by the E transforms of a message.
-        translation: (M, E, 3) [m].
-        rotation_xyzw: (M, E, 4) unit quaternions in ROS order (x, y, z, w).
+        u8: the buffer holding the messages.
+        starts: each message's first byte (its CDR header) in ``u8``.
+        sizes: each message's length [bytes].
+
+    Raises:
+        ValueError: a message that does not fit the type, or is not little-endian CDR.
     """
-    key = tuple((str(p), str(c)) for p, c in frames)
-    stamps = stamp_pairs(stamp_ns)
-    count, edges = stamps.shape[0], len(key)
-    t = np.asarray(translation, dtype="<f8")
-    r = np.asarray(rotation_xyzw, dtype="<f8")
-    if t.shape != (count, edges, 3) or r.shape != (count, edges, 4):
-        raise ValueError(f"translation/rotation shapes {t.shape}/{r.shape} for {count}x{edges}")
-    pose = np.concatenate([t, r], axis=2)
-    values: dict[str, NDArray[np.generic]] = {}
-    for i in range(edges):
-        values[f"stamp{i}"] = stamps
-        values[f"transform{i}"] = np.ascontiguousarray(pose[:, i, :])
-    return tf_template(key).fill(count, values)
-
-
-# --- one-off messages ---------------------------------------------------------------------
-
-
-def encode_string(text: str) -> bytes:
-    """std_msgs/msg/String."""
-    w = CdrWriter()
-    w.string(text)
-    return w.getvalue()
-
-
-def encode_joint_trajectory(
-    joint_names: Sequence[str],
-    stamp_ns: int,
-    *,
-    time_from_start_ns: ArrayLike,
-    positions: ArrayLike,
-    velocities: ArrayLike,
-    accelerations: ArrayLike,
-) -> bytes:
-    """trajectory_msgs/msg/JointTrajectory with K points (effort left empty).
-
-    Args:
-        stamp_ns: header stamp [ns].
-        time_from_start_ns: (K,) [ns].
-        positions, velocities, accelerations: (K, n).
-    """
-    tfs = np.asarray(time_from_start_ns, dtype=np.int64).reshape(-1)
-    count, n = tfs.size, len(joint_names)
-    pos = _f64(positions, count, n, "positions")
-    vel = _f64(velocities, count, n, "velocities")
-    acc = _f64(accelerations, count, n, "accelerations")
-    w = CdrWriter()
-    w.time(stamp_ns)
-    w.string("")
-    w.strings(list(joint_names))
-    w.uint32(count)
-    # A point's layout depends only on the 8-byte phase it starts at (its fields are 4- or
-    # 8-aligned), so lay out one point per phase and fill all points of a phase at once.
-    phases = np.empty(count, dtype=np.int64)
-    phase = w.body_offset % 8
-    for k in range(count):
-        phases[k] = phase
-        phase = (phase + _point_template(n, phase).size) % 8
-    rows = np.empty(count, dtype=object)
-    for phase in np.unique(phases).tolist():
-        sel = phases == phase
-        filled = _point_template(n, phase).fill(
-            int(sel.sum()),
-            {
-                "positions": pos[sel],
-                "velocities": vel[sel],
-                "accelerations": acc[sel],
-                "t": stamp_pairs(tfs[sel]),
-            },
-        )
-        rows[sel] = [row.tobytes() for row in filled]
-    w.raw(b"".join(rows.tolist()))
-    return w.getvalue()
-
-
-@functools.lru_cache(maxsize=16)
-def _point_template(n: int, phase: int) -> Template:
-    """A JointTrajectoryPoint fragment (n positions/velocities/accelerations, no effort)."""
-    w = CdrWriter(header=False, origin=phase)
-    w.float64_seq(np.zeros(n), slot="positions")
-    w.float64_seq(np.zeros(n), slot="velocities")
-    w.float64_seq(np.zeros(n), slot="accelerations")
-    w.float64_seq(np.zeros(0))
-    w.time(slot="t")
-    return w.template()
+    if np.any(sizes < 4) or not np.all(u8[starts + 1] == 1):
+        raise ValueError("not little-endian CDR (encapsulation header)")
+    w = _ManyWalk(types, u8, starts.astype(np.int64), sizes.astype(np.int64))
+    w.walk(_resolve(types, root), np.full(starts.size, 4, dtype=np.int64), None)
+    return ManyLayout(w.leaves, w.regions)

@@ -96,6 +96,10 @@ RECORD_CODE = (
     "log/__init__.py",
     "log/bag.py",
     "log/cdr.py",
+    "log/gather.py",
+    "log/mcap.py",
+    "log/msgdef.py",
+    "log/rosbag2.py",
     "log/schemas.py",
     "stages/__init__.py",
     "stages/record.py",
@@ -453,6 +457,7 @@ def _run_and_write(
         metadata=metadata,
         joint_state_decimation=sim.joint_state_decimation,
         tf_rate_hz=sim.tf_rate_hz,
+        ros_distro=sim.ros_distro,
         force=force,
     )
     # true tracking error from the motion start (the report's definition)

@@ -26,7 +26,7 @@ from pipeline.analysis.metrics import check_baseline, comparisons, joint_metrics
 from pipeline.analysis.protocol import protocol_view
 from pipeline.errors import PipelineError, RecordingError, ReportError
 from pipeline.fsutil import OutputLock, remove_stale
-from pipeline.log.reader import Recording, find_recordings, read_recording
+from pipeline.log.reader import ReadOptions, Recording, find_recordings, read_recording
 from pipeline.report.figures import (
     FIGURES_DIR,
     MAX_FIGURE_SCENARIOS,
@@ -70,9 +70,14 @@ def _noop(step: str, done: int, total: int) -> None:
 
 
 def read_all(
-    recordings_dir: Path, *, skip_bad: bool, progress: Progress = _noop
+    recordings_dir: Path,
+    *,
+    skip_bad: bool,
+    progress: Progress = _noop,
+    options: ReadOptions | None = None,
 ) -> tuple[list[Recording], list[tuple[str, str]]]:
-    """Read every recording under ``recordings_dir``.
+    """Read every recording under ``recordings_dir`` (with ``options`` for bags we did not
+    write: remaps, salvage, labels).
 
     Raises:
         ReportError: no such folder, or nothing in it; duplicate episode names.
@@ -93,7 +98,7 @@ def read_all(
     for k, source in enumerate(sources):
         progress("reading recordings", k, len(sources))
         try:
-            good.append(read_recording(source))
+            good.append(read_recording(source, options))
         except RecordingError as err:
             if not skip_bad:
                 raise RecordingError(f"{err} (use --skip-bad to report without it)") from err
@@ -187,6 +192,7 @@ def run_report(
     baseline: str = "pid",
     skip_bad: bool = False,
     progress: Progress = _noop,
+    options: ReadOptions | None = None,
 ) -> ReportResult:
     """Read the recordings, compute metrics and write every report output.
 
@@ -213,6 +219,7 @@ def run_report(
                 baseline=baseline,
                 skip_bad=skip_bad,
                 progress=progress,
+                options=options,
             )
     except PipelineError as err:
         if isinstance(err, RecordingError | ReportError):
@@ -233,8 +240,9 @@ def _run_report_locked(
     baseline: str,
     skip_bad: bool,
     progress: Progress,
+    options: ReadOptions | None,
 ) -> ReportResult:
-    raw, bad = read_all(recordings_dir, skip_bad=skip_bad, progress=progress)
+    raw, bad = read_all(recordings_dir, skip_bad=skip_bad, progress=progress, options=options)
     views = {rec.episode: protocol_view(rec)[0] for rec in raw}
     recordings = [views[rec.episode].recording for rec in raw]
     episodes = episode_table(recordings, views)

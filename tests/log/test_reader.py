@@ -12,12 +12,9 @@ from mcap.writer import CompressionType, IndexType
 from mcap_ros2.decoder import DecoderFactory
 
 from pipeline.errors import RecordingError
-from pipeline.log.reader import (
-    find_recordings,
-    message_layout,
-    parse_msgdef,
-    read_recording,
-)
+from pipeline.log.cdr import walk as message_layout
+from pipeline.log.msgdef import parse_msgdef
+from pipeline.log.reader import find_recordings, read_recording
 from tests.analysis.bagfactory import (
     JTCS,
     damage,
@@ -174,17 +171,18 @@ def test_find_recordings_lists_bag_folders_and_bare_files_not_hidden_ones(tmp_pa
 
 def test_msgdef_parser_reads_the_controller_state_schema() -> None:
     types = parse_msgdef(JTCS, msgdef(JTCS))
-    names = [f.name for f in types[JTCS]]
+    names = [f.name for f in types[JTCS].fields]
     assert names[:6] == ["header", "joint_names", "reference", "feedback", "error", "output"]
-    point = {f.name: f for f in types["trajectory_msgs/msg/JointTrajectoryPoint"]}
+    point = {f.name: f for f in types["trajectory_msgs/msg/JointTrajectoryPoint"].fields}
     assert point["positions"].base == "float64" and point["positions"].array == -1
     assert "builtin_interfaces/msg/Duration" in types
 
 
 def test_msgdef_parser_skips_constants_and_reads_fixed_and_bounded_arrays() -> None:
     text = "uint8 MODE_A=1\nstring NAME = 'x'\nfloat64[3] xyz\nint32[<=4] some\nstring<=8 tag\n"
-    fields = parse_msgdef("pkg/msg/T", text)["pkg/msg/T"]
-    assert [(f.name, f.base, f.array) for f in fields] == [
+    parsed = parse_msgdef("pkg/msg/T", text)["pkg/msg/T"]
+    assert [c.name for c in parsed.constants] == ["MODE_A", "NAME"]
+    assert [(f.name, f.base, f.array) for f in parsed.fields] == [
         ("xyz", "float64", 3),
         ("some", "int32", -1),
         ("tag", "string", None),
@@ -254,7 +252,7 @@ def test_flipped_byte_outside_chunks_fails_the_data_section_crc(tmp_path: Path) 
 def test_recording_without_a_control_topic_is_rejected(tmp_path: Path, missing: str) -> None:
     topics = [t for t in ("/joint_states", "/controller_state", "/tf") if t != missing]
     path = write_bag(tmp_path, paper_like("nojs", "pid", duration_s=0.3), topics=topics)
-    with pytest.raises(RecordingError, match=f"lacks the topic {missing}"):
+    with pytest.raises(RecordingError, match=f"topic for .*default {missing}"):
         read_recording(path)
 
 

@@ -10,7 +10,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-import pipeline.log.reader as reader
+import pipeline.log.decode as decode
 from pipeline.errors import RecordingError
 from pipeline.log.reader import read_recording
 from tests.analysis.bagfactory import mcap_file, msgdef, paper_like, write_bag
@@ -64,7 +64,7 @@ def test_an_unforeseen_decoder_failure_is_a_recording_error_naming_file_and_topi
     def broken(*args: object, **kwargs: object) -> None:
         raise IndexError("index 7 is out of bounds")
 
-    monkeypatch.setattr(reader, "_leaf_matrix", broken)
+    monkeypatch.setattr(decode, "_leaf_matrix", broken)
     with pytest.raises(RecordingError) as info:
         read_recording(path)
     message = str(info.value)

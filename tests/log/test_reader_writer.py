@@ -6,10 +6,9 @@ import json
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from pipeline.log.bag import write_episode_bag
-from pipeline.log.reader import _McapScan, _trajectory_generic, _trajectory_walk, read_recording
+from pipeline.log.reader import read_recording
 from pipeline.robots import load_spec
 from pipeline.sim.result import EpisodeResult, TrajectorySamples
 
@@ -85,30 +84,3 @@ def test_decimated_joint_states_pair_with_the_controller_state_at_the_same_stamp
     np.testing.assert_array_equal(_wide(rec, "position_rad"), result.q[rows])
     np.testing.assert_array_equal(_wide(rec, "reference_position_rad"), result.q_ref[rows])
     assert rec.notes == ()
-
-
-def test_trajectory_fast_decoder_equals_the_generic_walker(tmp_path: Path) -> None:
-    result, planned = _episode(50)
-    path = _write(tmp_path / "traj", result, planned)
-    scan = _McapScan(next(path.glob("*.mcap")))
-    scan.run()
-    cid, data = scan.singles["/planned_trajectory"]
-    name, types = scan.types_of(scan.channels[cid])
-    fast, generic = _trajectory_walk(data), _trajectory_generic(types, name, data)
-    assert fast[0] == generic[0] and fast[1] == generic[1]
-    for a, b in zip(fast[2] + fast[3], generic[2] + generic[3], strict=True):
-        np.testing.assert_array_equal(a, b)
-    assert len(fast[1]) == 41
-
-
-@pytest.mark.parametrize("cut", [0.3, 0.7])
-def test_writer_output_cut_short_is_reported_truncated(tmp_path: Path, cut: float) -> None:
-    from pipeline.errors import RecordingError
-
-    result, planned = _episode(2000)
-    path = _write(tmp_path / "cut", result, planned)
-    mcap = next(path.glob("*.mcap"))
-    data = mcap.read_bytes()
-    mcap.write_bytes(data[: int(len(data) * cut)])
-    with pytest.raises(RecordingError, match="truncated"):
-        read_recording(path)

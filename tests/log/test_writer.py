@@ -26,7 +26,7 @@ from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 from mcap_ros2.reader import read_ros2_messages
 from rosbags.highlevel import AnyReader
 from rosbags.interfaces import QosDurability
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys import Stores, get_typestore
 
 from pipeline.constants import (
     METADATA_EPISODE,
@@ -39,7 +39,7 @@ from pipeline.constants import (
     TYPE_CONTROLLER_STATE,
 )
 from pipeline.errors import RecordingError
-from pipeline.log import bag, cdr
+from pipeline.log import bag, rosbag2
 from pipeline.log.schemas import TYPE_HASHES, full_definition
 from pipeline.model import transforms
 from pipeline.model.frames import tf_edges
@@ -248,7 +248,7 @@ def test_rosbags_anyreader_opens_the_directory_and_recovers_every_field_exactly(
         assert qos[TOPIC_ROBOT_DESCRIPTION] == QosDurability.TRANSIENT_LOCAL
         assert qos[TOPIC_JOINT_STATES] == QosDurability.VOLATILE
         assert {c.topic: c.digest for c in reader.connections}[TOPIC_CONTROLLER_STATE] == (
-            TYPE_HASHES[TYPE_CONTROLLER_STATE]
+            TYPE_HASHES["jazzy"][TYPE_CONTROLLER_STATE]
         )
         messages = [
             (c.topic, t, reader.deserialize(raw, c.msgtype)) for c, t, raw in reader.messages()
@@ -290,14 +290,15 @@ def test_tf_source_true_uses_the_noise_free_positions(
             assert np.allclose(r, edge.parent_T_child[:3, :3], atol=1e-12)
 
 
+@pytest.mark.parametrize("distro", ["jazzy", "humble"])
 def test_encoders_match_mcap_ros2_encoder_byte_for_byte(
-    ur5: RobotSpec, episode: tuple[EpisodeResult, TrajectorySamples]
+    ur5: RobotSpec, episode: tuple[EpisodeResult, TrajectorySamples], distro: str
 ) -> None:
     result, planned = episode
     names = list(ur5.joint_names)
 
     def encoder(type_name: str) -> Any:
-        return serialize_dynamic(type_name, full_definition(type_name))[type_name]
+        return serialize_dynamic(type_name, full_definition(type_name, distro))[type_name]
 
     def time(ns: int) -> dict[str, int]:
         return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
@@ -307,27 +308,18 @@ def test_encoders_match_mcap_ros2_encoder_byte_for_byte(
         seqs |= {f: fields.get(f, np.zeros(0)).tolist() for f in ("accelerations", "effort")}
         return {**seqs, "time_from_start": time(tfs)}
 
-    rows = [0, 1, 999, 1001, result.stamp_ns.size - 1]
-    st = result.stamp_ns[rows]
-    js = cdr.encode_joint_states(
-        names, st, position=result.q[rows], velocity=result.qd[rows], effort=result.tau_nm[rows]
-    )
-    cs = cdr.encode_controller_states(
-        names,
-        st,
-        reference=(result.q_ref[rows], result.qd_ref[rows], result.qdd_ref[rows]),
-        feedback=(result.q[rows], result.qd[rows]),
-        error=(result.q_ref[rows] - result.q[rows], result.qd_ref[rows] - result.qd[rows]),
-        output_effort=result.tau_cmd_nm[rows],
-        time_from_start_ns=st,
-    )
-    frames, translation, rotation = bag.tf_poses(ur5, result.q[rows])
-    tf = cdr.encode_tf(frames, st, translation=translation, rotation_xyzw=rotation)
+    blocks = {b.topic: b for b in bag.encode_episode(ur5, result, planned, ros_distro=distro)}
+    js, cs, tf = (blocks[t] for t in (TOPIC_JOINT_STATES, TOPIC_CONTROLLER_STATE, TOPIC_TF))
+    tf_row = {int(t): i for i, t in enumerate(tf.log_time_ns)}
+    frames, translation, rotation = bag.tf_poses(ur5, result.q)
     empty_multi = {"transforms": [], "velocities": [], "accelerations": [], **point(0)}
-    for i, k in enumerate(rows):
-        t = int(st[i])
+    multi = ["reference", "feedback", "error", "output"]
+    if distro == "humble":
+        multi += ["desired", "actual"]
+    for k in [0, 1, 999, 1001, result.stamp_ns.size - 1]:
+        t = int(result.stamp_ns[k])
         header = {"stamp": time(t), "frame_id": ""}
-        assert bytes(js[i]) == encoder("sensor_msgs/msg/JointState")(
+        assert bytes(js.payload[k]) == encoder("sensor_msgs/msg/JointState")(
             {
                 "header": header,
                 "name": names,
@@ -336,53 +328,54 @@ def test_encoders_match_mcap_ros2_encoder_byte_for_byte(
                 "effort": result.tau_nm[k].tolist(),
             }
         )
-        assert bytes(cs[i]) == encoder(TYPE_CONTROLLER_STATE)(
-            {
-                "header": header,
-                "joint_names": names,
-                "reference": point(
-                    t,
-                    positions=result.q_ref[k],
-                    velocities=result.qd_ref[k],
-                    accelerations=result.qdd_ref[k],
-                ),
-                "feedback": point(t, positions=result.q[k], velocities=result.qd[k]),
-                "error": point(
-                    t,
-                    positions=result.q_ref[k] - result.q[k],
-                    velocities=result.qd_ref[k] - result.qd[k],
-                ),
-                "output": point(t, effort=result.tau_cmd_nm[k]),
-                "multi_dof_joint_names": [],
-                **{f"multi_dof_{p}": empty_multi for p in ("reference", "feedback")},
-                **{f"multi_dof_{p}": empty_multi for p in ("error", "output")},
-            }
+        reference = point(
+            t,
+            positions=result.q_ref[k],
+            velocities=result.qd_ref[k],
+            accelerations=result.qdd_ref[k],
         )
+        feedback = point(t, positions=result.q[k], velocities=result.qd[k])
+        state = {
+            "header": header,
+            "joint_names": names,
+            "reference": reference,
+            "feedback": feedback,
+            "error": point(
+                t,
+                positions=result.q_ref[k] - result.q[k],
+                velocities=result.qd_ref[k] - result.qd[k],
+            ),
+            "output": point(t, effort=result.tau_cmd_nm[k]),
+            "multi_dof_joint_names": [],
+            **{f"multi_dof_{p}": empty_multi for p in multi},
+        }
+        if distro == "humble":
+            state |= {"desired": reference, "actual": feedback}
+        else:
+            state |= {"speed_scaling_factor": 1.0}
+        assert bytes(cs.payload[k]) == encoder(TYPE_CONTROLLER_STATE)(state)
+        if t not in tf_row:
+            continue
         transforms_msg = [
             {
                 "header": {"stamp": time(t), "frame_id": parent},
                 "child_frame_id": child,
                 "transform": {
-                    "translation": dict(zip("xyz", translation[i, e].tolist(), strict=True)),
-                    "rotation": dict(zip("xyzw", rotation[i, e].tolist(), strict=True)),
+                    "translation": dict(zip("xyz", translation[k, e].tolist(), strict=True)),
+                    "rotation": dict(zip("xyzw", rotation[k, e].tolist(), strict=True)),
                 },
             }
             for e, (parent, child) in enumerate(frames)
         ]
-        assert bytes(tf[i]) == encoder("tf2_msgs/msg/TFMessage")({"transforms": transforms_msg})
+        assert bytes(tf.payload[tf_row[t]]) == encoder("tf2_msgs/msg/TFMessage")(
+            {"transforms": transforms_msg}
+        )
 
     tfs_ns = np.round(planned.times_s * 1e9).astype(np.int64)
-    plan = cdr.encode_joint_trajectory(
-        names,
-        123_456_789_012,
-        time_from_start_ns=tfs_ns,
-        positions=planned.positions,
-        velocities=planned.velocities,
-        accelerations=planned.accelerations,
-    )
-    assert plan == encoder("trajectory_msgs/msg/JointTrajectory")(
+    t0 = int(result.stamp_ns[0])
+    trajectory = encoder("trajectory_msgs/msg/JointTrajectory")(
         {
-            "header": {"stamp": time(123_456_789_012), "frame_id": ""},
+            "header": {"stamp": time(t0), "frame_id": ""},
             "joint_names": names,
             "points": [
                 point(
@@ -395,19 +388,10 @@ def test_encoders_match_mcap_ros2_encoder_byte_for_byte(
             ],
         }
     )
+    assert bytes(blocks[TOPIC_PLANNED_TRAJECTORY].payload[0]) == trajectory
     urdf = build_urdf(ur5)
-    assert cdr.encode_string(urdf) == encoder("std_msgs/msg/String")({"data": urdf})
-
-
-def test_embedded_definitions_hash_to_the_recorded_type_hashes() -> None:
-    # rosbags computes RIHS01 from the field definitions; control_msgs is not in its store,
-    # so it is registered from our text (its hash is also the one rosidl generates for Jazzy).
-    store = get_typestore(Stores.ROS2_JAZZY)
-    for type_name, expected in TYPE_HASHES.items():
-        if type_name not in store.fielddefs:
-            top = full_definition(type_name).split("\n" + "=" * 80)[0]
-            store.register(get_types_from_msg(top, type_name))
-        assert store.hash_rihs01(type_name) == expected, type_name
+    string = encoder("std_msgs/msg/String")({"data": urdf})
+    assert bytes(blocks[TOPIC_ROBOT_DESCRIPTION].payload[0]) == string
 
 
 def test_mcap_file_is_ros2_profile_with_embedded_schemas(written: bag.BagSummary) -> None:
@@ -421,7 +405,7 @@ def test_mcap_file_is_ros2_profile_with_embedded_schemas(written: bag.BagSummary
         schema = summary.schemas[channel.schema_id]
         assert channel.message_encoding == "cdr" and schema.encoding == "ros2msg"
         assert schema.data.decode() == full_definition(schema.name)
-        assert channel.metadata["topic_type_hash"] == TYPE_HASHES[schema.name]
+        assert channel.metadata["topic_type_hash"] == TYPE_HASHES["jazzy"][schema.name]
         assert yaml.safe_load(channel.metadata["offered_qos_profiles"])[0]["reliability"] == 1
 
 
@@ -578,7 +562,7 @@ def test_force_replaces_existing_bag(
     atomic_exchange: bool,
 ) -> None:
     if not atomic_exchange:  # the two-rename fallback for file systems without renameat2
-        monkeypatch.setattr(bag, "_renameat2", lambda src, dst, flags: False)
+        monkeypatch.setattr(rosbag2, "_renameat2", lambda src, dst, flags: False)
     result, planned = episode
     target = tmp_path / "ep"
     bag.write_episode_bag(

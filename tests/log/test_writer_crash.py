@@ -25,7 +25,7 @@ WRITER = textwrap.dedent(
     import json, sys, time
     from pathlib import Path
     import numpy as np
-    from pipeline.log import bag
+    from pipeline.log import bag, mcap, rosbag2
     from pipeline.robots import load_spec
     from pipeline.sim.result import EpisodeResult, TrajectorySamples
 
@@ -43,7 +43,7 @@ WRITER = textwrap.dedent(
         time.sleep(120)
 
     if mode == "mid_mcap":  # stop while compressing the third chunk
-        real = bag.zstandard.ZstdCompressor
+        real = mcap.zstandard.ZstdCompressor
 
         class Stalling:
             def __init__(self, **kwargs):
@@ -55,9 +55,9 @@ WRITER = textwrap.dedent(
                     hang()
                 return self.inner.compress(data)
 
-        bag.zstandard = type("zstd", (), {"ZstdCompressor": Stalling})
+        mcap.zstandard = type("zstd", (), {"ZstdCompressor": Stalling})
     elif mode == "before_publish":  # everything written and fsynced, not yet renamed
-        bag._publish = hang
+        rosbag2._publish = hang
     else:
         print("ready", flush=True)
     bag.write_episode_bag(target, spec=spec, result=result, planned=planned, metadata=meta,

@@ -1,0 +1,264 @@
+"""Decode a control-rate topic's messages into arrays, chunk by chunk, through its schema.
+
+The schema embedded in the recording is parsed (:mod:`pipeline.log.msgdef`), the first
+message of a shape is walked once to find where every field sits (its :class:`Layout`), and
+all messages of the chunk that have the same length and the same length prefixes / strings
+are decoded together with numpy (a byte gather and a dtype view). Messages of another shape
+(a header.frame_id that changes length, another publisher's joint list) are walked one by
+one (the generic path, same values, slower) and start a shape of their own, which later
+chunks decode vectorized again. Messages are grouped by their joint-name list, so a topic
+with several publishers (an arm and a gripper on ``/joint_states``) keeps each one's rows.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.log.cdr import Layout, ManyLayout, walk, walk_many
+from pipeline.log.gather import gather_rows, gather_u64
+from pipeline.log.mcap import MESSAGE_PREFIX
+from pipeline.log.msgdef import MsgTypes
+
+F64 = NDArray[np.float64]
+STAMP_SEC = "header.stamp.sec"
+STAMP_NSEC = "header.stamp.nanosec"
+
+
+class DecodeError(ValueError):
+    """A message or schema that does not give what a role needs."""
+
+
+@dataclass(frozen=True)
+class Want:
+    """Fields to decode from a control-rate topic (first alias present wins).
+
+    ``required``: groups of field paths; the schema must have at least one path of
+    each group (besides ``header.stamp``), else the topic cannot serve.
+    """
+
+    names: tuple[str, ...]
+    arrays: dict[str, tuple[str, ...]]
+    required: tuple[tuple[str, ...], ...] = ()
+
+
+@dataclass
+class Group:
+    """The messages of one joint-name list: its layout and accumulated arrays."""
+
+    names: tuple[str, ...]
+    layout: Layout
+    check_cols: NDArray[np.intp]
+    check_bytes: NDArray[np.uint8]
+    stamps: list[NDArray[np.int64]] = field(default_factory=list)
+    arrays: dict[str, list[F64]] = field(default_factory=dict)
+    count: int = 0
+
+    def concat(self) -> tuple[NDArray[np.int64], dict[str, F64]]:
+        """All rows in time order: stamps [ns] and (N, joints) arrays.
+
+        The per-chunk pieces are replaced by the result, so the rows are held once.
+        """
+        stamps = np.concatenate(self.stamps)
+        self.stamps = [stamps]
+        arrays = {}
+        for k in list(self.arrays):
+            arrays[k] = np.concatenate(self.arrays[k])
+            self.arrays[k] = [arrays[k]]
+        if stamps.size > 1 and not (np.diff(stamps) > 0).all():
+            order = np.argsort(stamps, kind="stable")
+            stamps = stamps[order]
+            arrays = {k: v[order] for k, v in arrays.items()}
+        return stamps, arrays
+
+
+@dataclass
+class TopicDecoder:
+    """Decodes one channel's messages (type ``type_name``) into per-joint-list groups."""
+
+    topic: str
+    type_name: str
+    types: MsgTypes
+    want: Want
+    groups: list[Group] = field(default_factory=list)
+
+    @property
+    def count(self) -> int:
+        return sum(g.count for g in self.groups)
+
+    def largest(self) -> Group | None:
+        return max(self.groups, key=lambda g: g.count, default=None)
+
+    def add(self, buf: bytes, starts: NDArray[np.int64]) -> None:
+        """Decode the messages whose MCAP message records start at ``starts`` in ``buf``.
+
+        Raises:
+            DecodeError: a message that does not fit the schema, or a schema without the
+                fields ``want`` requires.
+        """
+        u8 = np.frombuffer(buf, dtype=np.uint8)
+        lengths = gather_u64(u8, starts - 8).astype(np.int64) - MESSAGE_PREFIX
+        data_start = starts + MESSAGE_PREFIX
+        if not self.groups:
+            first = self._walk(buf, int(data_start[0]), int(lengths[0]))
+            s0 = int(data_start[0])
+            self._group(first, u8[s0 : s0 + first.size])
+        left = np.ones(starts.size, dtype=bool)
+        for group in self.groups:
+            if not left.any():
+                break
+            sel = left & (lengths == group.layout.size)
+            if not sel.any():
+                continue
+            idx = np.flatnonzero(sel)
+            matrix = gather_rows(u8, data_start[idx], group.layout.size)
+            same = (matrix[:, group.check_cols] == group.check_bytes[None, :]).all(axis=1)
+            if same.any():
+                self._append(group, matrix[same])
+                left[idx[same]] = False
+        rest = np.flatnonzero(left)
+        if rest.size:
+            self._add_generic(buf, u8, data_start[rest], lengths[rest])
+
+    def _add_generic(
+        self, buf: bytes, u8: NDArray[np.uint8], starts: NDArray[np.int64], sizes: NDArray[np.int64]
+    ) -> None:
+        """Messages of differing shapes: walked all at once (:func:`walk_many`), grouped by
+        their joint-name bytes; one message at a time only if that fails (to name it)."""
+        try:
+            many = walk_many(self.types, self.type_name, u8, starts, sizes)
+            region = next(many.regions[p] for p in self.want.names if p in many.regions)
+        except (ValueError, StopIteration):
+            for s, n in zip(starts.tolist(), sizes.tolist(), strict=True):
+                layout = self._walk(buf, s, n)
+                row = u8[s : s + layout.size]
+                self._append(self._group(layout, row), row[None, :], layout)
+            return
+        a, b = region
+        span = b - a
+        for length in np.unique(span).tolist():
+            sel = np.flatnonzero(span == length)
+            rows = gather_rows(u8, a[sel], int(length))
+            while sel.size:  # one joint list at a time (usually one in all)
+                same = (rows == rows[0]).all(axis=1)
+                i = int(sel[0])
+                s, n = int(starts[i]), int(sizes[i])
+                group = self._group(self._walk(buf, s, n), u8[s : s + n])
+                self._append_many(group, u8, many, sel[same])
+                sel, rows = sel[~same], rows[~same]
+
+    def _append_many(
+        self, group: Group, u8: NDArray[np.uint8], many: ManyLayout, idx: NDArray[np.intp]
+    ) -> None:
+        def column(path: str) -> NDArray[Any]:
+            off, dtype, _ = many.leaves[path]
+            return gather_rows(u8, off[idx], int(dtype[2])).view(dtype)
+
+        n = idx.size
+        group.stamps.append(
+            column(STAMP_SEC)[:, 0].astype(np.int64) * 1_000_000_000
+            + column(STAMP_NSEC)[:, 0].astype(np.int64)
+        )
+        width = len(group.names)
+        for key, aliases in self.want.arrays.items():
+            out = np.full((n, width), np.nan)
+            todo = np.ones(n, dtype=bool)
+            for path in aliases:  # per message, the first alias with values wins
+                if path not in many.leaves or not width:
+                    continue
+                off, dtype, count = many.leaves[path]
+                cnt = count[idx]
+                bad = todo & (cnt != width) & (cnt != 0)
+                if bad.any():
+                    raise DecodeError(f"{path} has {int(cnt[bad].max())} values for {width} joints")
+                take = todo & (cnt == width)
+                if take.any():
+                    block = gather_rows(u8, off[idx[take]], int(dtype[2]) * width)
+                    out[take] = np.ascontiguousarray(block).view(dtype).astype(np.float64)
+                    todo &= ~take
+            group.arrays.setdefault(key, []).append(out)
+        group.count += n
+
+    def _walk(self, buf: bytes, start: int, length: int) -> Layout:
+        data = buf[start : start + length]
+        try:
+            return walk(self.types, self.type_name, data)
+        except (ValueError, struct.error) as err:
+            raise DecodeError(
+                f"corrupt: a message on {self.topic} cannot be decoded as {self.type_name} ({err})"
+            ) from err
+
+    def _group(self, layout: Layout, data: NDArray[np.uint8]) -> Group:
+        names = self._names(layout)
+        for g in self.groups:
+            if g.names == names:
+                return g
+        self._check_fields(layout)
+        cols = layout.check_cols()
+        group = Group(names, layout, cols, data[cols].copy())
+        self.groups.append(group)
+        return group
+
+    def _append(
+        self, group: Group, matrix: NDArray[np.uint8], layout: Layout | None = None
+    ) -> None:
+        lay = layout or group.layout
+        n = matrix.shape[0]
+        group.stamps.append(
+            _column(lay, matrix, STAMP_SEC)[:, 0].astype(np.int64) * 1_000_000_000
+            + _column(lay, matrix, STAMP_NSEC)[:, 0].astype(np.int64)
+        )
+        width = len(group.names)
+        for key, aliases in self.want.arrays.items():
+            group.arrays.setdefault(key, []).append(_leaf_matrix(lay, matrix, aliases, width, n))
+        group.count += n
+
+    def _check_fields(self, layout: Layout) -> None:
+        """Refuse a schema that lacks a field the report cannot do without."""
+        missing = [p for p in (STAMP_SEC, STAMP_NSEC) if p not in layout.leaves]
+        missing += [
+            " or ".join(group)
+            for group in self.want.required
+            if not any(p in layout.leaves for p in group)
+        ]
+        if missing:
+            raise DecodeError(
+                f"{self.topic} ({self.type_name}) has no field {', '.join(missing)}; "
+                "cannot read it as a control-rate topic"
+            )
+
+    def _names(self, layout: Layout) -> tuple[str, ...]:
+        for path in self.want.names:
+            value = layout.texts.get(path)
+            if isinstance(value, tuple):
+                return value
+        raise DecodeError(
+            f"{self.topic} ({self.type_name}) has no joint-name field "
+            f"({' or '.join(self.want.names)})"
+        )
+
+
+def _column(layout: Layout, matrix: NDArray[np.uint8], path: str) -> NDArray[Any]:
+    off, dtype, count = layout.leaves[path]
+    size = int(dtype[2])
+    block = np.ascontiguousarray(matrix[:, off : off + size * count])
+    return block.view(dtype).reshape(matrix.shape[0], count)
+
+
+def _leaf_matrix(
+    layout: Layout, matrix: NDArray[np.uint8], aliases: tuple[str, ...], width: int, n: int
+) -> F64:
+    for path in aliases:
+        if path in layout.leaves:
+            _, _, count = layout.leaves[path]
+            if count == 0:
+                continue
+            if count != width:
+                raise DecodeError(f"{path} has {count} values for {width} joints")
+            return _column(layout, matrix, path).astype(np.float64)
+    # An empty or absent optional array (e.g. no commanded effort): NaN, not a crash.
+    return np.full((n, width), np.nan)
