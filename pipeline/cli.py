@@ -428,6 +428,10 @@ def main() -> None:
         signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         app()
+    except SystemExit as exit_:
+        if exit_.code == EXIT_INTERRUPTED:  # typer ends a command's Ctrl-C silently with 130
+            sys.stderr.write("interrupted\n")
+        raise
     except KeyboardInterrupt:
         if debug:
             raise
