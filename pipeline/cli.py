@@ -428,6 +428,10 @@ def main() -> None:
         signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         app()
+    except SystemExit as exit_:
+        if exit_.code == EXIT_INTERRUPTED:  # typer ends a command's Ctrl-C silently with 130
+            sys.stderr.write("interrupted\n")
+        raise
     except KeyboardInterrupt:
         if debug:
             raise
@@ -478,6 +482,9 @@ def record_cmd(
     written atomically to OUT/<episode>/ (the episode's key in PARAMS). If a
     selected episode's bag already exists, nothing runs unless --force (or pick
     others with --only). Exits 1 if any episode failed, after writing the others.
+    Episodes that would not fit in memory (or run over 2 h) are refused before any
+    work. One run per OUT at a time; Ctrl-C exits 130 and says which episodes were
+    recorded.
     """
     from pathlib import Path
 

@@ -483,11 +483,11 @@ def _run_and_write(
 # logging incl. the true state): peak RSS of `pipeline record` grows by ~3.6 kB per control
 # step (6 joints) with the episode's length (benches/record_memory.py, docs/BENCHMARKS.md).
 # The episode is held in memory whole (EpisodeResult arrays, then every CDR message, then
-# the MCAP chunks), so this is what a longer episode adds. 800 B is the measured ~595 B
+# the MCAP chunks), so this is what a longer episode adds. 800 B is the measured ~605 B
 # plus a margin, so the estimate stays an upper bound when logging grows a little
 # (tests/stages/test_record_budget.py fails when it no longer is).
 BYTES_PER_JOINT_STEP = 800
-# Wall time per physics step and joint: ~14 us measured for a whole process on a shared
+# Wall time per physics step and joint: 5-14 us measured for a whole process, idle to busy
 # machine (simulation, control, safety checks and writing), rounded up.
 SECONDS_PER_JOINT_STEP = 2e-5
 MAX_EPISODE_WALL_S = 2 * 3600.0  # longer is a typo in hold_s or physics_dt_s, not a study

@@ -232,3 +232,31 @@ def test_report_removes_staging_folders_of_killed_reports(tmp_path):
     run_report(recordings_dir=tmp_path / "rec", out_dir=tmp_path / "rep")
     left = {p.name for p in tmp_path.iterdir() if p.name.startswith(".")}
     assert left == set(kept)
+
+
+@pytest.mark.slow
+def test_ctrl_c_during_a_report_keeps_the_earlier_report_and_leaves_no_staging(tmp_path):
+    from pipeline.stages.report import run_report
+    from tests.analysis.bagfactory import paper_like, write_bag
+
+    rec, out = tmp_path / "rec", tmp_path / "rep"
+    for ctrl in ("pid", "ctc"):
+        write_bag(rec, paper_like(f"paper-{ctrl}", ctrl, duration_s=3.0, motion_end_s=2.0))
+    run_report(recordings_dir=rec, out_dir=out)
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pipeline", "report", "--recordings", str(rec), "--out", str(out)],
+        cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        start_new_session=True,
+    )  # fmt: skip
+    # interrupt once it is writing (its staging folder exists)
+    _wait_for(lambda: any(".rep.tmp-" in p.name for p in tmp_path.iterdir()), 60)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    if proc.returncode == 0:
+        pytest.skip("the report finished before the interrupt arrived")
+    assert proc.returncode == 130, err
+    assert err.strip() == "interrupted", err
+    after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert after == before
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
