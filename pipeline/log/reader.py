@@ -260,7 +260,8 @@ class Recording:
         planner = self.settings.get("planner")
         if isinstance(planner, dict):
             value = planner.get("trajectory_duration_s")
-            if isinstance(value, int | float) and np.isfinite(value):
+            # a negative duration is no motion end (the settings contract flags it)
+            if isinstance(value, int | float) and np.isfinite(value) and value >= 0:
                 return float(value)
         if self.planned is not None and self.planned.times_s.size:
             return float(self.planned.times_s[-1])

@@ -97,3 +97,18 @@ def test_a_candidate_many_times_worse_is_shown_as_a_ratio(tmp_path: Path) -> Non
     text = _text(_report(tmp_path, [pid, ctc]))
     assert "× the baseline's" in text
     assert not any(f"-{n}" in text and " %" in text for n in ("3600.0 %", "3500.0 %"))
+
+
+def test_settings_breaking_the_contract_are_flagged_not_trusted(tmp_path: Path) -> None:
+    from tests.analysis.bagfactory import default_settings
+
+    ep = paper_like("odd-pid", "pid", duration_s=0.6, motion_end_s=0.4, error_scale=1e-3)
+    settings = default_settings(ep)
+    settings["planner"]["trajectory_duration_s"] = -1.0
+    ep.settings = settings
+    report = _report(tmp_path, [ep])
+    (note,) = [n for e, n in report.warnings if e == "odd-pid" and "contract" in n]
+    assert "planner.trajectory_duration_s: expected a finite number >= 0, got -1.0" in note
+    doc = _doc(report)
+    # the motion end falls back to the planned trajectory, never a negative time
+    assert doc["episodes"]["odd-pid"]["motion_end_s"] == pytest.approx(0.4)
