@@ -45,6 +45,25 @@ class PlantOptions:
     payload_kg: float = 0.0
 
 
+BOUND_SUFFIX = "__bound"
+"""Name suffix of the capsule enclosing an obstacle box in collision-checking models."""
+
+
+def bounding_capsule(box: Box) -> tuple[tuple[float, ...], tuple[float, ...], float]:
+    """A capsule containing ``box``: (segment start, segment end, radius [m]).
+
+    The segment runs along the box's longest axis between its face centres; every
+    point of the box is within the norm of the two other half extents of it.
+    """
+    half = np.asarray(box.half_size, dtype=np.float64)
+    axis = int(np.argmax(half))
+    offset = np.zeros(3)
+    offset[axis] = half[axis]
+    centre = np.asarray(box.center, dtype=np.float64)
+    radius = float(np.linalg.norm(np.delete(half, axis)))
+    return tuple((centre - offset).tolist()), tuple((centre + offset).tolist()), radius
+
+
 def _v(xs: Sequence[float] | np.ndarray) -> str:
     return " ".join(repr(float(x)) for x in xs)
 
@@ -66,6 +85,7 @@ def build_mjcf(
     plant: PlantOptions | None = None,
     obstacles: Sequence[Box] = (),
     excluded_pairs: Sequence[tuple[str, str]] | None = None,
+    obstacle_bounds: bool = False,
 ) -> str:
     """MJCF text for the robot on a pedestal, floor at ``FLOOR_Z_M``.
 
@@ -73,6 +93,12 @@ def build_mjcf(
     a spherical wrist) are excluded from collision, as MoveIt Setup
     Assistant disables "default" collisions; pass ``excluded_pairs`` to
     override.
+
+    With ``obstacle_bounds`` (collision checking, not the plant) each box leaves
+    MuJoCo's collision pipeline (contype = conaffinity = 0; it stays in the model
+    for ``mj_geomDistance``) and a capsule that encloses it takes its place, named
+    ``<box>`` + ``BOUND_SUFFIX``: capsule pairs are exact within the margin, while
+    MuJoCo's capsule–box collider misses pairs there (google-deepmind/mujoco#1473).
 
     A kinematics-only robot gets geometry-derived inertias (density 1000)
     so the model still compiles and steps; simulation code calls
@@ -99,12 +125,20 @@ def build_mjcf(
         f'    <geom name="pedestal" type="cylinder" fromto="0 0 {FLOOR_Z_M!r} 0 0 -0.02" '
         f'size="0.08" rgba="0.4 0.4 0.4 1" contype="{GROUND_BIT}" conaffinity="0"/>',
     ]
+    box_bit = 0 if obstacle_bounds else OBSTACLE_BIT
     for box in obstacles:
         out.append(
             f'    <geom name={quoteattr(box.name)} type="box" pos="{_v(box.center)}" '
-            f'size="{_v(box.half_size)}" rgba="0.8 0.3 0.3 0.6" contype="{OBSTACLE_BIT}" '
+            f'size="{_v(box.half_size)}" rgba="0.8 0.3 0.3 0.6" contype="{box_bit}" '
             'conaffinity="0"/>'
         )
+        if obstacle_bounds:
+            a, b, radius = bounding_capsule(box)
+            out.append(
+                f'    <geom name={quoteattr(box.name + BOUND_SUFFIX)} type="capsule" '
+                f'fromto="{_v(a + b)}" size="{radius!r}" rgba="0 0 0 0" group="5" '
+                f'contype="{OBSTACLE_BIT}" conaffinity="0"/>'
+            )
     out.append(f'    <body name="{BASE_LINK}">')
     indent = "    "
     for i, (joint, link) in enumerate(zip(spec.joints, links, strict=True)):
@@ -201,9 +235,17 @@ def build_mujoco_model(
     timestep_s: float = 0.001,
     plant: PlantOptions | None = None,
     obstacles: Sequence[Box] = (),
+    obstacle_bounds: bool = False,
 ) -> mujoco.MjModel:
-    """Compile the spec into an ``MjModel`` with auto-reset on divergence disabled."""
-    xml = build_mjcf(spec, timestep_s=timestep_s, plant=plant, obstacles=obstacles)
+    """Compile the spec into an ``MjModel`` with auto-reset on divergence disabled
+    (``obstacle_bounds``: see ``build_mjcf``)."""
+    xml = build_mjcf(
+        spec,
+        timestep_s=timestep_s,
+        plant=plant,
+        obstacles=obstacles,
+        obstacle_bounds=obstacle_bounds,
+    )
     try:
         model = mujoco.MjModel.from_xml_string(xml)
     except ValueError as err:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -145,6 +145,38 @@ def _refine(path: og.PathGeometric, simplifier: og.PathSimplifier) -> None:
         simplifier.reduceVertices(path, 100, 20)
 
 
+class _MotionValidator(ob.MotionValidator):  # type: ignore[misc]
+    """OMPL's ``DiscreteMotionValidator`` semantics (states at most ``step_rad`` apart,
+    checked coarse to fine) with one Python call per motion instead of one per state
+    (``CollisionChecker.motion_clear``). Only the two-state form is used by
+    RRTConnect and the path simplifier."""
+
+    def __init__(
+        self,
+        si: ob.SpaceInformation,
+        checker: CollisionChecker,
+        coords: Callable[[ob.State], F64],
+        step_rad: float,
+    ) -> None:
+        super().__init__(si)
+        self._checker = checker
+        self._coords = coords
+        self._step_rad = step_rad
+        # the simplifier re-checks many motions (about a quarter of the states): a
+        # motion's answer is a function of its two ends
+        self._known: dict[bytes, bool] = {}
+
+    def checkMotion(self, s1: ob.State, s2: ob.State, *last_valid: object) -> bool:
+        if last_valid:
+            raise PlanningError("checkMotion with a last valid state is not supported")
+        qa, qb = self._coords(s1), self._coords(s2)
+        key = qa.tobytes() + qb.tobytes()
+        known = self._known.get(key)
+        if known is None:
+            known = self._known[key] = self._checker.motion_clear(qa, qb, step_rad=self._step_rad)
+        return known
+
+
 def plan_path(
     spec: RobotSpec,
     *,
@@ -191,19 +223,18 @@ def plan_path(
         bounds.setHigh(i, float(spec.upper[i]))
     space.setBounds(bounds)
     ss = og.SimpleSetup(space)
-    qpos = checker.data.qpos
-    collide = checker.collide_current
+
+    def coords(state: ob.State) -> F64:
+        # (the state space keeps samples and interpolations inside the joint limits)
+        return np.array([state[i] for i in range(n)])
 
     def state_valid(state: ob.State) -> bool:
-        # hot path (tens of thousands of calls per plan): no numpy, no bounds check
-        # (the state space keeps samples and interpolations inside the joint limits)
-        for i in range(n):
-            qpos[i] = state[i]
-        return collide() == 0
+        return checker.is_clear(coords(state))
 
     ss.setStateValidityChecker(state_valid)
     si = ss.getSpaceInformation()
     si.setStateValidityCheckingResolution(step / space.getMaximumExtent())
+    si.setMotionValidator(_MotionValidator(si, checker, coords, step))
     ss.setPlanner(og.RRTConnect(si))
     # SpaceInformation.allocState hands ownership to Python (freed with the
     # wrapper); StateSpace.allocState would leak, and freeState would double-free.

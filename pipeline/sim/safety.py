@@ -27,7 +27,6 @@ from pipeline.settings import KINDS, Clearance, ContactKind, ContactSpan, Execut
 FLOOR_GEOMS = ("ground", "pedestal")
 """World geometry of the scene besides obstacles (names from ``pipeline.model.mjcf``)."""
 DEFAULT_PADDING_M = 0.05
-_BOX = int(mujoco.mjtGeom.mjGEOM_BOX)
 
 
 def _kind(
@@ -162,36 +161,25 @@ def _collide_rows(
 ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
     """Every pair within the padding at the given rows: (row, (geom1, geom2), distance).
 
-    Robot–robot and robot–floor pairs come from ``mj_collision`` with the
-    checker's margins (capsule–capsule and capsule–plane distances are exact).
-    Robot–obstacle pairs do not: MuJoCo's capsule–box collider misses or
-    misjudges pairs within the margin (google-deepmind/mujoco#1473; a capsule
-    20 mm above a box with a 50 mm margin gives no contact at all), so their
-    distances come from ``mj_geomDistance``, only for the rows and geoms whose
-    bounding sphere comes within the padding of the box.
+    ``mj_collision`` with the checker's margins gives robot–robot and robot–floor
+    pairs (capsule–capsule and capsule–plane distances are exact) and, for
+    obstacles, contacts with each box's enclosing capsule: only those rows get
+    one more ``mj_kinematics`` and ``CollisionChecker.resolve_bounds`` (the exact
+    robot–box distance; see ``pipeline.planning.collision``).
     """
-    model, data = checker.model, checker.data
-    padding = checker.padding_m
-    world = model.geom_bodyid == 0
-    obstacle_geoms = [g for g in range(model.ngeom) if world[g] and model.geom_type[g] == _BOX]
-    robot_geoms = np.flatnonzero(~world)
-    is_obstacle = np.zeros(model.ngeom, dtype=bool)
-    is_obstacle[obstacle_geoms] = True
-
-    qpos, xpos = data.qpos, data.geom_xpos
+    data = checker.data
+    bounds = checker.box_of >= 0
+    qpos = data.qpos
     collide = checker.collide_current
-    centres = np.empty((len(rows), len(robot_geoms), 3))
     # flat buffers for every contact, grown when full; filtered after the loop
     size = 2 * len(rows) + 16  # the floor test outgrows this: growth is exercised
     row_buf = np.empty(size, dtype=np.int64)
     geom_buf = np.empty((size, 2), dtype=np.int64)
     dist_buf = np.empty(size)
     filled = 0
-    for i, k in enumerate(rows.tolist()):
+    for k in rows.tolist():
         qpos[:] = qs[k]
         ncon = collide()
-        if obstacle_geoms:
-            centres[i] = xpos[robot_geoms]
         if ncon:
             end = filled + ncon
             if end > size:
@@ -207,52 +195,16 @@ def _collide_rows(
             dist_buf[filled:end] = contact.dist[:ncon]
             filled = end
     row_of, geom_pairs, dists = row_buf[:filled], geom_buf[:filled], dist_buf[:filled]
-    keep = ~is_obstacle[geom_pairs].any(axis=1)
-    found = [(row_of[keep], geom_pairs[keep], dists[keep])]
-    if obstacle_geoms:
-        found.extend(_obstacle_distances(checker, qs, rows, centres, robot_geoms, obstacle_geoms))
+    candidate = bounds[geom_pairs].any(axis=1)
+    found = [(row_of[~candidate], geom_pairs[~candidate], dists[~candidate])]
+    at = np.flatnonzero(candidate)  # in row order, as the buffers were filled
+    rows_at, first = np.unique(row_of[at], return_index=True)
+    groups = np.split(at, first[1:]) if len(at) else []
+    for k, group in zip(rows_at.tolist(), groups, strict=True):
+        qpos[:] = qs[k]
+        mujoco.mj_kinematics(checker.model, data)
+        pairs, near = checker.resolve_bounds(geom_pairs[group], dists[group])
+        found.append((np.full(len(near), k, dtype=np.int64), pairs, near))
     row_of, geom_pairs, dists = (np.concatenate(parts) for parts in zip(*found, strict=True))
-    inside = dists < padding
+    inside = dists < checker.padding_m
     return row_of[inside], geom_pairs[inside], dists[inside]
-
-
-def _obstacle_distances(
-    checker: CollisionChecker,
-    qs: NDArray[np.float64],
-    rows: NDArray[np.int64],
-    centres: NDArray[np.float64],
-    robot_geoms: NDArray[np.int64],
-    obstacle_geoms: list[int],
-) -> list[tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]]:
-    """Exact robot–box distances where a geom's bounding sphere comes within the padding."""
-    model, data = checker.model, checker.data
-    padding = checker.padding_m
-    rbound = model.geom_rbound[robot_geoms]
-    boxes = np.array(obstacle_geoms)
-    # a world geom's pos is in the world frame and obstacles are axis-aligned there:
-    # distance of every bounding sphere to every box, (rows, robot geoms, boxes)
-    gap = np.abs(centres[:, :, None, :] - model.geom_pos[boxes]) - model.geom_size[boxes]
-    near = np.linalg.norm(np.maximum(gap, 0.0), axis=3) - rbound[:, None] < padding
-    found_rows: list[int] = []
-    found_geoms: list[tuple[int, int]] = []
-    found_dists: list[float] = []
-    fromto = np.zeros(6)
-    distance = mujoco.mj_geomDistance
-    for i in np.flatnonzero(near.any(axis=(1, 2))).tolist():
-        k = int(rows[i])
-        data.qpos[:] = qs[k]
-        mujoco.mj_kinematics(model, data)
-        for j, b in zip(*np.nonzero(near[i]), strict=True):
-            g, box = int(robot_geoms[j]), int(boxes[b])
-            found_rows.append(k)
-            found_geoms.append((g, box))
-            found_dists.append(distance(model, data, g, box, padding, fromto))
-    if not found_rows:
-        return []
-    return [
-        (
-            np.array(found_rows, dtype=np.int64),
-            np.array(found_geoms, dtype=np.int64),
-            np.array(found_dists),
-        )
-    ]

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from pipeline.errors import PlanningError
+from pipeline.model.chain import chain
 from pipeline.model.dh import forward_kinematics, link_frames
-from pipeline.model.mjcf import FLOOR_Z_M
+from pipeline.model.mjcf import FLOOR_Z_M, build_mjcf
 from pipeline.model.scene import Box
 from pipeline.planning import (
     CollisionChecker,
@@ -121,3 +122,44 @@ def test_motion_check_step_moves_points_by_at_most_the_padding(ur5):
     step = motion_check_step_rad(ur5, padding)
     assert step * reach_bound_m(ur5) == pytest.approx(padding)
     assert 1e-3 < step < 0.05  # sane for a UR5: fine but not absurd
+
+
+def _shelf_under_the_elbow(spec, gap_m):
+    """A wide shelf whose top is ``gap_m`` under the elbow capsule at q = 0 (DH FK): the
+    capsule lies along the shelf's face, where MuJoCo's capsule–box collider misses
+    pairs within the margin (google-deepmind/mujoco#1473)."""
+    frame = link_frames(spec, np.zeros(6))[2]
+    (seg,) = chain(spec)[2].segments_dh
+    a, b = ((frame @ np.append(p, 1.0))[:3] for p in (seg.start, seg.end))
+    assert a[2] == pytest.approx(b[2])  # horizontal at q = 0
+    top = a[2] - seg.radius - gap_m
+    return Box("shelf", (-0.6, 0.0, top - 0.05), (0.12, 0.1, 0.05))
+
+
+def test_padding_sees_a_box_along_a_capsule_that_mujocos_box_collider_misses(ur5):
+    q = np.zeros(6)
+    checker = CollisionChecker(ur5, obstacles=[_shelf_under_the_elbow(ur5, 0.005)], padding_m=0.01)
+    # MuJoCo's own box pair reports nothing within the 10 mm margin here ...
+    plain = mujoco.MjModel.from_xml_string(
+        build_mjcf(ur5, obstacles=[_shelf_under_the_elbow(ur5, 0.005)])
+    )
+    plain.geom_margin[:] = 0.005
+    data = mujoco.MjData(plain)
+    mujoco.mj_forward(plain, data)
+    shelf = plain.geom("shelf").id
+    assert not any(shelf in (c.geom1, c.geom2) for c in data.contact[: data.ncon])
+    # ... the checker does, at the geometric gap
+    assert not checker.is_clear(q)
+    dist, pair = checker.clearance_m(q)
+    assert pair == ("elbow_link", "shelf")
+    assert dist == pytest.approx(0.005, abs=1e-9)
+    assert checker.is_valid(q) and checker.contacts(q) == []  # near, not touching
+    # and a planned motion must keep the padding there too
+    lifted = q.copy()
+    lifted[1] = -0.3  # shoulder lift raises the elbow well clear of the shelf
+    assert checker.is_clear(lifted)
+    assert not checker.motion_clear(lifted, q, step_rad=0.01)
+    assert checker.first_invalid(np.stack([lifted, q]), step_rad=0.01) is not None
+    checker.padding_m = 0.004
+    assert checker.is_clear(q)
+    assert checker.motion_clear(lifted, q, step_rad=0.01 * 0.4)
