@@ -451,6 +451,8 @@ class ExecutionSafety:
         padding_m: distances below this were measured; farther pairs were not [m].
         every: every how many rows of the episode were checked.
         samples_checked: rows checked.
+        skip_within_m: rows were skipped only when provably within this of a checked
+            row in every distance (0: all checked; see ``assess_execution``) [m].
         clearances: per kind of pair that came within ``padding_m`` (obstacle,
             floor, self, in that order), its closest approach.
         contacts: every pair that penetrated, by first contact time.
@@ -461,6 +463,7 @@ class ExecutionSafety:
     samples_checked: int
     clearances: tuple[Clearance, ...]
     contacts: tuple[ContactSpan, ...]
+    skip_within_m: float = 0.0
 
     @property
     def touched(self) -> bool:
@@ -490,6 +493,7 @@ class ExecutionSafety:
             "padding_m": self.padding_m,
             "every": self.every,
             "samples_checked": self.samples_checked,
+            "skip_within_m": self.skip_within_m,
             "touched": self.touched,
             "min_clearance_m": self.min_clearance_m,
             "clearances": [c.to_dict() for c in self.clearances],
@@ -500,7 +504,7 @@ class ExecutionSafety:
     @classmethod
     def from_dict(cls, data: Any, path: str = "safety") -> ExecutionSafety:
         """Inverse of ``to_dict`` (derived keys are not read), validated."""
-        d = _mapping(data, path)
+        d = {"skip_within_m": 0.0, **_mapping(data, path)}  # absent before it existed
         _check_keys(d, cls, path)
         clearances, contacts = d["clearances"], d["contacts"]
         if not isinstance(clearances, list):
@@ -511,6 +515,7 @@ class ExecutionSafety:
             padding_m=_number(d["padding_m"], f"{path}.padding_m", minimum=0),
             every=_int(d["every"], f"{path}.every", minimum=1),
             samples_checked=_int(d["samples_checked"], f"{path}.samples_checked"),
+            skip_within_m=_number(d["skip_within_m"], f"{path}.skip_within_m", minimum=0),
             clearances=tuple(
                 Clearance.from_dict(c, f"{path}.clearances[{i}]") for i, c in enumerate(clearances)
             ),

@@ -8,6 +8,7 @@ links 2..n with the ground, and every link with obstacles.
 
 from __future__ import annotations
 
+import copy
 import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -238,7 +239,33 @@ def build_mujoco_model(
     obstacle_bounds: bool = False,
 ) -> mujoco.MjModel:
     """Compile the spec into an ``MjModel`` with auto-reset on divergence disabled
-    (``obstacle_bounds``: see ``build_mjcf``)."""
+    (``obstacle_bounds``: see ``build_mjcf``).
+
+    Compiled models are cached per process (``compiled_model``), so the episodes of
+    a campaign in one worker compile each plant and checker once; every call gets
+    its own copy (~0.2 ms instead of ~8 ms), free to modify.
+    """
+    return copy.copy(
+        compiled_model(
+            spec,
+            timestep_s=float(timestep_s),
+            plant=plant or PlantOptions(),
+            obstacles=tuple(obstacles),
+            obstacle_bounds=bool(obstacle_bounds),
+        )
+    )
+
+
+@functools.lru_cache(maxsize=64)
+def compiled_model(
+    spec: RobotSpec,
+    *,
+    timestep_s: float,
+    plant: PlantOptions,
+    obstacles: tuple[Box, ...],
+    obstacle_bounds: bool,
+) -> mujoco.MjModel:
+    """The cached compile behind ``build_mujoco_model`` (do not modify the result: copy it)."""
     xml = build_mjcf(
         spec,
         timestep_s=timestep_s,

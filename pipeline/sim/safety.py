@@ -12,6 +12,7 @@ and how deep [m]; over the whole episode, the smallest clearance and where.
 from __future__ import annotations
 
 import math
+from bisect import bisect_left
 from collections.abc import Sequence
 
 import mujoco
@@ -20,13 +21,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import SimulationError
 from pipeline.model.scene import Box
-from pipeline.planning.collision import CollisionChecker
+from pipeline.planning.collision import CollisionChecker, reach_bound_m
 from pipeline.robots.spec import RobotSpec
 from pipeline.settings import KINDS, Clearance, ContactKind, ContactSpan, ExecutionSafety
 
 FLOOR_GEOMS = ("ground", "pedestal")
 """World geometry of the scene besides obstacles (names from ``pipeline.model.mjcf``)."""
 DEFAULT_PADDING_M = 0.05
+SKIP_WITHIN_M = 5e-4
+"""The record stage's ``skip_within_m``: clearances exact to 0.5 mm, contacts exact."""
 
 
 def _kind(
@@ -78,6 +81,7 @@ def assess_execution(
     obstacles: Sequence[Box],
     padding_m: float = DEFAULT_PADDING_M,
     every: int = 1,
+    skip_within_m: float = 0.0,
 ) -> ExecutionSafety:
     """Contacts and the minimum clearance along true joint states.
 
@@ -88,16 +92,35 @@ def assess_execution(
         obstacles: the boxes the episode ran with.
         padding_m: measure clearances below this [m]; farther pairs cost nothing.
         every: check every ``every``-th row (the last row is always checked).
+        skip_within_m: skip rows that provably differ from the last checked row by less
+            than this in every pair's distance [m] (0: check them all). Along the rows
+            no point of the arm moves more than ``reach_bound_m`` times the joint-space
+            path length, so a row is skipped only while that bound stays below
+            ``min(skip_within_m, d)``, ``d`` being the checked row's smallest distance:
+            a skipped row is contact-free, every contact row is checked (so contact
+            spans, sample counts and depths are exact), and the clearances are exact
+            to within ``skip_within_m``. Settled phases (pre-roll, hold) then cost a
+            few checks instead of one per row.
 
     Raises:
         SimulationError: shapes, non-finite positions, a bad padding or step.
     """
     qs, stamps = _check_inputs(spec, q, stamp_ns, padding_m, every)
+    if not (
+        isinstance(skip_within_m, int | float | np.floating)
+        and math.isfinite(skip_within_m)
+        and skip_within_m >= 0
+    ):
+        raise SimulationError(
+            f"skip_within_m: expected a finite distance >= 0 [m], got {skip_within_m!r}"
+        )
     checker = CollisionChecker(spec, obstacles=obstacles, padding_m=float(padding_m))
     rows = np.arange(0, len(qs), every)
     if len(qs) and rows[-1] != len(qs) - 1:
         rows = np.append(rows, len(qs) - 1)
-    row_of, geom_pairs, dists = _collide_rows(checker, qs, rows)
+    rows, row_of, geom_pairs, dists = _collide_rows(
+        checker, qs, rows, skip_within_m=float(skip_within_m), reach_m_per_rad=reach_bound_m(spec)
+    )
     labels = checker.geom_labels
     obstacle_names = frozenset(b.name for b in obstacles)
     # one id per unordered pair of labels (robot links are labelled by body, so a
@@ -150,6 +173,7 @@ def assess_execution(
     return ExecutionSafety(
         padding_m=float(padding_m),
         every=int(every),
+        skip_within_m=float(skip_within_m),
         samples_checked=len(rows),
         clearances=tuple(clearances),
         contacts=tuple(spans),
@@ -157,9 +181,16 @@ def assess_execution(
 
 
 def _collide_rows(
-    checker: CollisionChecker, qs: NDArray[np.float64], rows: NDArray[np.int64]
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
-    """Every pair within the padding at the given rows: (row, (geom1, geom2), distance).
+    checker: CollisionChecker,
+    qs: NDArray[np.float64],
+    rows: NDArray[np.int64],
+    *,
+    skip_within_m: float,
+    reach_m_per_rad: float,
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+    """The rows checked (a subset of ``rows`` when ``skip_within_m`` > 0, see
+    ``assess_execution``; the last one always) and every pair within the padding at
+    them: (rows checked, row, (geom1, geom2), distance).
 
     ``mj_collision`` with the checker's margins gives robot–robot and robot–floor
     pairs (capsule–capsule and capsule–plane distances are exact) and, for
@@ -171,15 +202,28 @@ def _collide_rows(
     bounds = checker.box_of >= 0
     qpos = data.qpos
     collide = checker.collide_current
+    padding = checker.padding_m
+    skipping = skip_within_m > 0.0 and len(rows) > 2
+    if skipping:
+        # path length along the rows [rad] bounds the joint distance between any two
+        chords = np.linalg.norm(np.diff(qs[rows], axis=0), axis=1)
+        length = np.concatenate([[0.0], np.cumsum(chords)]).tolist()
+        per_m = 1.0 / reach_m_per_rad
     # flat buffers for every contact, grown when full; filtered after the loop
     size = 2 * len(rows) + 16  # the floor test outgrows this: growth is exercised
     row_buf = np.empty(size, dtype=np.int64)
     geom_buf = np.empty((size, 2), dtype=np.int64)
     dist_buf = np.empty(size)
     filled = 0
-    for k in rows.tolist():
+    row_list = rows.tolist()
+    checked: list[int] = []
+    pos = 0
+    while pos < len(row_list):
+        k = row_list[pos]
+        checked.append(k)
         qpos[:] = qs[k]
         ncon = collide()
+        nearest = padding
         if ncon:
             end = filled + ncon
             if end > size:
@@ -193,7 +237,20 @@ def _collide_rows(
             row_buf[filled:end] = k
             geom_buf[filled:end] = contact.geom[:ncon]
             dist_buf[filled:end] = contact.dist[:ncon]
+            if skipping:
+                # capsules around boxes are nearer than the boxes: a lower bound too
+                nearest = float(dist_buf[filled:end].min())
             filled = end
+        if not skipping:
+            pos += 1
+            continue
+        threshold = min(skip_within_m, nearest)
+        if threshold <= 0.0 or pos >= len(row_list) - 2:
+            pos += 1
+            continue
+        # skip the rows within threshold / reach of joint path length (the last row stays)
+        target = length[pos] + threshold * per_m
+        pos = min(max(pos + 1, bisect_left(length, target, pos + 1)), len(row_list) - 1)
     row_of, geom_pairs, dists = row_buf[:filled], geom_buf[:filled], dist_buf[:filled]
     candidate = bounds[geom_pairs].any(axis=1)
     found = [(row_of[~candidate], geom_pairs[~candidate], dists[~candidate])]
@@ -207,4 +264,4 @@ def _collide_rows(
         found.append((np.full(len(near), k, dtype=np.int64), pairs, near))
     row_of, geom_pairs, dists = (np.concatenate(parts) for parts in zip(*found, strict=True))
     inside = dists < checker.padding_m
-    return row_of[inside], geom_pairs[inside], dists[inside]
+    return np.array(checked, dtype=np.int64), row_of[inside], geom_pairs[inside], dists[inside]

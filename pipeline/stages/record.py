@@ -321,7 +321,7 @@ def _run_and_write(
     from pipeline.model.mjcf import PlantOptions
     from pipeline.model.uncertainty import draw_plant, link_inertials, with_plant
     from pipeline.sim.runner import run_episode
-    from pipeline.sim.safety import assess_execution
+    from pipeline.sim.safety import SKIP_WITHIN_M, assess_execution
 
     scenario = episode.scenario
     spec = load_spec(scenario.robot)
@@ -368,9 +368,14 @@ def _run_and_write(
     )
     k0 = int(result.extra["motion_start_row"])
     motion_start_s = float(result.extra["motion_start_s"])
-    # contacts and clearance along the plant's true motion, every control step
+    # contacts and clearance along the plant's true motion: every control step that is
+    # not provably within SKIP_WITHIN_M of a checked one
     safety = assess_execution(
-        spec, q=result.q_true, stamp_ns=result.stamp_ns, obstacles=_boxes(scenario)
+        spec,
+        q=result.q_true,
+        stamp_ns=result.stamp_ns,
+        obstacles=_boxes(scenario),
+        skip_within_m=SKIP_WITHIN_M,
     )
     plant_settings = PlantSettings(
         exact=_plant_is_exact(spec, plant_spec, scenario),

@@ -214,3 +214,52 @@ def test_bad_inputs_are_refused_in_one_line(ur5, kwargs, match):
     with pytest.raises(SimulationError, match=match) as err:
         assess_execution(ur5, **args)
     assert isinstance(err.value, PipelineError) and "\n" not in str(err.value)
+
+
+# --- skipping provably clear rows ----------------------------------------------------
+
+
+def _held(q, rows=1500):
+    """``q`` with its first and last rows held for ``rows`` more rows each (settled phases)."""
+    return np.concatenate([np.repeat(q[:1], rows, axis=0), q, np.repeat(q[-1:], rows, axis=0)])
+
+
+def test_skipping_within_a_bound_keeps_contacts_exact_and_checks_few_settled_rows(
+    ur5, pan_through_box
+):
+    box, q, _ = pan_through_box
+    q = _held(q)
+    stamps = _stamps(len(q))
+    full = assess_execution(ur5, q=q, stamp_ns=stamps, obstacles=[box])
+    skip = assess_execution(ur5, q=q, stamp_ns=stamps, obstacles=[box], skip_within_m=5e-4)
+    assert full.samples_checked == len(q)
+    assert skip.skip_within_m == 5e-4 and full.skip_within_m == 0.0
+    # the held phases cost a few checks; the sweep is checked about row by row
+    assert skip.samples_checked < len(q) - 2 * 1400
+    assert skip.contacts == full.contacts  # spans, sample counts, depths: identical
+    for a, b in zip(skip.clearances, full.clearances, strict=True):
+        assert (a.kind, a.bodies) == (b.kind, b.bodies)
+        assert b.distance_m <= a.distance_m <= b.distance_m + 5e-4
+
+
+def test_a_two_row_dip_into_the_floor_between_settled_phases_is_caught(ur5):
+    """Rows far from anything are skipped, yet a contact two rows long is found: the
+    skip bound is distance-based, not a fixed stride."""
+    q = np.zeros((4001, 6))
+    q[2000:2002, 1] = 1.2  # the stretched arm swung into the floor for two rows
+    stamps = _stamps(len(q))
+    skip = assess_execution(ur5, q=q, stamp_ns=stamps, obstacles=(), skip_within_m=1e-3)
+    full = assess_execution(ur5, q=q, stamp_ns=stamps, obstacles=())
+    assert skip.samples_checked < 20
+    assert skip.touched and skip.contacts == full.contacts
+    assert {c.first_ns for c in skip.contacts} == {2000 * STEP_NS}
+    assert all(c.samples == 2 for c in skip.contacts)
+    # a stride of 7 rows (``every``) misses it
+    assert not assess_execution(ur5, q=q, stamp_ns=stamps, obstacles=(), every=7).touched
+
+
+def test_skip_bound_must_be_a_distance(ur5):
+    with pytest.raises(SimulationError, match=r"^skip_within_m: expected a finite distance"):
+        assess_execution(
+            ur5, q=np.zeros((3, 6)), stamp_ns=_stamps(3), obstacles=(), skip_within_m=-1.0
+        )
