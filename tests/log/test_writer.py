@@ -657,3 +657,35 @@ def test_bad_inputs_raise_recording_error_and_write_nothing(
     with pytest.raises(RecordingError, match=message):
         bag.write_episode_bag(tmp_path / "ep", spec=ur5, result=result, planned=planned, **kwargs)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_metadata_custom_data_written_as_json_strings_reads_back_as_pyyaml_writes_it():
+    """The fast path (JSON strings as YAML double-quoted scalars) and PyYAML's own
+    emitter give the same document for awkward printable-ASCII values."""
+    import yaml
+
+    from pipeline.log import rosbag2
+
+    values = {
+        "settings": json.dumps({"a": [1, 2.5e-3, None], "b": "x: y # z", "c": "'\"\\"}),
+        "quote'd": 'it\'s "quoted" \\ back\\slash',
+        "empty": "",
+        "spaces": "  lead and trail  ",
+        "yaml-ish": "- [not, a, list]: {no}",
+        "number": "0123",
+        "bool": "yes",
+    }
+    topic = rosbag2.TopicInfo("/t", "std_msgs/msg/String", "- history: 1", "RIHS01_00", 3)
+    args = {"topics": [topic], "start_ns": 5, "end_ns": 9, "ros_distro": "jazzy"}
+    fast = rosbag2.metadata_yaml("x.mcap", custom_data=values, **args)
+    assert '"quote\'d": "it\'s \\"quoted\\" \\\\ back\\\\slash"' in fast  # the fast path ran
+    assert yaml.safe_load(fast)["rosbag2_bagfile_information"]["custom_data"] == values
+    # non-ASCII takes PyYAML's path; both parse to what was given
+    slow = rosbag2.metadata_yaml("x.mcap", custom_data={**values, "ü": "naïve"}, **args)
+    info = yaml.safe_load(slow)["rosbag2_bagfile_information"]
+    assert info["custom_data"] == {**values, "ü": "naïve"}
+    fast_info = yaml.safe_load(fast)["rosbag2_bagfile_information"]
+    assert {k: v for k, v in info.items() if k != "custom_data"} == {
+        k: v for k, v in fast_info.items() if k != "custom_data"
+    }
+    assert list(fast_info)[-2:] == ["custom_data", "ros_distro"]
