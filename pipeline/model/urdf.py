@@ -8,6 +8,7 @@ DH conventions. ``tool0`` is the DH flange frame.
 
 from __future__ import annotations
 
+import functools
 import math
 from xml.sax.saxutils import quoteattr
 
@@ -46,8 +47,10 @@ def _cylinder_between(
     return t, length
 
 
+@functools.lru_cache(maxsize=64)
 def build_urdf(spec: RobotSpec) -> str:
-    """URDF text of the robot (inertials, visual + collision cylinders, ``tool0``)."""
+    """URDF text of the robot (inertials, visual + collision cylinders, ``tool0``);
+    cached per process (an episode needs it twice: controller model, robot description)."""
     links = chain(spec)
     out = [f'<?xml version="1.0"?>\n<robot name={quoteattr(spec.name)}>']
     out.append(f'  <link name="{BASE_LINK}"/>')
@@ -94,7 +97,17 @@ def build_urdf(spec: RobotSpec) -> str:
 
 
 def build_pinocchio_model(spec: RobotSpec) -> pin.Model:
-    """Pinocchio model from the URDF text (gravity -9.81 z, frame ``tool0``)."""
+    """Pinocchio model from the URDF text (gravity -9.81 z, frame ``tool0``).
+
+    A copy of a per-process cached build (``pinocchio_model``): ~0.02 ms instead of
+    ~2 ms, so the episodes of a campaign in one worker build each robot once.
+    """
+    return pin.Model(pinocchio_model(spec))
+
+
+@functools.lru_cache(maxsize=64)
+def pinocchio_model(spec: RobotSpec) -> pin.Model:
+    """The cached build behind ``build_pinocchio_model`` (do not modify the result: copy it)."""
     try:
         model = pin.buildModelFromXML(build_urdf(spec))
     except (RuntimeError, ValueError) as err:

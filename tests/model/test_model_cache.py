@@ -1,4 +1,4 @@
-"""The compiled-model cache behind build_mujoco_model: shared compile, private copies."""
+"""Per-process model caches (MuJoCo compile, Pinocchio build): shared build, private copies."""
 
 from __future__ import annotations
 
@@ -27,3 +27,15 @@ def test_models_come_from_one_compile_but_each_caller_gets_its_own_copy(ur5):
     assert heavy.body_mass.sum() > build_mujoco_model(ur5).body_mass.sum() + 1.9
     for m in (a, b, c, heavy):
         assert m.opt.disableflags & int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
+
+
+def test_pinocchio_models_are_private_copies_of_one_build(ur5):
+    from pipeline.model.urdf import build_pinocchio_model, pinocchio_model
+
+    pinocchio_model.cache_clear()
+    a, b = build_pinocchio_model(ur5), build_pinocchio_model(ur5)
+    assert pinocchio_model.cache_info().misses == 1
+    assert a is not b and a == b
+    a.armature[:] = 7.0
+    assert not np.any(b.armature == 7.0)
+    assert np.allclose(build_pinocchio_model(ur5).armature, ur5.armature)
