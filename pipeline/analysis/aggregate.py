@@ -16,7 +16,7 @@ from typing import Any, NamedTuple
 import polars as pl
 from scipy import stats
 
-from pipeline.analysis.metrics import COMPARED_METRICS
+from pipeline.analysis.catalog import COMPARED_METRICS
 
 CONFIDENCE = 0.95
 
@@ -83,7 +83,12 @@ def mean_ci(values: Iterable[Any], *, confidence: float = CONFIDENCE) -> MeanCI:
 
 
 def _ok(episodes: pl.DataFrame) -> pl.DataFrame:
-    return episodes.filter(pl.col("status") == "ok")
+    """Completed episodes, with ``scenario`` = the group they are compared in (the
+    scenario, or ``campaign/condition``: :func:`pipeline.analysis.episodes.group_key`)."""
+    ok = episodes.filter(pl.col("status") == "ok")
+    if "group" in ok.columns:
+        ok = ok.with_columns(pl.col("group").alias("scenario"))
+    return ok
 
 
 def runs_per_controller(episodes: pl.DataFrame) -> dict[tuple[str, str], int]:

@@ -37,7 +37,18 @@ EPISODE_COLUMNS = (
     "motion_start_s",
     "start_abs_error_rad",
     "start_abs_effort_nm",
+    "campaign",
+    "condition",
+    "group",
 )
+
+
+def group_key(scenario: str, campaign: str | None, condition: str | None) -> str:
+    """What episodes are compared within: the scenario of a hand-listed episode, else
+    ``<campaign>/<condition>`` (``<campaign>`` when only controller and seed vary)."""
+    if campaign is None:
+        return scenario
+    return f"{campaign}/{condition}" if condition else campaign
 
 
 def _period_s(rec: Recording) -> float:
@@ -70,7 +81,9 @@ def episode_table(
     ``controller_samples`` count ``/joint_states`` and ``/controller_state`` messages;
     ``error_source``, ``motion_start_s`` (the pre-roll cut), ``start_abs_error_rad`` and
     ``start_abs_effort_nm`` (the worst joint at the motion start) come from ``views``
-    (the protocol applied to each recording; null without one).
+    (the protocol applied to each recording; null without one); ``campaign`` and
+    ``condition`` from the typed settings (null for a hand-listed episode) and ``group``
+    is :func:`group_key`.
     """
     rows: list[dict[str, Any]] = []
     for rec in recordings:
@@ -98,6 +111,10 @@ def episode_table(
                 **_protocol_columns((views or {}).get(rec.episode)),
             }
         )
+        info = _campaign((views or {}).get(rec.episode))
+        rows[-1]["campaign"] = info[0]
+        rows[-1]["condition"] = info[1]
+        rows[-1]["group"] = group_key(rec.scenario, *info)
     schema = {
         "episode": pl.String,
         "controller": pl.String,
@@ -117,8 +134,16 @@ def episode_table(
         "motion_start_s": pl.Float64,
         "start_abs_error_rad": pl.Float64,
         "start_abs_effort_nm": pl.Float64,
+        "campaign": pl.String,
+        "condition": pl.String,
+        "group": pl.String,
     }
     return pl.DataFrame(rows, schema=schema, orient="row").sort("episode")
+
+
+def _campaign(view: ProtocolView | None) -> tuple[str | None, str | None]:
+    info = view.settings.campaign if view is not None and view.settings is not None else None
+    return (None, None) if info is None else (info.name, info.condition)
 
 
 def _protocol_columns(view: ProtocolView | None) -> dict[str, Any]:

@@ -1,5 +1,8 @@
 """Tracking metrics per episode and joint, and reductions between controllers.
 
+The metrics themselves are declared in :mod:`pipeline.analysis.catalog`; this module
+prepares the frames they aggregate over and pairs episodes for reductions.
+
 Definitions (also in docs/report.md and in every report):
 
 - error e(t) = reference - position [rad] from the frames :mod:`pipeline.analysis.protocol`
@@ -39,40 +42,36 @@ from collections.abc import Sequence
 
 import polars as pl
 
+from pipeline.analysis.catalog import (
+    COMPARED_METRICS,
+    METRIC_COLUMNS,
+    METRIC_SOURCES,
+    METRICS,
+    MIN_TRAVEL_RAD,
+    SETTLING_TOLERANCE_RAD,
+    Frame,
+)
 from pipeline.constants import FINAL_WINDOW_S
 from pipeline.errors import ReportError
 
-SETTLING_TOLERANCE_RAD = 1e-3
+__all__ = [
+    "COMPARED_METRICS",
+    "ERROR_FLOOR_RAD",
+    "METRIC_COLUMNS",
+    "METRIC_SOURCES",
+    "MIN_TRAVEL_RAD",
+    "SETTLING_TOLERANCE_RAD",
+    "check_baseline",
+    "comparisons",
+    "joint_metrics",
+    "pairs",
+    "reduction_pct",
+]
+
 SATURATION_REL_TOL = 1e-6
-MIN_TRAVEL_RAD = 1e-9
 # Below this a joint error is numerical noise (a perfect-model CTC settles to ~1e-13 rad);
 # a reduction relative to it would read 1e10 %, so none is given.
 ERROR_FLOOR_RAD = 1e-9
-
-METRIC_COLUMNS = (
-    "max_abs_error",
-    "rms_error",
-    "final_error",
-    "settling_time",
-    "overshoot",
-    "peak_velocity",
-    "peak_velocity_time",
-    "rms_effort",
-    "saturation_fraction",
-)
-COMPARED_METRICS = ("max_abs_error", "rms_error", "final_error")
-# Which recorded topic each metric is computed from.
-METRIC_SOURCES = {
-    "max_abs_error": "/controller_state",
-    "rms_error": "/controller_state",
-    "final_error": "/controller_state",
-    "settling_time": "/controller_state",
-    "overshoot": "/controller_state",
-    "peak_velocity": "/joint_states",
-    "peak_velocity_time": "/joint_states",
-    "rms_effort": "/joint_states",
-    "saturation_fraction": "/joint_states + /controller_state",
-}
 
 _KEY = ["episode", "joint"]
 
@@ -126,11 +125,10 @@ def error_metrics(
         final_window_s: longest window at the end used for the final error [s].
 
     Returns:
-        ``episode, joint, max_abs_error, rms_error, final_error, settling_time, overshoot``.
+        ``episode, joint`` and the catalog's ``controller_state`` metrics.
     """
     e = pl.col("error_rad")
     t = pl.col("time_s")
-    ref = pl.col("reference_position_rad")
     df = (
         _time_sorted(controller_states)
         .join(_episode_columns(episodes, final_window_s), on="episode", how="left")
@@ -150,24 +148,12 @@ def error_metrics(
             )
         )
     )
-    completed = pl.col("completed").first()
-    motion_end = pl.col("motion_end_s").first()
-    goal = ref.drop_nulls().last()
-    travel = goal - ref.drop_nulls().first()
-    direction = pl.when(travel > 0).then(1.0).otherwise(-1.0)
-    return df.group_by(_KEY, maintain_order=True).agg(
-        max_abs_error=e.abs().max(),
-        rms_error=(e * e).mean().sqrt(),
-        final_error=pl.when(completed).then(e.abs().filter(pl.col("in_final")).mean()),
-        settling_time=pl.when(motion_end.is_null() | ~completed)
-        .then(None)
-        .when(~pl.col("violating").any())
-        .then(0.0)
-        .otherwise(t.filter(pl.col("after_motion") & pl.col("settled")).min() - motion_end),
-        overshoot=pl.when(completed & (travel.abs() > MIN_TRAVEL_RAD)).then(
-            ((pl.col("feedback_position_rad") - goal) * direction).max().clip(lower_bound=0.0)
-        ),
-    )
+    return df.group_by(_KEY, maintain_order=True).agg(_aggregations("controller_state"))
+
+
+def _aggregations(frame: Frame) -> list[pl.Expr]:
+    """The catalog's aggregations over one prepared frame."""
+    return [m.expr() for m in METRICS if m.frame == frame]
 
 
 def state_metrics(
@@ -182,14 +168,12 @@ def state_metrics(
         limits: ``episode, joint, effort_limit_nm`` (null where unknown); None = unknown.
 
     Returns:
-        ``episode, joint, peak_velocity, peak_velocity_time, rms_effort, saturation_fraction``.
+        ``episode, joint`` and the catalog's ``joint_states`` metrics.
     """
     if limits is None:
         limits = pl.DataFrame(
             schema={"episode": pl.String, "joint": pl.String, "effort_limit_nm": pl.Float64}
         )
-    t = pl.col("time_s")
-    v = pl.col("velocity_rad_s")
     eff = pl.col("effort_nm")
     cmd = pl.col("commanded_effort_nm")
     limit = pl.col("effort_limit_nm")
@@ -203,14 +187,7 @@ def state_metrics(
             saturated=pl.when(eff.is_not_null()).then((at_limit | clipped).fill_null(False)),
         )
     )
-    # First sample at the largest |v| (nulls never match: all-null gives null, not 0).
-    is_peak = v.abs() == v.abs().max()
-    return df.group_by(_KEY, maintain_order=True).agg(
-        peak_velocity=v.filter(is_peak).first(),
-        peak_velocity_time=t.filter(is_peak).first(),
-        rms_effort=(eff * eff).mean().sqrt(),
-        saturation_fraction=pl.col("saturated").cast(pl.Float64).mean(),
-    )
+    return df.group_by(_KEY, maintain_order=True).agg(_aggregations("joint_states"))
 
 
 def joint_metrics(
@@ -247,26 +224,35 @@ def joint_metrics(
     return out.select(*_KEY, *METRIC_COLUMNS)
 
 
-def check_baseline(episodes: pl.DataFrame, baseline: str) -> None:
-    """Raise a one-line error when no episode ran the baseline controller."""
+def check_baseline(episodes: pl.DataFrame, baseline: str) -> bool:
+    """Whether reductions against ``baseline`` can be computed.
+
+    Recordings of a single controller have nothing to compare: False (the report has no
+    reduction section). Several controllers without the baseline: a one-line error.
+    """
     present = sorted(set(episodes.get_column("controller").to_list()))
-    if baseline not in present:
-        raise ReportError(
-            f"unknown baseline controller '{baseline}'; controllers in the recordings: "
-            f"{', '.join(present) or 'none'} (choose one with --baseline)"
-        )
+    if baseline in present:
+        return True
+    if len(present) <= 1:
+        return False
+    raise ReportError(
+        f"unknown baseline controller '{baseline}'; controllers in the recordings: "
+        f"{', '.join(present)} (choose one with --baseline)"
+    )
 
 
 def pairs(episodes: pl.DataFrame, *, baseline: str) -> list[tuple[str, str, str]]:
-    """(scenario, baseline episode, candidate episode) for every comparable pair.
+    """(group, baseline episode, candidate episode) for every comparable pair.
 
-    Episodes pair within a scenario and robot; only "ok" episodes take part. When
-    a scenario holds several baseline runs, a candidate pairs with the ones of
-    its own seed if there are any, else with all of them.
+    Episodes pair within a group (the scenario of hand-listed episodes, a campaign's
+    condition: :func:`pipeline.analysis.episodes.group_key`) and robot; only "ok"
+    episodes take part. When a group holds several baseline runs, a candidate pairs
+    with the ones of its own seed if there are any, else with all of them.
     """
     ok = episodes.filter(pl.col("status") == "ok").sort("episode")
+    key = "group" if "group" in ok.columns else "scenario"
     out: list[tuple[str, str, str]] = []
-    for (scenario, robot), group in ok.group_by(["scenario", "robot"], maintain_order=True):
+    for (scenario, robot), group in ok.group_by([key, "robot"], maintain_order=True):
         rows = group.to_dicts()
         bases = [r for r in rows if r["controller"] == baseline]
         for cand in (r for r in rows if r["controller"] != baseline):

@@ -19,20 +19,7 @@ from pipeline.analysis.aggregate import (
 from pipeline.analysis.checks import duplicate_stamp_notes
 from pipeline.analysis.protocol import ProtocolView
 from pipeline.log.reader import Recording
-
-# Matplotlib's tab10, as RGB bytes: one colour per episode within a scenario.
-PALETTE: tuple[tuple[int, int, int], ...] = (
-    (31, 119, 180),
-    (255, 127, 14),
-    (44, 160, 44),
-    (214, 39, 40),
-    (148, 103, 189),
-    (140, 86, 75),
-    (227, 119, 194),
-    (127, 127, 127),
-    (188, 189, 34),
-    (23, 190, 207),
-)
+from pipeline.report.colors import controller_colors
 
 
 @dataclass(frozen=True)
@@ -104,24 +91,62 @@ class ReportData:
         row = self._metric_rows.get((episode, joint or ""))
         return None if row is None else row.get(column)
 
+    @cached_property
+    def _by_episode(self) -> dict[str, Recording]:
+        return {rec.episode: rec for rec in self.recordings}
+
     def recording(self, episode: str) -> Recording:
-        for rec in self.recordings:
-            if rec.episode == episode:
-                return rec
-        raise KeyError(episode)
+        return self._by_episode[episode]
+
+    def controllers(self) -> list[str]:
+        """Every controller in the recordings, sorted."""
+        return sorted({rec.controller for rec in self.recordings})
+
+    @property
+    def compares(self) -> bool:
+        """Whether the baseline ran, so reductions exist (False for one other controller)."""
+        return self.baseline in self.controllers()
+
+    @cached_property
+    def campaign_of(self) -> dict[str, str | None]:
+        """Episode -> its campaign (None: hand-listed)."""
+        if "campaign" not in self.episodes.columns:
+            return {}
+        return dict(
+            zip(
+                self.episodes["episode"].to_list(), self.episodes["campaign"].to_list(), strict=True
+            )
+        )
+
+    @cached_property
+    def listed(self) -> tuple[Recording, ...]:
+        """The hand-listed episodes (not part of a campaign): reported scenario by scenario."""
+        return tuple(r for r in self.recordings if self.campaign_of.get(r.episode) is None)
+
+    def campaigns(self) -> list[str]:
+        """Campaign names in the recordings, sorted (summarised, not listed)."""
+        return sorted({c for c in self.campaign_of.values() if c is not None})
 
     def scenarios(self) -> list[str]:
-        return sorted({rec.scenario for rec in self.recordings})
+        """Scenarios of the hand-listed episodes, sorted."""
+        return sorted({rec.scenario for rec in self.listed})
 
     def in_scenario(self, scenario: str) -> list[Recording]:
-        """Episodes of a scenario, baseline controller first, then by controller and name."""
-        recs = [r for r in self.recordings if r.scenario == scenario]
+        """Hand-listed episodes of a scenario, baseline controller first, then by controller
+        and name."""
+        recs = [r for r in self.listed if r.scenario == scenario]
         return sorted(recs, key=lambda r: (r.controller != self.baseline, r.controller, r.episode))
 
+    @cached_property
+    def _colors(self) -> dict[str, tuple[int, int, int]]:
+        return controller_colors(self.controllers())
+
     def color(self, episode: str) -> tuple[int, int, int]:
-        rec = self.recording(episode)
-        index = [r.episode for r in self.in_scenario(rec.scenario)].index(episode)
-        return PALETTE[index % len(PALETTE)]
+        """The episode's controller's colour (one per controller, every output)."""
+        return self._colors[self.recording(episode).controller]
+
+    def controller_color(self, controller: str) -> tuple[int, int, int]:
+        return self._colors[controller]
 
     def label(self, episode: str) -> str:
         """Legend label: the controller, plus the episode when it is not unique."""

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 import polars as pl
 
+from pipeline.analysis import catalog
 from pipeline.analysis.aggregate import CONFIDENCE, MeanCI, mean_ci
 from pipeline.analysis.episodes import robot_spec, setting
 from pipeline.analysis.metrics import ERROR_FLOOR_RAD, SETTLING_TOLERANCE_RAD, pairs
@@ -150,11 +151,10 @@ def _incomplete(data: ReportData, rec: Recording) -> str:
 
 def _missing(data: ReportData, rec: Recording, metric: str) -> str:
     """The text for a null metric value of one episode."""
-    if metric in ("final_error", "settling_time", "overshoot") and not _completed(
-        data, rec.episode
-    ):
+    m = catalog.metric(metric)
+    if m.needs_completed_motion and not _completed(data, rec.episode):
         return _incomplete(data, rec)
-    if metric in ("peak_velocity", "rms_effort", "saturation_fraction"):
+    if m.frame == "joint_states":
         return NOT_RECORDED
     if metric == "settling_time":
         return "n/a (motion end unknown)" if rec.motion_end_s is None else "never settles"
@@ -180,8 +180,13 @@ def _intro(data: ReportData) -> list[str]:
         "",
         f"{len(recs)} episode(s) read from `{data.recordings_dir.as_posix()}`"
         + (f", {len(data.skipped)} recording(s) skipped" if data.skipped else "")
-        + f"; baseline controller: **{data.baseline}**. "
-        f"Recorded by armlab-pipeline {', '.join(versions)} (git {', '.join(commits)}).",
+        + (
+            f"; baseline controller: **{data.baseline}**. "
+            if data.compares
+            else f"; one controller (**{', '.join(data.controllers())}**): nothing to compare, "
+            "so no reductions. "
+        )
+        + f"Recorded by armlab-pipeline {', '.join(versions)} (git {', '.join(commits)}).",
         "",
         "Interactive view: [`recording.rrd`](recording.rrd), next to this file: open it with "
         "`rerun recording.rrd` (per-joint time series, the arm in 3D per controller).",
@@ -485,14 +490,8 @@ def _setup(data: ReportData, scenario: str) -> list[str]:
     return lines
 
 
-_ERROR_TITLES = (
-    ("max_abs_error", "Max |error| [rad]"),
-    ("rms_error", "RMS error [rad]"),
-    (
-        "final_error",
-        f"Error at the target [rad] (mean |e| over the final window, ≤ {FINAL_WINDOW_S} s)",
-    ),
-)
+# The compared metrics: aggregate and per-episode tables with reductions.
+_ERROR_TITLES = tuple((m.name, m.heading) for m in catalog.METRICS if m.compared)
 
 
 def _aggregate_tables(data: ReportData, scenario: str) -> list[str]:
@@ -588,44 +587,33 @@ def _error_tables(data: ReportData, scenario: str) -> list[str]:
     return lines
 
 
+def _cell(data: ReportData, rec: Recording, m: catalog.Metric, joint: str) -> str:
+    """One metric value as its catalog format says; a companion ``<name>_time`` metric
+    (the peak's time) is shown beside it."""
+    v = _metric(data, rec.episode, joint, m.name)
+    if v is None:
+        return _missing(data, rec, m.name)
+    text = format(float(v) + 0.0, m.fmt)
+    if m.fmt.startswith("+") and float(text) == 0.0:
+        text = text[1:]  # never "-0.000" or "+0.000"
+    at = catalog.BY_NAME.get(f"{m.name}_time")
+    t = _metric(data, rec.episode, joint, at.name) if at is not None else None
+    return text if t is None else f"{text} (t = {t:.2f} s)"
+
+
 def _other_tables(data: ReportData, scenario: str) -> list[str]:
     recs = data.in_scenario(scenario)
     joints = recs[0].joint_names
-    rows = []
-    for k, joint in enumerate(joints):
-        row = [f"{k + 1} {joint}"]
-        for r in recs:
-            v = _metric(data, r.episode, joint, "peak_velocity")
-            t = _metric(data, r.episode, joint, "peak_velocity_time")
-            if v is None:
-                row.append(_missing(data, r, "peak_velocity"))
-            else:
-                row.append(f"{_signed(v, 3)} (t = {t:.2f} s)")
-        rows.append(row)
-    lines = [
-        "#### Peak velocity [rad/s] (signed value at the largest |velocity|)",
-        "",
-        _table(["joint", *[_head(data, r) for r in recs]], rows),
-        "",
-    ]
-    for metric, title, fmt in (
-        (
-            "settling_time",
-            f"Settling time [s] (|e| ≤ {SETTLING_TOLERANCE_RAD:g} rad after the motion end)",
-            ".3f",
-        ),
-        ("overshoot", "Overshoot past the goal [rad]", ".2e"),
-        ("rms_effort", "RMS applied effort [N m]", ".3g"),
-        ("saturation_fraction", "Fraction of time in torque saturation", ".3f"),
-    ):
-        rows = []
-        for k, joint in enumerate(joints):
-            row = [f"{k + 1} {joint}"]
-            for r in recs:
-                v = _metric(data, r.episode, joint, metric)
-                row.append(_missing(data, r, metric) if v is None else format(v + 0.0, fmt))
-            rows.append(row)
-        lines += [f"#### {title}", "", _table(["joint", *[_head(data, r) for r in recs]], rows), ""]
+    lines: list[str] = []
+    for m in catalog.METRICS:
+        if m.compared or not m.in_tables:
+            continue
+        rows = [
+            [f"{k + 1} {joint}", *[_cell(data, r, m, joint) for r in recs]]
+            for k, joint in enumerate(joints)
+        ]
+        header = ["joint", *[_head(data, r) for r in recs]]
+        lines += [f"#### {m.heading}", "", _table(header, rows), ""]
     return lines
 
 
@@ -633,7 +621,7 @@ def _paper_scenarios(data: ReportData) -> list[str]:
     """Scenarios whose recordings say they reproduce the paper (settings contract)."""
     marked = {
         rec.scenario
-        for rec in data.recordings
+        for rec in data.listed
         if (view := data.protocol.get(rec.episode)) is not None
         and view.settings is not None
         and view.settings.protocol.reproduces_paper

@@ -11,12 +11,8 @@ import numpy as np
 import polars as pl
 
 from pipeline.analysis.aggregate import CONFIDENCE
-from pipeline.analysis.metrics import (
-    COMPARED_METRICS,
-    ERROR_FLOOR_RAD,
-    METRIC_SOURCES,
-    SETTLING_TOLERANCE_RAD,
-)
+from pipeline.analysis.catalog import BY_NAME, COMPARED_METRICS, METRIC_SOURCES, METRICS
+from pipeline.analysis.metrics import ERROR_FLOOR_RAD, SETTLING_TOLERANCE_RAD
 from pipeline.constants import FINAL_WINDOW_S
 from pipeline.report.inputs import ReportData, cs_times_s, cs_wide, times_s, wide
 
@@ -29,19 +25,6 @@ SIGNIFICANT_DIGITS = 9
 # of a 1.7e9 s wall-clock time would be whole seconds.
 TIME_DECIMALS = 9
 _FLOOR = f"{ERROR_FLOOR_RAD:.0e}".replace("e-0", "e-")  # "1e-9"
-
-# metrics.json key -> metric column (and its unit, documented in docs/report.md).
-JOINT_KEYS = (
-    ("max_abs_error", "max_abs_error"),
-    ("rms_error", "rms_error"),
-    ("final_error", "final_error"),
-    ("settling_time", "settling_time"),
-    ("overshoot", "overshoot"),
-    ("peak_velocity", "peak_velocity"),
-    ("peak_velocity_time", "peak_velocity_time"),
-    ("rms_effort", "rms_effort"),
-    ("saturation_fraction", "saturation_fraction"),
-)
 
 
 def number(value: Any) -> float | None:
@@ -64,12 +47,9 @@ def seconds(value: Any) -> float | None:
     return round(x, TIME_DECIMALS) + 0.0
 
 
-# Metrics that are times [s] (rounded to decimals, not significant digits).
-TIME_KEYS = frozenset({"settling_time", "peak_velocity_time"})
-
-
 def _rounded(key: str, value: Any) -> float | None:
-    return seconds(value) if key in TIME_KEYS else number(value)
+    """Times [s] to decimals, everything else to significant digits."""
+    return seconds(value) if BY_NAME[key].is_time else number(value)
 
 
 def _aggregates(data: ReportData) -> dict[str, Any]:
@@ -106,6 +86,32 @@ def _aggregates(data: ReportData) -> dict[str, Any]:
     return out
 
 
+def _stats_ci(mean: Any, half_width: Any) -> tuple[float | None, float | None]:
+    if mean is None or half_width is None:
+        return None, None
+    return number(mean - half_width), number(mean + half_width)
+
+
+def headline(data: ReportData) -> dict[str, Any]:
+    """Flat scalars for ``dvc metrics diff`` / ``dvc exp show`` (DVC skips lists):
+    ``<group>.<candidate>_vs_<baseline>.<joint>.<metric>.{reduction_pct, ci95_low,
+    ci95_high, n}``; group = scenario, or ``campaign/condition``. ``reduction_pct`` is the
+    mean over the pairs (seed pairs where seeds pair), the CI bounds are the Student-t
+    95 % interval of that mean (null for a single pair)."""
+    out: dict[str, Any] = {}
+    for row in data.reduction_summary.iter_rows(named=True):
+        low, high = _stats_ci(row["mean"], row["ci95_half_width"])
+        pair = f"{row['controller']}_vs_{row['baseline']}"
+        node = out.setdefault(row["scenario"], {}).setdefault(pair, {})
+        node.setdefault(row["joint"], {})[row["metric"].removesuffix("_reduction_pct")] = {
+            "reduction_pct": number(row["mean"]),
+            "ci95_low": low,
+            "ci95_high": high,
+            "n": row["n"],
+        }
+    return out
+
+
 def metrics_document(data: ReportData) -> dict[str, Any]:
     """The metrics.json content as plain data (see docs/report.md for every key)."""
     episodes: dict[str, Any] = {}
@@ -119,7 +125,7 @@ def metrics_document(data: ReportData) -> dict[str, Any]:
         joints: dict[str, Any] = {}
         if group is not None:
             for m in group.iter_rows(named=True):
-                joints[m["joint"]] = {key: _rounded(key, m[col]) for key, col in JOINT_KEYS}
+                joints[m["joint"]] = {x.name: _rounded(x.name, m[x.name]) for x in METRICS}
         episodes[ep] = {
             "controller": row["controller"],
             "scenario": row["scenario"],
@@ -163,10 +169,12 @@ def metrics_document(data: ReportData) -> dict[str, Any]:
             "reduction_floor_rad": ERROR_FLOOR_RAD,
             "confidence": CONFIDENCE,
             "metric_sources": dict(METRIC_SOURCES),
+            "metric_units": {m.name: m.unit for m in METRICS},
         },
         "episodes": episodes,
         "comparisons": comparisons,
         "aggregates": _aggregates(data),
+        "headline": headline(data),
         "skipped": [{"path": s.source, "problem": s.problem} for s in data.skipped],
     }
 

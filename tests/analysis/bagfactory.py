@@ -26,6 +26,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from pipeline.model.uncertainty import link_inertials
 from pipeline.robots import load_spec
 from pipeline.settings import (
+    CampaignInfo,
     ControllerSettings,
     EpisodeSettings,
     ExecutionSafety,
@@ -151,6 +152,7 @@ class Episode:
     # the plant's true positions, written on /ground_truth/joint_states when given
     q_true: np.ndarray | None = None
     motion_start_s: float = 0.0  # the pre-roll recorded before the motion (settings)
+    campaign: CampaignInfo | None = None  # where the episode sits in a campaign (settings)
 
 
 def default_settings(ep: Episode) -> dict[str, Any]:
@@ -223,6 +225,7 @@ def default_settings(ep: Episode) -> dict[str, Any]:
         reason=ep.reason,
         package_version="0.1.0",
         git_commit="0000000",
+        campaign=ep.campaign,
     ).to_dict()
     if ep.motion_end_s is None:
         del settings["planner"]["trajectory_duration_s"]

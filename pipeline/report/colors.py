@@ -1,0 +1,53 @@
+"""One colour per controller, the same in every figure, the .rrd and the DVC plots.
+
+The registered controllers have fixed colours (the DVC plot template in
+``.dvc/plots/controller_joint.json`` lists the same ones; a test checks they agree);
+any other controller name takes the next unused palette colour in sorted order.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+# Matplotlib's tab10, as RGB bytes.
+PALETTE: tuple[tuple[int, int, int], ...] = (
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (127, 127, 127),
+    (188, 189, 34),
+    (23, 190, 207),
+)
+# The registered controllers (pipeline.control.registry), by name.
+FIXED: dict[str, tuple[int, int, int]] = {
+    "pid": PALETTE[0],
+    "ctc": PALETTE[1],
+    "ctc_pid": PALETTE[2],
+    "pd_gravity": PALETTE[4],
+}
+# The reference: light grey, visible on Rerun's dark theme and on white.
+REFERENCE_RGB = (200, 200, 200)
+REFERENCE_MPL = "0.25"
+
+
+def controller_colors(names: Iterable[str]) -> dict[str, tuple[int, int, int]]:
+    """Colour of each controller name (fixed ones first, then the rest in sorted order)."""
+    out = {n: FIXED[n] for n in set(names) if n in FIXED}
+    free = [c for c in PALETTE if c not in FIXED.values()]
+    for k, name in enumerate(sorted(n for n in set(names) if n not in FIXED)):
+        out[name] = free[k % len(free)]
+    return out
+
+
+def hex_color(rgb: tuple[int, int, int]) -> str:
+    """``#rrggbb``."""
+    return "#{:02x}{:02x}{:02x}".format(*rgb)
+
+
+def mpl(rgb: tuple[int, int, int]) -> tuple[float, float, float]:
+    """Matplotlib's 0..1 RGB."""
+    return (rgb[0] / 255, rgb[1] / 255, rgb[2] / 255)
