@@ -632,6 +632,7 @@ class EpisodeSettings:
             package_version=_str(d["package_version"], "package_version"),
             git_commit=_str(d["git_commit"], "git_commit"),
             mujoco_warnings={str(k): _int(v, f"mujoco_warnings.{k}") for k, v in warnings.items()},
+            campaign=None if d["campaign"] is None else CampaignInfo.from_dict(d["campaign"]),
             version=SETTINGS_VERSION,
         )
 

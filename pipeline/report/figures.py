@@ -88,7 +88,8 @@ def _single() -> tuple[Figure, Axes]:
     return fig, ax
 
 
-def _save(fig: Figure, out_dir: Path, name: str) -> str:
+def save_figure(fig: Figure, out_dir: Path, name: str) -> str:
+    """Write ``fig`` as ``figures/<name>`` under ``out_dir``; return the relative path."""
     rel = f"{FIGURES_DIR}/{name}"
     (out_dir / FIGURES_DIR).mkdir(parents=True, exist_ok=True)
     # No timestamp/software metadata: re-running gives the same bytes.
@@ -200,7 +201,7 @@ def scenario_figures(
     fig.suptitle(f"{scenario}: joint 1 ({first_joint}) reference and actual (cf. paper Fig. 5)")
     out.append(
         FigureFile(
-            _save(fig, out_dir, f"{stem}_fig5_joint1_position.png"),
+            save_figure(fig, out_dir, f"{stem}_fig5_joint1_position.png"),
             "Joint 1: reference and measured position per controller (paper Fig. 5)",
         )
     )
@@ -218,7 +219,7 @@ def scenario_figures(
     fig.suptitle(f"{scenario}: joint 1 tracking error, reference - actual (cf. paper Fig. 6)")
     out.append(
         FigureFile(
-            _save(fig, out_dir, f"{stem}_fig6_joint1_error.png"),
+            save_figure(fig, out_dir, f"{stem}_fig6_joint1_error.png"),
             "Joint 1: tracking error per controller (paper Fig. 6)",
         )
     )
@@ -259,5 +260,5 @@ def scenario_figures(
             limits=limits,
             controller_state=column == "error_rad",
         )
-        out.append(FigureFile(_save(fig, out_dir, f"{stem}_{name}.png"), caption))
+        out.append(FigureFile(save_figure(fig, out_dir, f"{stem}_{name}.png"), caption))
     return out

@@ -21,6 +21,10 @@ from pipeline.analysis.protocol import ProtocolView
 from pipeline.log.reader import Recording
 from pipeline.report.colors import controller_colors
 
+# A (group, controller) with at most this many episodes is shown whole in the .rrd and the
+# plot CSVs; a larger one by its labelled sample (median and worst episode).
+SHOW_ALL_UP_TO = 3
+
 
 @dataclass(frozen=True)
 class Skipped:
@@ -126,6 +130,53 @@ class ReportData:
     def campaigns(self) -> list[str]:
         """Campaign names in the recordings, sorted (summarised, not listed)."""
         return sorted({c for c in self.campaign_of.values() if c is not None})
+
+    @cached_property
+    def sample_roles(self) -> dict[str, str]:
+        """The episodes shown one by one (.rrd, plot CSVs) and their role.
+
+        Per group (scenario, or campaign/condition) and controller: every episode when
+        there are at most :data:`SHOW_ALL_UP_TO` (role ""), else the completed episode
+        with the median and the one with the worst max |error| over joints ("median",
+        "worst") and the first failed one ("failed"), so the outputs stay bounded
+        whatever N is.
+        """
+        worst = self.metrics.group_by("episode").agg(score=pl.col("max_abs_error").max())
+        eps = self.episodes.join(worst, on="episode", how="left").sort("episode")
+        key = "group" if "group" in eps.columns else "scenario"
+        roles: dict[str, str] = {}
+        for _, grp in eps.group_by(key, "controller", maintain_order=True):
+            if grp.height <= SHOW_ALL_UP_TO:
+                roles.update(dict.fromkeys(grp["episode"].to_list(), ""))
+                continue
+            ok = grp.filter((pl.col("status") == "ok") & pl.col("score").is_not_null())
+            ok = ok.sort("score", "episode")
+            if ok.height:
+                roles[ok["episode"][(ok.height - 1) // 2]] = "median"
+                roles[ok["episode"][-1]] = "worst"
+            failed = grp.filter(pl.col("status") != "ok")
+            if failed.height:
+                roles[failed["episode"][0]] = "failed"
+        return roles
+
+    def sample(self) -> list[Recording]:
+        """The recordings of :attr:`sample_roles`, sorted by episode."""
+        return [r for r in self.recordings if r.episode in self.sample_roles]
+
+    def groups(self) -> list[str]:
+        """Every group episodes are compared in (scenario, or campaign/condition), sorted."""
+        return sorted(set(self.episodes.get_column("group").to_list()))
+
+    @cached_property
+    def _group_of(self) -> dict[str, str]:
+        return dict(
+            zip(self.episodes["episode"].to_list(), self.episodes["group"].to_list(), strict=True)
+        )
+
+    def in_group(self, group: str) -> list[Recording]:
+        """Episodes of a group, baseline controller first, then by controller and name."""
+        recs = [r for r in self.recordings if self._group_of.get(r.episode) == group]
+        return sorted(recs, key=lambda r: (r.controller != self.baseline, r.controller, r.episode))
 
     def scenarios(self) -> list[str]:
         """Scenarios of the hand-listed episodes, sorted."""

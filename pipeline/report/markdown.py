@@ -20,12 +20,20 @@ from pipeline.constants import (
 )
 from pipeline.log.reader import Recording
 from pipeline.report import paper
+from pipeline.report.campaigns import CampaignSection
 from pipeline.report.figures import FigureFile
 from pipeline.report.inputs import ReportData
 from pipeline.robots.spec import RobotSpec
 from pipeline.settings import EpisodeSettings
 
 REPORT_FILE = "report.md"
+# Lists (episodes, warnings, findings, recordings) show at most this many rows; the rest are
+# in episodes.csv / recordings.csv / metrics.json, so report.md stays bounded whatever N is.
+MAX_ROWS = 40
+# A campaign's mean ± CI tables are written for at most this many conditions.
+MAX_CONDITION_TABLES = 4
+# A scenario with more episodes than this gets no per-episode tables (only the summaries).
+MAX_EPISODE_COLUMNS = 8
 NA = "n/a"
 NOT_RECORDED = "n/a (not recorded)"
 ENDED_EARLY = "n/a (episode ended before the motion did)"
@@ -161,6 +169,19 @@ def _missing(data: ReportData, rec: Recording, metric: str) -> str:
     return NA
 
 
+def _count(values: Sequence[str]) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for v in values:
+        out[v] = out.get(v, 0) + 1
+    return out
+
+
+def _seed_span(seeds: Sequence[str]) -> str:
+    """``0–49`` for the seeds 0..49 (sorted numerically where they are numbers)."""
+    ordered = sorted(set(seeds), key=lambda x: (len(x), x))
+    return ordered[0] if len(ordered) == 1 else f"{ordered[0]}–{ordered[-1]} ({len(ordered)})"
+
+
 def _samples(joint_states: int, controller_states: int) -> str:
     """Message count; both topics' when /joint_states is decimated."""
     if joint_states == controller_states:
@@ -203,7 +224,9 @@ def _intro(data: ReportData) -> list[str]:
         .agg(pl.col("saturation_fraction").max())
         .iter_rows(named=True)
     }
-    for row in data.episodes.iter_rows(named=True):
+    listed = {r.episode for r in data.listed}
+    table_rows = [r for r in data.episodes.iter_rows(named=True) if r["episode"] in listed]
+    for row in table_rows[:MAX_ROWS]:
         sat = worst_sat.get(row["episode"])
         rows.append(
             [
@@ -242,6 +265,17 @@ def _intro(data: ReportData) -> list[str]:
             rows,
         )
     )
+    if len(table_rows) > MAX_ROWS:
+        lines += ["", f"… {len(table_rows) - MAX_ROWS} more in [`episodes.csv`](episodes.csv)."]
+    in_campaigns = len(data.recordings) - len(data.listed)
+    if in_campaigns:
+        lines += [
+            "",
+            f"{in_campaigns} more episodes belong to campaigns ("
+            + ", ".join(f"`{c}`" for c in data.campaigns())
+            + "): summarised in their sections below; every episode is in "
+            "[`episodes.csv`](episodes.csv).",
+        ]
     lines += [
         "",
         "Times count from the **motion start**: every episode first holds its start pose "
@@ -258,8 +292,10 @@ def _intro(data: ReportData) -> list[str]:
         lines += ["", "### Failed episodes", ""]
         lines += [
             f"- **{r.episode}** ({r.controller}, {r.scenario}): {r.status} — {r.reason or NA}"
-            for r in failed
+            for r in failed[:MAX_ROWS]
         ]
+        if len(failed) > MAX_ROWS:
+            lines.append(f"- … {len(failed) - MAX_ROWS} more (`status` in episodes.csv)")
         lines.append("")
         lines.append("Failed episodes are shown but take no part in the comparisons.")
     if data.skipped:
@@ -272,7 +308,10 @@ def _intro(data: ReportData) -> list[str]:
             "Read from the recordings; the numbers below are affected where they say n/a.",
             "",
         ]
-        lines += [f"- **{episode}**: {note}" for episode, note in warnings]
+        lines += [f"- **{episode}**: {note}" for episode, note in warnings[:MAX_ROWS]]
+        if len(warnings) > MAX_ROWS:
+            lines.append(f"- … {len(warnings) - MAX_ROWS} more (metrics.json, each episode's "
+                         "`warnings`)")  # fmt: skip
     return lines
 
 
@@ -364,13 +403,18 @@ def _physical_checks(data: ReportData) -> list[str]:
             f"friction's dead band; {stable} of {len(data.recordings)} episodes stable "
             "(not diverged).",
         ]
-    for text, episodes in found.items():
+    for text, episodes in list(found.items())[:MAX_ROWS]:
         who = (
             ", ".join(episodes)
             if len(episodes) <= 3
             else (f"{episodes[0]} … {episodes[-1]} ({len(episodes)} episodes)")
         )
         lines.append(f"- **{who}**: {text}")
+    if len(found) > MAX_ROWS:
+        lines.append(
+            f"- … {len(found) - MAX_ROWS} more findings (per episode: `saturation_fraction` "
+            "and `final_error` in metrics.json, contacts in each bag's settings)"
+        )
     return lines
 
 
@@ -486,6 +530,21 @@ def _setup(data: ReportData, scenario: str) -> list[str]:
         gains = setting(ctrl, "gains", default=None)
         shown = _value(gains) if gains is not None else _settings_line(ctrl, (), skip=("name",))
         rows.append([rec.episode, rec.controller, shown, rec.meta("seed"), rec.status])
+    if len(rows) > MAX_EPISODE_COLUMNS:
+        # one row per controller and gains: seeds and statuses summarised
+        grouped: dict[tuple[str, str], list[list[str]]] = {}
+        for row in rows:
+            grouped.setdefault((row[1], row[2]), []).append(row)
+        rows = [
+            [
+                f"{len(members)} episodes",
+                ctrl,
+                shown,
+                _seed_span([m[3] for m in members]),
+                ", ".join(f"{k}: {v}" for k, v in _count([m[4] for m in members]).items()),
+            ]
+            for (ctrl, shown), members in grouped.items()
+        ]
     lines.append(_table(["episode", "controller", "gains and settings", "seed", "status"], rows))
     return lines
 
@@ -496,7 +555,7 @@ _ERROR_TITLES = tuple((m.name, m.heading) for m in catalog.METRICS if m.compared
 
 def _aggregate_tables(data: ReportData, scenario: str) -> list[str]:
     """Mean ± 95 % CI over the repeated runs of each controller, and reductions per pair."""
-    recs = data.in_scenario(scenario)
+    recs = data.in_group(scenario)
     joints = recs[0].joint_names
     controllers = list(dict.fromkeys(r.controller for r in recs if r.status == "ok"))
     summary = data.metric_summary.filter(pl.col("scenario") == scenario)
@@ -563,6 +622,13 @@ def _error_tables(data: ReportData, scenario: str) -> list[str]:
     pairs = [] if repeated else _pairs_in(data, scenario)
     lines: list[str] = _aggregate_tables(data, scenario) if repeated else []
     level = "#####" if repeated else "####"
+    if len(recs) > MAX_EPISODE_COLUMNS:
+        return [
+            *lines,
+            f"Per-episode values of the {len(recs)} episodes: metrics.json (`episodes`) and "
+            "[`episodes.csv`](episodes.csv).",
+            "",
+        ]
     if repeated:
         lines += ["#### Per episode", ""]
     for metric, title in _ERROR_TITLES:
@@ -605,6 +671,8 @@ def _other_tables(data: ReportData, scenario: str) -> list[str]:
     recs = data.in_scenario(scenario)
     joints = recs[0].joint_names
     lines: list[str] = []
+    if len(recs) > MAX_EPISODE_COLUMNS:
+        return lines
     for m in catalog.METRICS:
         if m.compared or not m.in_tables:
             continue
@@ -618,10 +686,12 @@ def _other_tables(data: ReportData, scenario: str) -> list[str]:
 
 
 def _paper_scenarios(data: ReportData) -> list[str]:
-    """Scenarios whose recordings say they reproduce the paper (settings contract)."""
+    """Groups (scenarios, campaign conditions) whose recordings say they reproduce the
+    paper (settings contract)."""
+    group = data.episodes.select("episode", "group").rows_by_key("episode", unique=True)
     marked = {
-        rec.scenario
-        for rec in data.listed
+        group[rec.episode][0]
+        for rec in data.recordings
         if (view := data.protocol.get(rec.episode)) is not None
         and view.settings is not None
         and view.settings.protocol.reproduces_paper
@@ -633,7 +703,7 @@ def _exact(data: ReportData, scenario: str) -> bool | None:
     """Whether the scenario's plant is the nominal model (None: unknown)."""
     flags = {
         view.settings.plant.exact
-        for rec in data.in_scenario(scenario)
+        for rec in data.in_group(scenario)
         if (view := data.protocol.get(rec.episode)) is not None and view.settings is not None
     }
     return flags.pop() if len(flags) == 1 else None
@@ -651,7 +721,7 @@ def _paper_pairs(
     eps = data.episodes.with_columns(pl.col("controller").str.to_lowercase())
     eps = eps.filter(pl.col("controller").is_in([paper.PAPER_BASELINE, paper.PAPER_CANDIDATE]))
     found = pairs(eps, baseline=paper.PAPER_BASELINE)
-    for scenario in sorted(data.scenarios(), key=lambda s: (s != "paper", s)):
+    for scenario in sorted(data.groups(), key=lambda s: (s != "paper", s)):
         if only is not None and scenario != only:
             continue
         chosen = [(b, c) for sc, b, c in found if sc == scenario]
@@ -935,12 +1005,20 @@ def _provenance(data: ReportData) -> list[str]:
             f"{rec.size_bytes:,}",
             f"`{rec.sha256}`",
         ]
-        for rec in data.recordings
+        for rec in data.recordings[:MAX_ROWS]
     ]
+    more = len(data.recordings) - len(rows)
     return [
         "## Recordings",
         "",
-        "Every number and figure above comes from these files:",
+        "Every number and figure above comes from these files"
+        + (
+            f" (the first {len(rows)} of {len(data.recordings)}; every one in "
+            "[`recordings.csv`](recordings.csv))"
+            if more
+            else ""
+        )
+        + ":",
         "",
         _table(["episode", "file", "bytes", "SHA-256"], rows),
         "",
@@ -952,6 +1030,7 @@ def render_report(
     figures: dict[str, list[FigureFile]],
     *,
     omitted_figures: Sequence[str] = (),
+    campaigns: Sequence[CampaignSection] = (),
 ) -> str:
     """The whole report.md text."""
     lines = _intro(data)
@@ -973,6 +1052,20 @@ def render_report(
             + ".",
             "",
         ]
+    for section in campaigns:
+        lines += [*section.lines, ""]
+        conditions = [
+            g for g in data.groups() if g == section.name or g.startswith(f"{section.name}/")
+        ]
+        for group in conditions[:MAX_CONDITION_TABLES]:
+            if data.repeated(group):
+                lines += [f"### `{group}`", "", *_aggregate_tables(data, group)]
+        if len(conditions) > MAX_CONDITION_TABLES:
+            lines += [
+                f"Mean ± CI tables for the first {MAX_CONDITION_TABLES} conditions only; the "
+                f"rest: metrics.json (`aggregates`, `headline`) and `{section.table_path}`.",
+                "",
+            ]
     lines += _versus_paper(data)
     lines += _definitions()
     lines += _provenance(data)

@@ -198,14 +198,16 @@ def write_metrics(data: ReportData, out_dir: Path) -> str:
 
 
 def series_frame(data: ReportData, column: str, *, controller_state: bool = False) -> pl.DataFrame:
-    """Long form ``time_s, episode, joint, value`` of one sample column (thinned).
+    """Long form ``time_s, controller, episode, joint, value`` of one sample column
+    (thinned), for the episodes :meth:`ReportData.sample` keeps (every hand-listed episode
+    of a small scenario; median and worst per controller and condition otherwise).
 
     Args:
         controller_state: take the column from ``/controller_state`` (full rate) instead
             of the ``/joint_states`` samples.
     """
     parts = []
-    for rec in data.recordings:
+    for rec in data.sample():
         t = cs_times_s(rec) if controller_state else times_s(rec)
         step = max(1, int(np.ceil(t.size / MAX_CSV_POINTS)))
         idx = np.arange(0, t.size, step)
@@ -215,6 +217,7 @@ def series_frame(data: ReportData, column: str, *, controller_state: bool = Fals
             pl.DataFrame(
                 {
                     "time_s": np.repeat(np.round(t[idx], 9), n),
+                    "controller": [rec.controller] * (idx.size * n),
                     "episode": [rec.episode] * (idx.size * n),
                     "joint": list(rec.joint_names) * idx.size,
                     # + 0.0 writes -0.0 as 0.0
@@ -223,6 +226,7 @@ def series_frame(data: ReportData, column: str, *, controller_state: bool = Fals
                 # typed: an episode with no samples (diverged before its motion) is empty
                 schema={
                     "time_s": pl.Float64,
+                    "controller": pl.String,
                     "episode": pl.String,
                     "joint": pl.String,
                     "value": pl.Float64,
@@ -233,7 +237,8 @@ def series_frame(data: ReportData, column: str, *, controller_state: bool = Fals
 
 
 def write_series_csvs(data: ReportData, out_dir: Path) -> list[str]:
-    """reports/plots/errors.csv and velocities.csv (columns time_s, episode, joint, value)."""
+    """reports/plots/errors.csv and velocities.csv (columns time_s, controller, episode,
+    joint, value; the DVC template colours by controller and dashes by revision)."""
     folder = out_dir / PLOTS_DIR
     folder.mkdir(parents=True, exist_ok=True)
     written = []
@@ -245,3 +250,24 @@ def write_series_csvs(data: ReportData, out_dir: Path) -> list[str]:
         frame.write_csv(folder / name)
         written.append(f"{PLOTS_DIR}/{name}")
     return written
+
+
+EPISODES_CSV = "episodes.csv"
+RECORDINGS_CSV = "recordings.csv"
+
+
+def write_episode_csvs(data: ReportData, out_dir: Path) -> list[str]:
+    """``episodes.csv`` (the episode table: identity, status, timing, campaign, condition)
+    and ``recordings.csv`` (episode, file, bytes, SHA-256): every episode, however many,
+    where report.md lists only a bounded number."""
+    data.episodes.drop("source").write_csv(out_dir / EPISODES_CSV)
+    pl.DataFrame(
+        {
+            "episode": [r.episode for r in data.recordings],
+            "file": [_relative(r.mcap_path, data.recordings_dir) for r in data.recordings],
+            "bytes": [r.size_bytes for r in data.recordings],
+            "sha256": [r.sha256 for r in data.recordings],
+        },
+        schema={"episode": pl.String, "file": pl.String, "bytes": pl.Int64, "sha256": pl.String},
+    ).write_csv(out_dir / RECORDINGS_CSV)
+    return [EPISODES_CSV, RECORDINGS_CSV]

@@ -21,12 +21,14 @@ from pathlib import Path
 
 import polars as pl
 
+from pipeline.analysis.campaign import TABLE_DIR, campaign_tables
 from pipeline.analysis.episodes import episode_table, limits_table
 from pipeline.analysis.metrics import check_baseline, comparisons, joint_metrics
 from pipeline.analysis.protocol import protocol_view
 from pipeline.errors import PipelineError, RecordingError, ReportError
 from pipeline.fsutil import OutputLock, remove_stale
 from pipeline.log.reader import ReadOptions, Recording, find_recordings, read_recording
+from pipeline.report.campaigns import CampaignSection, campaign_section
 from pipeline.report.figures import (
     FIGURES_DIR,
     MAX_FIGURE_SCENARIOS,
@@ -36,7 +38,7 @@ from pipeline.report.figures import (
 )
 from pipeline.report.inputs import ReportData, Skipped
 from pipeline.report.markdown import REPORT_FILE, render_report
-from pipeline.report.metrics_json import write_metrics, write_series_csvs
+from pipeline.report.metrics_json import write_episode_csvs, write_metrics, write_series_csvs
 from pipeline.report.rerun_rrd import RRD_FILE, write_rrd
 
 # progress(step, done, total): called as work advances (for a progress bar).
@@ -120,23 +122,32 @@ def read_all(
     return sorted(good, key=lambda r: r.episode), bad
 
 
-def _stale(out_dir: Path, produced: set[str]) -> list[str]:
-    """Earlier outputs this run does not produce and that would mislead: figures only.
+# Earlier outputs a run removes when it does not produce them again: folder -> suffixes.
+_OWNED = {FIGURES_DIR: (".png",), TABLE_DIR: (".parquet", ".csv")}
 
-    Hidden files and anything that is not a ``.png`` directly in ``figures/`` are not
-    ours to delete (``.gitignore``, a README someone put there).
+
+def _stale(out_dir: Path, produced: set[str]) -> list[str]:
+    """Earlier outputs this run does not produce and that would mislead: figures and
+    campaign tables only.
+
+    Hidden files and anything that is not a ``.png`` directly in ``figures/`` (or a
+    ``.parquet`` / ``.csv`` directly in ``campaigns/``) are not ours to delete
+    (``.gitignore``, a README someone put there).
     """
-    folder = out_dir / FIGURES_DIR
-    if not folder.is_dir():
-        return []
-    return [
-        f"{FIGURES_DIR}/{p.name}"
-        for p in sorted(folder.iterdir())
-        if p.is_file()
-        and p.suffix == ".png"
-        and not p.name.startswith(".")
-        and f"{FIGURES_DIR}/{p.name}" not in produced
-    ]
+    out = []
+    for name, suffixes in _OWNED.items():
+        folder = out_dir / name
+        if not folder.is_dir():
+            continue
+        out += [
+            f"{name}/{p.name}"
+            for p in sorted(folder.iterdir())
+            if p.is_file()
+            and p.suffix in suffixes
+            and not p.name.startswith(".")
+            and f"{name}/{p.name}" not in produced
+        ]
+    return out
 
 
 def _commit(staging: Path, out_dir: Path, files: list[str]) -> None:
@@ -271,6 +282,9 @@ def _run_report_locked(
         raise ReportError(f"{out_dir.parent}: cannot write the report there ({err})") from err
     try:
         files = [write_metrics(data, staging), *write_series_csvs(data, staging)]
+        files += write_episode_csvs(data, staging)
+        sections = _campaigns(data, staging, progress)
+        files += [f for sec in sections for f in (sec.table_path, *sec.files)]
         scenarios = data.scenarios()
         drawn = scenarios[:MAX_FIGURE_SCENARIOS]
         stems = scenario_slugs(scenarios)
@@ -284,7 +298,9 @@ def _run_report_locked(
         write_rrd(data, staging / RRD_FILE)
         files.append(RRD_FILE)
         progress("writing recording.rrd", 1, 1)
-        text = render_report(data, figures, omitted_figures=scenarios[len(drawn) :])
+        text = render_report(
+            data, figures, omitted_figures=scenarios[len(drawn) :], campaigns=sections
+        )
         (staging / REPORT_FILE).write_text(text, encoding="utf-8")
         files.append(REPORT_FILE)
         _commit(staging, out_dir, files)
@@ -302,6 +318,36 @@ def _run_report_locked(
         decoded_messages=sum(r.decoded_messages for r in recordings),
         warnings=tuple(data.warnings()),
     )
+
+
+def _campaigns(data: ReportData, staging: Path, progress: Progress) -> list[CampaignSection]:
+    """Write each campaign's table (Parquet), then its section, read back from the table
+    with a lazy scan: the summary is the table's numbers."""
+    settings = {ep: view.settings for ep, view in data.protocol.items()}
+    tables = campaign_tables(data.metrics, data.episodes, settings)
+    if not tables:
+        return []
+    (staging / TABLE_DIR).mkdir(exist_ok=True)
+    stems = scenario_slugs(tables)
+    sections = []
+    for k, (name, table) in enumerate(tables.items()):
+        progress("summarising campaigns", k, len(tables))
+        rel = f"{TABLE_DIR}/{stems[name]}.parquet"
+        table.write_parquet(staging / rel)
+        sections.append(
+            campaign_section(
+                staging / rel,
+                out_dir=staging,
+                rel_table=rel,
+                name=name,
+                stem=stems[name],
+                baseline=data.baseline,
+                sample=data.sample_roles,
+                draw=k < MAX_FIGURE_SCENARIOS,
+            )
+        )
+    progress("summarising campaigns", len(tables), len(tables))
+    return sections
 
 
 def _summary(data: ReportData) -> pl.DataFrame:

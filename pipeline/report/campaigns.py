@@ -1,0 +1,452 @@
+"""A campaign's summary in the report: distributions, metric vs swept parameter, win/loss.
+
+Read from the campaign's table (``campaigns/<name>.parquet``, scanned lazily), so the
+summary is the table's numbers; the size of what is written does not grow with N:
+figures are fixed in number, tables list conditions (at most
+:data:`MAX_CONDITIONS_SHOWN`) and the labelled sample of episodes, and everything else is
+in the Parquet and CSV files beside the report.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import numpy as np
+import polars as pl
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+
+from pipeline.analysis import catalog
+from pipeline.analysis.campaign import (
+    ALPHA,
+    SWEPT_PREFIX,
+    WILCOXON,
+    TABLE_DIR,
+    by_parameter,
+    swept_axes,
+    win_loss,
+)
+from pipeline.report.colors import controller_colors, mpl
+from pipeline.report.figures import FigureFile, save_figure
+
+# Conditions drawn in a figure / listed in a Markdown table (all are in the CSV files).
+MAX_CONDITIONS_SHOWN = 12
+# Up to this many values per box the individual episodes are drawn as points too.
+MAX_POINTS_PER_BOX = 40
+# The exact two-sided signed-rank test needs 6 pairs to reach p < 0.05.
+MIN_SIGNED_RANK_N = 6
+# Figures are drawn for at most this many swept axes per campaign.
+MAX_AXES_DRAWN = 4
+
+
+@dataclass(frozen=True)
+class CampaignSection:
+    """What the report writes for one campaign.
+
+    Attributes:
+        name: the campaign.
+        table_path: its Parquet table, relative to the report folder.
+        lines: the Markdown section.
+        files: every file written for it (figures, CSVs), relative to the report folder.
+    """
+
+    name: str
+    table_path: str
+    lines: tuple[str, ...]
+    files: tuple[str, ...]
+
+
+def _joints(table: pl.DataFrame) -> list[str]:
+    return list(dict.fromkeys(table.get_column("joint").to_list()))
+
+
+def _conditions(table: pl.DataFrame) -> list[str]:
+    return sorted(set(table.get_column("condition").to_list()))
+
+
+def _grid(n: int) -> tuple[int, int]:
+    cols = 3 if n > 4 else 2 if n > 1 else 1
+    return (n + cols - 1) // cols, cols
+
+
+def _axes(n: int, *, width: float = 4.2, height: float = 2.6) -> tuple[Figure, list[Axes]]:
+    rows, cols = _grid(n)
+    fig = Figure(figsize=(width * cols, height * rows + 0.6))
+    grid = fig.subplots(rows, cols, squeeze=False)
+    axes = [grid[k // cols][k % cols] for k in range(rows * cols)]
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    fig.subplots_adjust(left=0.08, right=0.98, bottom=0.12, top=0.86, wspace=0.3, hspace=0.45)
+    return fig, axes[:n]
+
+
+def _legend(fig: Figure, colors: dict[str, tuple[int, int, int]], names: Sequence[str]) -> None:
+    """Controllers' colours above the panels: never on the data."""
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], color=mpl(colors[c]), lw=2) for c in names]
+    fig.legend(handles, list(names), loc="upper right", ncols=len(names), fontsize=8, frameon=False)
+
+
+def _distribution_figure(
+    table: pl.DataFrame,
+    metric: catalog.Metric,
+    conditions: list[str],
+    colors: dict[str, tuple[int, int, int]],
+    title: str,
+) -> Figure:
+    """Box per (condition, controller) and joint, with the episodes as points for small n."""
+    joints = _joints(table)
+    controllers = sorted(set(table.get_column("controller").to_list()))
+    fig, axes = _axes(len(joints), width=max(4.2, 0.5 * len(conditions) * len(controllers)))
+    ok = table.filter(pl.col("status") == "ok")
+    rng = np.random.default_rng(0)  # jitter only; fixed so figures are reproducible
+    width = 0.8 / max(len(controllers), 1)
+    for ax, joint in zip(axes, joints, strict=True):
+        sub = ok.filter(pl.col("joint") == joint)
+        for ci, cond in enumerate(conditions):
+            for k, ctrl in enumerate(controllers):
+                vals = (
+                    sub.filter((pl.col("condition") == cond) & (pl.col("controller") == ctrl))
+                    .get_column(metric.name)
+                    .drop_nulls()
+                    .to_numpy()
+                )
+                if metric.log_scale:
+                    vals = vals[vals > 0]
+                if vals.size == 0:
+                    continue
+                x = ci + (k - (len(controllers) - 1) / 2) * width
+                color = mpl(colors[ctrl])
+                box = ax.boxplot(
+                    [vals], positions=[x], widths=width * 0.8, patch_artist=True,
+                    showfliers=vals.size > MAX_POINTS_PER_BOX, manage_ticks=False,
+                )  # fmt: skip
+                for patch in box["boxes"]:
+                    patch.set(facecolor=(*color, 0.25), edgecolor=color)
+                for part in ("medians", "whiskers", "caps"):
+                    for line in box[part]:
+                        line.set(color=color)
+                if vals.size <= MAX_POINTS_PER_BOX:
+                    jitter = rng.uniform(-width * 0.3, width * 0.3, vals.size)
+                    ax.plot(x + jitter, vals, "o", ms=2.5, color=color, alpha=0.8)
+        if metric.log_scale:
+            ax.set_yscale("log")
+        ax.set_xticks(range(len(conditions)))
+        ax.set_xticklabels([c or "(all)" for c in conditions], rotation=30, ha="right", fontsize=7)
+        ax.set_title(joint, fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(True, axis="y", lw=0.3)
+        ax.set_ylabel(metric.label, fontsize=7)
+    _legend(fig, colors, controllers)
+    fig.suptitle(title, fontsize=10, x=0.02, ha="left")
+    return fig
+
+
+def _ecdf_figure(
+    table: pl.DataFrame, metric: catalog.Metric, colors: dict[str, tuple[int, int, int]], title: str
+) -> Figure:
+    """Empirical CDF per joint and controller (every condition pooled)."""
+    joints = _joints(table)
+    controllers = sorted(set(table.get_column("controller").to_list()))
+    fig, axes = _axes(len(joints))
+    ok = table.filter(pl.col("status") == "ok")
+    for ax, joint in zip(axes, joints, strict=True):
+        for ctrl in controllers:
+            vals = np.sort(
+                ok.filter((pl.col("joint") == joint) & (pl.col("controller") == ctrl))
+                .get_column(metric.name)
+                .drop_nulls()
+                .to_numpy()
+            )
+            if metric.log_scale:
+                vals = vals[vals > 0]
+            if vals.size == 0:
+                continue
+            ax.step(vals, np.arange(1, vals.size + 1) / vals.size, where="post",
+                    color=mpl(colors[ctrl]), lw=1.2)  # fmt: skip
+        if metric.log_scale:
+            ax.set_xscale("log")
+        ax.set_title(joint, fontsize=8)
+        ax.set_xlabel(metric.label, fontsize=7)
+        ax.set_ylabel("share of episodes", fontsize=7)
+        ax.tick_params(labelsize=7)
+        ax.grid(True, lw=0.3)
+    _legend(fig, colors, controllers)
+    fig.suptitle(title, fontsize=10, x=0.02, ha="left")
+    return fig
+
+
+def _parameter_figure(
+    table: pl.DataFrame,
+    axis: str,
+    metric: catalog.Metric,
+    colors: dict[str, tuple[int, int, int]],
+    title: str,
+) -> Figure:
+    """Mean with its 95 % CI band against one swept parameter, per joint and controller:
+    where the bands cross is where one controller stops winning."""
+    stats = by_parameter(table, axis, metric.name)
+    joints = _joints(table)
+    controllers = sorted(set(stats.get_column("controller").to_list()))
+    fig, axes = _axes(len(joints))
+    for ax, joint in zip(axes, joints, strict=True):
+        for ctrl in controllers:
+            s = stats.filter((pl.col("joint") == joint) & (pl.col("controller") == ctrl))
+            if not s.height:
+                continue
+            x = s.get_column("value").to_numpy()
+            mean = s.get_column("mean").to_numpy()
+            low = s.get_column("ci95_low").fill_null(np.nan).to_numpy()
+            high = s.get_column("ci95_high").fill_null(np.nan).to_numpy()
+            color = mpl(colors[ctrl])
+            ax.fill_between(x, low, high, color=color, alpha=0.25, lw=0)
+            ax.plot(x, mean, "o-", color=color, ms=3, lw=1.2)
+        if metric.log_scale and bool((stats.get_column("mean") > 0).all()):
+            ax.set_yscale("log")
+        ax.set_title(joint, fontsize=8)
+        ax.set_xlabel(axis.removeprefix(SWEPT_PREFIX), fontsize=7)
+        ax.set_ylabel(metric.label, fontsize=7)
+        ax.tick_params(labelsize=7)
+        ax.grid(True, lw=0.3)
+    _legend(fig, colors, controllers)
+    fig.suptitle(title, fontsize=10, x=0.02, ha="left")
+    return fig
+
+
+def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    lines = ["| " + " | ".join(h.replace("|", "\\|") for h in header) + " |"]
+    lines.append("|" + "|".join(" --- " for _ in header) + "|")
+    lines += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def _verdict_cell(row: dict[str, object]) -> str:
+    effect, p, verdict = row["effect_pct"], row["p_value"], row["verdict"]
+    if verdict == "n/a" or not isinstance(effect, float) or not isinstance(p, float):
+        return "n/a"
+    mark = {"wins": "**wins**", "loses": "**loses**"}.get(str(verdict), "n.s.")
+    return f"{mark} {effect:+.0f} % (p = {p:.2g}, n = {row['n']})"
+
+
+def campaign_section(
+    table_path: Path,
+    *,
+    out_dir: Path,
+    rel_table: str,
+    name: str,
+    stem: str,
+    baseline: str,
+    sample: dict[str, str],
+    draw: bool = True,
+) -> CampaignSection:
+    """The Markdown section and figures of one campaign, from its Parquet table.
+
+    Args:
+        table_path: the campaign table to scan (written before, in the staging folder).
+        out_dir: the (staging) report folder figures and CSVs go to.
+        rel_table: the table's path relative to the report folder (for the text).
+        name: the campaign.
+        stem: file-name stem for its figures.
+        baseline: the controller the others are compared with.
+        sample: episode -> role ("median", "worst", ...) of the episodes shown one by one.
+        draw: draw the figures (False: only the text and the CSVs).
+    """
+    table = pl.scan_parquet(table_path).collect()
+    conditions = _conditions(table)
+    shown = conditions[:MAX_CONDITIONS_SHOWN]
+    controllers = sorted(set(table.get_column("controller").to_list()))
+    colors = controller_colors(controllers)
+    episodes = table.unique("episode", maintain_order=True)
+    n_eps = episodes.height
+    files: list[str] = []
+    axes = swept_axes(table)
+    lines = [
+        f"## Campaign `{name}`",
+        "",
+        f"{n_eps} episodes, {len(conditions)} condition(s), controllers "
+        f"{', '.join(controllers)}; swept: "
+        + (
+            ", ".join(
+                f"`{c.removeprefix(SWEPT_PREFIX)}` ({table.get_column(c).n_unique()} values)"
+                for c in table.columns
+                if c.startswith(SWEPT_PREFIX)
+            )
+            or "nothing"
+        )
+        + ". Every episode's swept values and per-joint metrics: "
+        f"[`{rel_table}`]({rel_table}), one row per episode and joint "
+        f'(`pl.read_parquet("{rel_table}")`).',
+        "",
+    ]
+    counts = (
+        episodes.group_by("condition", "controller")
+        .agg(n=pl.len(), failed=(pl.col("status") != "ok").sum())
+        .sort("condition", "controller")
+    )
+    rows = []
+    for cond in shown:
+        c = counts.filter(pl.col("condition") == cond)
+        per = {r["controller"]: r for r in c.iter_rows(named=True)}
+        rows.append(
+            [
+                cond or "(all)",
+                *[
+                    str(per[k]["n"]) + (f" ({per[k]['failed']} failed)" if per[k]["failed"] else "")
+                    if k in per
+                    else "0"
+                    for k in controllers
+                ],
+            ]
+        )
+    lines += [_table(["condition", *controllers], rows), ""]
+    if len(conditions) > len(shown):
+        lines += [f"({len(conditions) - len(shown)} more conditions in the table.)", ""]
+
+    compared = tuple(m.name for m in catalog.METRICS if m.compared)
+    wl = win_loss(table, baseline=baseline, metrics=compared)
+    if wl.height:
+        wl_rel = f"{TABLE_DIR}/{stem}_win_loss.csv"
+        wl.write_csv(out_dir / wl_rel)
+        files.append(wl_rel)
+        tests = sorted(set(wl.get_column("test").to_list()))
+        lines += [
+            f"### Win/loss against `{baseline}` (joint × condition)",
+            "",
+            f"Each cell: the candidate **wins** or **loses** when a two-sided test gives "
+            f"p < {ALPHA:g}, else *n.s.* (not significant); the effect is the median per-seed reduction "
+            f"(baseline − candidate) / baseline where seeds pair, else the reduction of the "
+            f"medians. Tests used: {'; '.join(tests)}. Every cell: [`{wl_rel}`]({wl_rel}).",
+            "",
+        ]
+        if WILCOXON in tests and int(wl.get_column("n").min() or 0) < MIN_SIGNED_RANK_N:
+            lines += [
+                f"With fewer than {MIN_SIGNED_RANK_N} seed pairs the signed-rank test cannot "
+                f"reach p < {ALPHA:g} (its smallest two-sided p for 5 pairs is 0.0625): *n.s.* "
+                "there means too few seeds to tell, not no difference.",
+                "",
+            ]
+        for metric in compared:
+            m = catalog.BY_NAME[metric]
+            for cand in sorted(set(wl.get_column("candidate").to_list())):
+                sub = wl.filter((pl.col("metric") == metric) & (pl.col("candidate") == cand))
+                if not sub.height:
+                    continue
+                cells = {(r["joint"], r["condition"]): r for r in sub.iter_rows(named=True)}
+                rows = [
+                    [
+                        f"{k + 1} {joint}",
+                        *[
+                            _verdict_cell(cells[(joint, c)]) if (joint, c) in cells else "n/a"
+                            for c in shown
+                        ],
+                    ]
+                    for k, joint in enumerate(_joints(table))
+                ]
+                lines += [
+                    f"#### {m.title}: `{cand}` vs `{baseline}`",
+                    "",
+                    _table(["joint", *[c or "(all)" for c in shown]], rows),
+                    "",
+                ]
+    else:
+        lines += [
+            f"No win/loss matrix: the campaign has no completed `{baseline}` episodes and "
+            "another controller to compare with.",
+            "",
+        ]
+
+    if draw:
+        figures: list[FigureFile] = []
+        for metric in compared:
+            m = catalog.BY_NAME[metric]
+            fig = _distribution_figure(
+                table, m, shown, colors, f"{name}: {m.title.lower()} per condition and controller"
+            )
+            figures.append(
+                FigureFile(
+                    save_figure(fig, out_dir, f"{stem}_{metric}_distribution.png"),
+                    f"{m.title}: distribution per condition, joint and controller "
+                    f"(boxes: quartiles; points: episodes, up to {MAX_POINTS_PER_BOX} per box)",
+                )
+            )
+            fig = _ecdf_figure(table, m, colors, f"{name}: {m.title.lower()}, ECDF")
+            figures.append(
+                FigureFile(
+                    save_figure(fig, out_dir, f"{stem}_{metric}_ecdf.png"),
+                    f"{m.title}: empirical CDF per joint and controller (conditions pooled)",
+                )
+            )
+            for axis in axes[:MAX_AXES_DRAWN]:
+                short = axis.removeprefix(SWEPT_PREFIX)
+                fig = _parameter_figure(
+                    table, axis, m, colors, f"{name}: {m.title.lower()} against {short}"
+                )
+                figures.append(
+                    FigureFile(
+                        save_figure(fig, out_dir, f"{stem}_{metric}_vs_{short}.png"),
+                        f"{m.title} against `{short}`: mean and 95 % CI band per controller "
+                        "(other swept values pooled); where the bands cross, the better "
+                        "controller changes",
+                    )
+                )
+        files += [f.relpath for f in figures]
+        lines += ["### Figures", ""]
+        for f in figures:
+            lines += [f"**{f.caption}**", "", f"![{f.caption}]({f.relpath})", ""]
+
+    picked = episodes.filter(pl.col("episode").is_in(list(sample)))
+    if picked.height:
+        worst = (
+            table.group_by("episode")
+            .agg(
+                max_abs_error=pl.col("max_abs_error").max(),
+                final_error=pl.col("final_error").max(),
+            )
+            .join(
+                picked.select("episode", "condition", "controller", "seed", "status"), on="episode"
+            )
+            .sort("condition", "controller", "episode")
+        )
+        rows = [
+            [
+                r["episode"],
+                r["condition"] or "(all)",
+                r["controller"],
+                str(r["seed"]),
+                sample.get(r["episode"]) or "all",
+                r["status"],
+                "n/a" if r["max_abs_error"] is None else f"{r['max_abs_error']:.3e}",
+                "n/a" if r["final_error"] is None else f"{r['final_error']:.3e}",
+            ]
+            for r in worst.head(4 * MAX_CONDITIONS_SHOWN).iter_rows(named=True)
+        ]
+        lines += [
+            "### Sampled episodes",
+            "",
+            "The episodes shown one by one in `recording.rrd` and the plot CSVs: per condition "
+            "and controller the median and the worst by max |error| over joints (every "
+            "episode where there are only a few). Worst joint shown.",
+            "",
+            _table(
+                [
+                    "episode",
+                    "condition",
+                    "controller",
+                    "seed",
+                    "role",
+                    "status",
+                    "max |error| [rad]",
+                    "error at the target [rad]",
+                ],
+                rows,
+            ),
+            "",
+        ]
+    return CampaignSection(name, rel_table, tuple(lines), tuple(files))
