@@ -26,8 +26,8 @@ from pipeline.analysis import catalog
 from pipeline.analysis.campaign import (
     ALPHA,
     SWEPT_PREFIX,
-    WILCOXON,
     TABLE_DIR,
+    WILCOXON,
     by_parameter,
     swept_axes,
     win_loss,
@@ -320,12 +320,13 @@ def campaign_section(
             f"### Win/loss against `{baseline}` (joint × condition)",
             "",
             f"Each cell: the candidate **wins** or **loses** when a two-sided test gives "
-            f"p < {ALPHA:g}, else *n.s.* (not significant); the effect is the median per-seed reduction "
-            f"(baseline − candidate) / baseline where seeds pair, else the reduction of the "
+            f"p < {ALPHA:g}, else *n.s.* (not significant); the effect is the median "
+            "per-seed reduction (baseline − candidate) / baseline where seeds pair, else the "
+            "reduction of the "
             f"medians. Tests used: {'; '.join(tests)}. Every cell: [`{wl_rel}`]({wl_rel}).",
             "",
         ]
-        if WILCOXON in tests and int(wl.get_column("n").min() or 0) < MIN_SIGNED_RANK_N:
+        if WILCOXON in tests and min(wl.get_column("n").to_list()) < MIN_SIGNED_RANK_N:
             lines += [
                 f"With fewer than {MIN_SIGNED_RANK_N} seed pairs the signed-rank test cannot "
                 f"reach p < {ALPHA:g} (its smallest two-sided p for 5 pairs is 0.0625): *n.s.* "
