@@ -33,6 +33,24 @@ def series_path(joint: str, quantity: str, episode: str) -> str:
     return f"{quantity_path(joint, quantity)}/{part(episode)}"
 
 
+LEGEND = "legend"
+
+
+def band_path(joint: str, group: str, controller: str, level: str) -> str:
+    """A percentile (``p05``, ``p50``, ``p95``) of the error over a group's episodes."""
+    return f"{quantity_path(joint, 'error')}/band_{part(group)}_{part(controller)}_{level}"
+
+
+def episode_root(episode: str) -> str:
+    """An episode's place in the 3D scene (its base offset lives here)."""
+    return f"{WORLD_ROOT}/{part(episode)}"
+
+
+def label_path(episode: str) -> str:
+    """The episode's name and role, written at its base."""
+    return f"{episode_root(episode)}/label"
+
+
 def reference_path(joint: str, scenario: str) -> str:
     """The reference position of one joint in one scenario."""
     return f"{quantity_path(joint, 'position')}/reference_{part(scenario)}"

@@ -1,9 +1,17 @@
 """reports/recording.rrd: per-joint time series and the arm in 3D, with a default blueprint.
 
-Series are sent as whole columns (``send_columns`` + ``TimeColumn``); the arm is
-posed by forward kinematics of the recorded robot spec at the recorded joint
-positions, thinned to :data:`ARM_RATE_HZ`. Nothing is spawned or served: the
-stream goes to a file sink only.
+Bounded whatever N is: the episodes shown one by one are :meth:`ReportData.sample_roles`
+(every episode of a small group; the median and the worst per controller and condition
+otherwise), each labelled with its role, plus the error's 5/50/95 % percentile band over
+every episode of a large group. Colours are per controller (:mod:`pipeline.report.colors`),
+the reference is light grey (visible on the viewer's dark theme), legends are hidden in
+the plots and given once as a text panel.
+
+The arm is drawn from the robot's geometry (the capsules of :func:`pipeline.model.chain.chain`,
+as in the MJCF) posed by forward kinematics of the recorded joint positions at
+:data:`ARM_RATE_HZ`; each episode stands on its own base, side by side, and the 3D view's
+camera frames them all. Series are sent as whole columns (``send_columns``). Nothing is
+spawned or served: the stream goes to a file sink only.
 """
 
 from __future__ import annotations
@@ -23,12 +31,18 @@ from pipeline.log.reader import Recording
 from pipeline.model.chain import chain
 from pipeline.model.dh import link_frames
 from pipeline.report import entities as ent
+from pipeline.report.colors import REFERENCE_RGB, hex_color
 from pipeline.report.inputs import ReportData, cs_times_s, cs_wide, times_s, wide
 from pipeline.robots import RobotSpec
 
 RRD_FILE = "recording.rrd"
 APPLICATION_ID = "armlab_report"
 ARM_RATE_HZ = 30.0
+# Episodes stand this far apart in the 3D view [m] (a UR5 reaches ~0.85 m).
+SPACING_M = 1.6
+# Groups (scenarios, campaign conditions) drawn; the rest are in the CSV/Parquet files.
+MAX_RRD_GROUPS = 12
+BAND_LEVELS = (("p05", 5.0), ("p50", 50.0), ("p95", 95.0))
 
 _COLUMNS = {
     "position": "position_rad",
@@ -38,27 +52,47 @@ _COLUMNS = {
 }
 
 
-def blueprint(data: ReportData) -> rrb.Blueprint:
-    """Default layout: the arm in 3D beside one tab per joint (position, error, velocity,
-    effort stacked), built only from :mod:`pipeline.report.entities` paths."""
+def _joints(data: ReportData) -> list[str]:
     joints: list[str] = []
-    for rec in data.recordings:
+    for rec in data.sample():
         joints += [j for j in rec.joint_names if j not in joints]
+    return joints
+
+
+def blueprint(
+    data: ReportData, *, eye: tuple[NDArray[np.float64], NDArray[np.float64]]
+) -> rrb.Blueprint:
+    """Default layout: the arms in 3D (camera at ``eye`` = (position, target)) and the colour
+    key, beside one tab per joint (position, error, velocity, effort stacked), built only
+    from :mod:`pipeline.report.entities` paths."""
     tabs = [
         rrb.Vertical(
             *[
                 rrb.TimeSeriesView(
-                    origin=ent.quantity_path(joint, q), name=f"{joint}: {ent.QUANTITY_LABELS[q]}"
+                    origin=ent.quantity_path(joint, q),
+                    name=f"{joint}: {ent.QUANTITY_LABELS[q]}",
+                    plot_legend=rrb.PlotLegend(visible=False),
                 )
                 for q in ent.QUANTITIES
             ],
             name=f"{k + 1} {joint}",
         )
-        for k, joint in enumerate(joints)
+        for k, joint in enumerate(_joints(data))
     ]
+    position, target = eye
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Spatial3DView(origin=ent.WORLD_ROOT, name="arm (FK of the recorded joints)"),
+            rrb.Vertical(
+                rrb.Spatial3DView(
+                    origin=ent.WORLD_ROOT,
+                    name="arms (FK of the recorded joints), one base per episode",
+                    eye_controls=rrb.EyeControls3D(
+                        position=position.tolist(), look_target=target.tolist(), eye_up=[0, 0, 1]
+                    ),
+                ),
+                rrb.TextDocumentView(origin=ent.LEGEND, name="colour key"),
+                row_shares=[4, 1],
+            ),
             rrb.Tabs(*tabs),
             column_shares=[2, 3],
         ),
@@ -90,35 +124,66 @@ def _send_series(
     )
 
 
-def _arm_frames(
+def _z_to(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Quaternions (x, y, z, w) turning +Z onto each row of unit vectors ``v``."""
+    z = np.array([0.0, 0.0, 1.0])
+    q = np.concatenate([np.cross(z, v), 1.0 + v @ z[:, None]], axis=1)
+    flip = q[:, 3] < 1e-9  # v = -Z: half a turn about X
+    q[flip] = [1.0, 0.0, 0.0, 0.0]
+    out: NDArray[np.float64] = q / np.linalg.norm(q, axis=1, keepdims=True)
+    return out
+
+
+def _arm_capsules(
     spec: RobotSpec, q: NDArray[np.float64]
-) -> tuple[list[NDArray[np.float64]], NDArray[np.float64], NDArray[np.float32]]:
-    """Link segments in world (DH base) coordinates for each row of ``q``.
+) -> tuple[
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float32],
+    NDArray[np.float64],
+]:
+    """Link capsules in world (DH base) coordinates for each row of ``q``.
 
     Returns:
-        strips: one (2, 3) array per segment, frame after frame.
-        flange: (F, 3) flange positions.
-        radii: radius of each strip [m].
+        translations (F*S, 3), quaternions (F*S, 4), lengths (F*S,), radii (F*S,) and the
+        flange positions (F, 3); S segments per frame.
     """
     links = chain(spec)
-    segs = [(i, s) for i, link in enumerate(links) for s in link.segments_dh]
+    segs = [
+        (i, s)
+        for i, link in enumerate(links)
+        for s in link.segments_dh
+        if np.linalg.norm(np.subtract(s.end, s.start)) > 1e-9
+    ]
     starts = np.array([[*s.start, 1.0] for _, s in segs]).reshape(-1, 4)
     ends = np.array([[*s.end, 1.0] for _, s in segs]).reshape(-1, 4)
     owner = [i for i, _ in segs]
     radii = np.array([s.radius for _, s in segs], dtype=np.float32)
-    strips: list[NDArray[np.float64]] = []
+    a = np.empty((q.shape[0], len(segs), 3))
+    b = np.empty_like(a)
     flange = np.empty((q.shape[0], 3))
     for f, qf in enumerate(q):
         frames = link_frames(spec, qf)
         for k, i in enumerate(owner):
-            a = (frames[i] @ starts[k])[:3]
-            b = (frames[i] @ ends[k])[:3]
-            strips.append(np.stack([a, b]))
+            a[f, k] = (frames[i] @ starts[k])[:3]
+            b[f, k] = (frames[i] @ ends[k])[:3]
         flange[f] = frames[-1][:3, 3]
-    return strips, flange, np.tile(radii, q.shape[0])
+    starts_w, ends_w = a.reshape(-1, 3), b.reshape(-1, 3)
+    lengths = np.linalg.norm(ends_w - starts_w, axis=1)
+    quats = _z_to((ends_w - starts_w) / lengths[:, None])
+    return starts_w, quats, lengths, np.tile(radii, q.shape[0]), flange
 
 
-def _send_arm(stream: rr.RecordingStream, rec: Recording, color: tuple[int, int, int]) -> bool:
+def _send_arm(
+    stream: rr.RecordingStream,
+    rec: Recording,
+    color: tuple[int, int, int],
+    *,
+    offset: NDArray[np.float64],
+    label: str,
+) -> bool:
+    """Draw the episode's arm on its own base (False: no robot spec or no samples)."""
     spec = robot_spec(rec)
     if spec is None or spec.joint_names != rec.joint_names:
         return False
@@ -128,24 +193,106 @@ def _send_arm(stream: rr.RecordingStream, rec: Recording, color: tuple[int, int,
     wanted = np.arange(t[0], t[-1], 1.0 / ARM_RATE_HZ)
     idx = np.unique(np.append(np.searchsorted(t, wanted).clip(0, t.size - 1), t.size - 1))
     q = wide(rec, "position_rad")[idx]
-    strips, flange, radii = _arm_frames(spec, q)
-    per_frame = len(strips) // max(idx.size, 1)
+    if not np.isfinite(q).all():
+        q = np.nan_to_num(q)
+    trans, quats, lengths, radii, flange = _arm_capsules(spec, q)
+    per_frame = lengths.size // max(idx.size, 1)
     if per_frame == 0:
         return False
-    colors = np.tile(np.array(color, dtype=np.uint8), (len(strips), 1))
+    root = ent.episode_root(rec.episode)
+    stream.log(root, rr.Transform3D(translation=offset.tolist()), static=True)
     stream.send_columns(
         ent.arm_path(rec.episode),
         indexes=[rr.TimeColumn(ent.TIMELINE, duration=t[idx])],
-        columns=rr.LineStrips3D.columns(strips=strips, radii=radii, colors=colors).partition(
-            lengths=[per_frame] * idx.size
-        ),
+        columns=rr.Capsules3D.columns(
+            translations=trans,
+            quaternions=quats,
+            lengths=lengths,
+            radii=radii,
+            colors=np.tile(np.array(color, dtype=np.uint8), (lengths.size, 1)),
+        ).partition(lengths=[per_frame] * idx.size),
     )
     stream.log(
         ent.ee_path_path(rec.episode),
-        rr.LineStrips3D([flange], radii=[0.004], colors=[color], labels=[rec.episode]),
+        rr.LineStrips3D([flange], radii=[0.004], colors=[color]),
+        static=True,
+    )
+    stream.log(
+        ent.label_path(rec.episode),
+        rr.Points3D([[0.0, 0.0, -0.05]], radii=[0.02], colors=[color], labels=[label]),
         static=True,
     )
     return True
+
+
+def _send_bands(stream: rr.RecordingStream, data: ReportData, group: str) -> None:
+    """5/50/95 % of the error over every episode of a large (group, controller)."""
+    by_ctrl: dict[str, list[Recording]] = {}
+    for rec in data.in_group(group):
+        if rec.status == "ok":
+            by_ctrl.setdefault(rec.controller, []).append(rec)
+    for ctrl, recs in by_ctrl.items():
+        if len(recs) <= 3:
+            continue
+        n = min(cs_times_s(r).size for r in recs)
+        if n == 0:
+            continue
+        t = cs_times_s(recs[0])[:n]
+        stack = np.stack([cs_wide(r, "error_rad")[:n] for r in recs])  # (E, n, J)
+        levels = np.nanpercentile(stack, [p for _, p in BAND_LEVELS], axis=0)
+        color = data.controller_color(ctrl)
+        for j, joint in enumerate(recs[0].joint_names):
+            for (name, _), values in zip(BAND_LEVELS, levels, strict=True):
+                _send_series(
+                    stream,
+                    ent.band_path(joint, group, ctrl, name),
+                    t,
+                    values[:, j],
+                    name=f"{ctrl} {name} of {len(recs)} [{group}]",
+                    color=color,
+                    width=2.5 if name == "p50" else 0.6,
+                )
+
+
+def _legend(data: ReportData) -> str:
+    rows = [f"- <span style='color:{hex_color(REFERENCE_RGB)}'>■</span> reference (light grey)"]
+    for ctrl in data.controllers():
+        rows.append(f"- **{ctrl}**: {hex_color(data.controller_color(ctrl))}")
+    return (
+        "Colours: one per controller, in every plot and arm.\n\n"
+        + "\n".join(rows)
+        + "\n\nEach episode stands on its own base, labelled `episode: controller (role)`; "
+        "role *median* / *worst* (by max |error|) for large groups, whose error is also drawn "
+        "as thin 5 % / 95 % and thick 50 % percentile lines (`band_*`). Hide an episode in "
+        "the blueprint panel to compare others."
+    )
+
+
+def _layout(data: ReportData) -> list[tuple[str, list[Recording]]]:
+    """(group, its sampled episodes) for the groups drawn, in order."""
+    roles = data.sample_roles
+    out = []
+    for group in data.groups():
+        recs = [r for r in data.in_group(group) if r.episode in roles]
+        if recs:
+            out.append((group, recs))
+    return out[:MAX_RRD_GROUPS]
+
+
+def _offset(k: int) -> NDArray[np.float64]:
+    """The k-th episode's base: rows of six, :data:`SPACING_M` apart."""
+    return np.array([(k % 6) * SPACING_M, -(k // 6) * SPACING_M, 0.0])
+
+
+def _reach_m(data: ReportData) -> float:
+    """How far any drawn arm reaches from its base [m] (sum of the DH lengths)."""
+    reach = 0.0
+    for rec in data.sample():
+        spec = robot_spec(rec)
+        if spec is not None:
+            total = sum(abs(j.dh.a) + abs(j.dh.d) for j in spec.joints)
+            reach = max(reach, total)
+    return reach or 1.0
 
 
 def _save(stream: rr.RecordingStream, path: Path, layout: rrb.Blueprint) -> Callable[[], None]:
@@ -190,12 +337,16 @@ def write_rrd(data: ReportData, path: Path) -> list[str]:
     Every stream it opens is flushed, disconnected and freed before it returns, so a
     process calling it many times (a service, a notebook) does not accumulate threads.
     """
+    layout = _layout(data)
+    n = sum(len(recs) for _, recs in layout)
+    reach = _reach_m(data)
+    corners = [_offset(k) + sign * reach for k in range(max(n, 1)) for sign in (-1.0, 1.0)]
     stream = rr.RecordingStream(
         APPLICATION_ID, recording_id=_recording_id(data), send_properties=False
     )
-    close_blueprint = _save(stream, path, blueprint(data))
+    close_blueprint = _save(stream, path, blueprint(data, eye=_eye(corners)))
     try:
-        return _log_all(stream, data)
+        return _log_all(stream, data, layout)
     finally:
         stream.flush()
         stream.disconnect()
@@ -205,27 +356,33 @@ def write_rrd(data: ReportData, path: Path) -> list[str]:
         rr_bindings.flush_and_cleanup_orphaned_recordings()
 
 
-def _log_all(stream: rr.RecordingStream, data: ReportData) -> list[str]:
+def _log_all(
+    stream: rr.RecordingStream, data: ReportData, layout: list[tuple[str, list[Recording]]]
+) -> list[str]:
     no_arm: list[str] = []
-    for scenario in data.scenarios():
-        recs = data.in_scenario(scenario)
+    roles = data.sample_roles
+    k = 0
+    for group, recs in layout:
         ref = recs[0]
         t_ref = cs_times_s(ref)
         q_ref = cs_wide(ref, "reference_position_rad")
         for j, joint in enumerate(ref.joint_names):
             _send_series(
                 stream,
-                ent.reference_path(joint, scenario),
+                ent.reference_path(joint, group),
                 t_ref,
                 q_ref[:, j],
-                name=f"reference ({scenario})",
-                color=(0, 0, 0),
+                name=f"reference ({group})",
+                color=REFERENCE_RGB,
                 width=2.0,
             )
+        _send_bands(stream, data, group)
         for rec in recs:
             t = times_s(rec)
             color = data.color(rec.episode)
-            label = f"{data.label(rec.episode)} [{scenario}]"
+            role = roles.get(rec.episode, "")
+            who = f"{rec.controller}{f' ({role})' if role else ''}"
+            label = f"{who} {rec.episode} [{group}]"
             for quantity, column in _COLUMNS.items():
                 # The error at the /controller_state rate, as the metrics use it.
                 full_rate = quantity == "error"
@@ -239,6 +396,24 @@ def _log_all(stream: rr.RecordingStream, data: ReportData) -> list[str]:
                         name=label,
                         color=color,
                     )
-            if not _send_arm(stream, rec, color):
+            drawn = _send_arm(stream, rec, color, offset=_offset(k), label=f"{rec.episode}: {who}")
+            k += 1
+            if not drawn:
                 no_arm.append(rec.episode)
+    stream.log(ent.LEGEND, rr.TextDocument(_legend(data), media_type="text/markdown"), static=True)
     return no_arm
+
+
+def _eye(points: list[NDArray[np.float64]]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A camera that frames every arm (``points``: corners of the space they can reach):
+    looking at the centre, from the front-right and above, far enough for the whole box to
+    fit a ~60 deg view."""
+    if not points:
+        return np.array([2.0, -2.0, 1.5]), np.zeros(3)
+    allp = np.vstack(points)
+    low, high = allp.min(axis=0), allp.max(axis=0)
+    centre = (low + high) / 2
+    radius = max(float(np.linalg.norm(high - low)) / 2, 0.3)
+    direction = np.array([0.6, -1.0, 0.55])
+    position = centre + direction / np.linalg.norm(direction) * radius * 2.2
+    return position, centre

@@ -74,7 +74,7 @@ def test_metrics_json_has_the_stable_keys(report: ReportResult) -> None:
 def test_series_csvs_are_long_form(report: ReportResult) -> None:
     for name in ("errors.csv", "velocities.csv"):
         frame = pl.read_csv(report.out_dir / "plots" / name)
-        assert frame.columns == ["time_s", "episode", "joint", "value"]
+        assert frame.columns == ["time_s", "controller", "episode", "joint", "value"]
         assert set(frame.get_column("episode").unique()) == {"pid_paper", "ctc_paper", "lqr_paper"}
 
 
