@@ -75,14 +75,26 @@ def _grid(n: int) -> tuple[int, int]:
     return (n + cols - 1) // cols, cols
 
 
-def _axes(n: int, *, width: float = 4.2, height: float = 2.6) -> tuple[Figure, list[Axes]]:
+def _short(condition: str) -> str:
+    """A condition as a tick label: swept values without their params path
+    (``plant.payload_kg=0.5,gains.kp=9`` -> ``payload_kg=0.5, kp=9``)."""
+    if not condition:
+        return "(all)"
+    out = []
+    for part in condition.split(","):
+        key, sep, value = part.partition("=")
+        out.append(f"{key.rsplit('.', 1)[-1]}={value}" if sep else part)
+    return ", ".join(out)
+
+
+def _axes(n: int, *, width: float = 4.2, height: float = 3.0) -> tuple[Figure, list[Axes]]:
     rows, cols = _grid(n)
     fig = Figure(figsize=(width * cols, height * rows + 0.6))
     grid = fig.subplots(rows, cols, squeeze=False)
     axes = [grid[k // cols][k % cols] for k in range(rows * cols)]
     for ax in axes[n:]:
         ax.set_visible(False)
-    fig.subplots_adjust(left=0.08, right=0.98, bottom=0.12, top=0.86, wspace=0.3, hspace=0.45)
+    fig.subplots_adjust(left=0.08, right=0.98, bottom=0.14, top=0.86, wspace=0.3, hspace=0.75)
     return fig, axes[:n]
 
 
@@ -139,7 +151,7 @@ def _distribution_figure(
         if metric.log_scale:
             ax.set_yscale("log")
         ax.set_xticks(range(len(conditions)))
-        ax.set_xticklabels([c or "(all)" for c in conditions], rotation=30, ha="right", fontsize=7)
+        ax.set_xticklabels([_short(c) for c in conditions], rotation=25, ha="right", fontsize=7)
         ax.set_title(joint, fontsize=8)
         ax.tick_params(labelsize=7)
         ax.grid(True, axis="y", lw=0.3)

@@ -20,6 +20,7 @@ matplotlib.use("Agg")
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
 from pipeline.log.reader import Recording
@@ -97,10 +98,63 @@ def save_figure(fig: Figure, out_dir: Path, name: str) -> str:
     return rel
 
 
-def _motion_end(ax: Axes, recs: list[Recording]) -> None:
-    ends = {r.motion_end_s for r in recs if r.motion_end_s is not None}
-    for end in sorted(ends):
-        ax.axvline(end, color="0.6", lw=0.8, ls=":", zorder=0)
+def _motion_end(ax: Axes, recs: list[Recording], *, label: bool = True) -> None:
+    """A dotted line at each motion end, labelled at the top of the axes."""
+    ends = sorted({r.motion_end_s for r in recs if r.motion_end_s is not None})
+    for end in ends:
+        ax.axvline(end, color="0.45", lw=0.9, ls=":", zorder=0)
+        if label:
+            ax.annotate(
+                "motion end",
+                xy=(end, 1.0),
+                xycoords=("data", "axes fraction"),
+                xytext=(3, -3),
+                textcoords="offset points",
+                ha="left",
+                va="top",
+                fontsize=7,
+                color="0.35",
+            )
+
+
+def _legend(fig: Figure, data: ReportData, recs: list[Recording], *, reference: bool) -> None:
+    """One entry per controller (and the reference), above the axes: never on the data."""
+    from matplotlib.lines import Line2D
+
+    controllers = list(dict.fromkeys(r.controller for r in recs))
+    handles = [Line2D([], [], color="k", lw=1.4, ls="--")] if reference else []
+    labels = ["reference"] if reference else []
+    for c in controllers:
+        n = sum(1 for r in recs if r.controller == c)
+        handles.append(Line2D([], [], color=_rgb(data.controller_color(c)), lw=1.6))
+        labels.append(c if n == 1 else f"{c} ({n} runs)")
+    fig.legend(
+        handles, labels, loc="upper right", ncols=len(labels), fontsize=8, frameon=False,
+        bbox_to_anchor=(0.99, 0.995),
+    )  # fmt: skip
+
+
+def _alpha(recs: list[Recording], controller: str) -> float:
+    """Lighter lines when a controller has many runs, so seeds do not hide each other."""
+    n = sum(1 for r in recs if r.controller == controller)
+    return 1.0 if n <= 1 else max(0.25, 1.0 / np.sqrt(n))
+
+
+# Draw |error| on a log axis when controllers' largest errors differ by more than this.
+LOG_ERROR_RATIO = 30.0
+
+
+def _log_error(recs: list[Recording], joint_index: int | None = None) -> bool:
+    """Whether the controllers' errors are orders of magnitude apart (log |error| reads)."""
+    worst: dict[str, float] = {}
+    for rec in recs:
+        e = np.abs(cs_wide(rec, "error_rad"))
+        if joint_index is not None:
+            e = e[:, joint_index : joint_index + 1]
+        if e.size and np.isfinite(e).any():
+            worst[rec.controller] = max(worst.get(rec.controller, 0.0), float(np.nanmax(e)))
+    positive = [v for v in worst.values() if v > 0]
+    return len(positive) > 1 and max(positive) / min(positive) > LOG_ERROR_RATIO
 
 
 def _per_joint(
@@ -115,10 +169,14 @@ def _per_joint(
 ) -> Figure:
     joints = recs[0].joint_names
     rows, cols = _grid(len(joints))
-    fig = Figure(figsize=(4.2 * cols, 2.6 * rows))
+    fig = Figure(figsize=(4.2 * cols, 2.6 * rows + 0.4))
     axes = fig.subplots(rows, cols, squeeze=False, sharex=True)
+    log = column == "error_rad" and _log_error(recs)
     for k, joint in enumerate(joints):
         ax = axes[k // cols][k % cols]
+        lows: list[float] = []
+        highs: list[float] = []
+        smallest: list[float] = []  # the smallest positive value (log axes)
         for rec in recs:
             if joint not in rec.joint_names:
                 continue
@@ -127,16 +185,30 @@ def _per_joint(
                 t, y = _thin(cs_times_s(rec), cs_wide(rec, column)[:, j])
             else:
                 t, y = _thin(times_s(rec), wide(rec, column)[:, j])
+            if log:
+                y = np.abs(y)
+            if np.isfinite(y).any():
+                lows.append(float(np.nanmin(y)))
+                highs.append(float(np.nanmax(y)))
+                if (y > 0).any():
+                    smallest.append(float(np.nanmin(y[y > 0])))
             ax.plot(
-                t, y, lw=1.0, color=_rgb(data.color(rec.episode)), label=data.label(rec.episode)
-            )
+                t, y, lw=1.0, color=_rgb(data.color(rec.episode)),
+                alpha=_alpha(recs, rec.controller),
+            )  # fmt: skip
+        if log:
+            ax.set_yscale("log")
+            top = max(highs, default=1.0)
+            if top > 0:
+                # at most 6 decades: below that is integration noise, not tracking
+                ax.set_ylim(max(top * 1e-6, min(smallest, default=top * 1e-6)) * 0.8, top * 1.5)
+        else:
+            ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))
         if limits:
             lim = _effort_limit(data, recs[0], joint)
             if lim is not None:
-                for sign in (1, -1):
-                    ax.axhline(sign * lim, color="0.3", lw=0.8, ls="--")
-        _motion_end(ax, recs)
-        ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))
+                _limit_note(ax, lim, lows, highs)
+        _motion_end(ax, recs, label=k == 0)
         # Plain text above the top-right corner: set_title re-measures every tick label on
         # each draw (3x slower figures).
         ax.text(
@@ -151,16 +223,32 @@ def _per_joint(
         ax.tick_params(labelsize=8)
         ax.grid(True, lw=0.3)
         if k % cols == 0:
-            ax.set_ylabel(ylabel, fontsize=8)
+            ax.set_ylabel(f"|{ylabel.split(' [')[0]}| [rad] (log)" if log else ylabel, fontsize=8)
         if k // cols == rows - 1:
             ax.set_xlabel("time [s]", fontsize=8)
     for k in range(len(joints), rows * cols):
         axes[k // cols][k % cols].set_visible(False)
-    axes[0][0].legend(fontsize=7, loc="lower right")
-    fig.suptitle(title, fontsize=10)
+    _legend(fig, data, recs, reference=False)
+    fig.suptitle(title, fontsize=10, x=0.01, ha="left")
     # Fixed margins: a layout engine would draw every figure twice.
-    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.1, top=0.89, wspace=0.25, hspace=0.3)
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.1, top=0.86, wspace=0.25, hspace=0.3)
     return fig
+
+
+def _limit_note(ax: Axes, limit: float, lows: list[float], highs: list[float]) -> None:
+    """The effort limit: a dashed line when the data come near it (within 80 %), else a
+    note; the axis stays scaled to the data either way."""
+    peak = max([abs(v) for v in (*lows, *highs)], default=0.0)
+    if peak >= 0.8 * limit:
+        for sign in (1, -1):
+            ax.axhline(sign * limit, color="0.3", lw=0.8, ls="--")
+        text = f"limit ±{limit:g} N m (dashed)"
+    else:
+        text = f"limit ±{limit:g} N m ({peak / limit * 100:.0f} % used)"
+    ax.text(
+        0.01, 0.97, text, transform=ax.transAxes, ha="left", va="top", fontsize=7,
+        color="0.3",
+    )  # fmt: skip
 
 
 def _effort_limit(data: ReportData, rec: Recording, joint: str) -> float | None:
@@ -169,13 +257,87 @@ def _effort_limit(data: ReportData, rec: Recording, joint: str) -> float | None:
     return effort_limits(rec, robot_spec(rec)).get(joint)
 
 
+def _position_with_inset(data: ReportData, recs: list[Recording], scenario: str) -> Figure:
+    """Paper Fig. 5: joint 1's reference and positions, with a zoomed inset where the
+    tracking error is largest (at full scale the curves lie on top of each other)."""
+    fig, ax = _single()
+    t_ref, y_ref = _thin(cs_times_s(recs[0]), cs_wide(recs[0], "reference_position_rad")[:, 0])
+    # the inset goes where the curve is not: after the motion, above a falling curve and
+    # below a rising one
+    falling = bool(y_ref.size and y_ref[-1] < y_ref[0])
+    inset = ax.inset_axes((0.6, 0.42, 0.37, 0.42) if falling else (0.6, 0.1, 0.37, 0.42))
+    for target in (ax, inset):
+        target.plot(t_ref, y_ref, color="k", lw=1.4, ls="--", zorder=3)
+    t_star, e_star = 0.0, -1.0
+    for rec in recs:
+        t, y = _thin(times_s(rec), wide(rec, "position_rad")[:, 0])
+        color = _rgb(data.color(rec.episode))
+        for target in (ax, inset):
+            target.plot(t, y, lw=1.0, color=color, alpha=_alpha(recs, rec.controller))
+        e = np.abs(cs_wide(rec, "error_rad")[:, 0])
+        if e.size and np.isfinite(e).any() and float(np.nanmax(e)) > e_star:
+            e_star = float(np.nanmax(e))
+            t_star = float(cs_times_s(rec)[int(np.nanargmax(e))])
+    centre = float(np.interp(t_star, t_ref, y_ref)) if t_ref.size else 0.0
+    duration = max(float(t_ref[-1] - t_ref[0]) if t_ref.size else 1.0, 1e-6)
+    slope = abs(float(np.interp(t_star, t_ref, np.gradient(y_ref, t_ref)))) if t_ref.size > 1 else 0
+    # a window where the reference runs at 45 degrees and the lag is a few widths across
+    pad = max(e_star, 1e-9) * 3.0
+    span = min(pad / slope, duration * 0.05) if slope > 0 else duration * 0.05
+    inset.set_xlim(t_star - span, t_star + span)
+    inset.set_ylim(centre - pad, centre + pad)
+    inset.tick_params(labelsize=6)
+    inset.ticklabel_format(axis="both", style="plain", useOffset=False)
+    inset.xaxis.set_major_locator(MaxNLocator(3))
+    inset.yaxis.set_major_locator(MaxNLocator(3))
+    inset.set_title(f"zoom: largest error ({e_star:.2g} rad)", fontsize=7)
+    ax.indicate_inset_zoom(inset, edgecolor="0.4")
+    _motion_end(ax, recs)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("position [rad]")
+    ax.grid(True, lw=0.3)
+    _legend(fig, data, recs, reference=True)
+    first_joint = recs[0].joint_names[0]
+    fig.suptitle(f"{scenario}: joint 1 ({first_joint}) reference and actual (cf. paper Fig. 5)",
+                 fontsize=10, x=0.01, ha="left", y=0.9)  # fmt: skip
+    fig.subplots_adjust(top=0.8)
+    return fig
+
+
+def _error_joint1(data: ReportData, recs: list[Recording], scenario: str) -> Figure:
+    """Paper Fig. 6: joint 1's tracking error (|error| on a log axis when the controllers
+    are orders of magnitude apart)."""
+    fig, ax = _single()
+    log = _log_error(recs, 0)
+    for rec in recs:
+        t, y = _thin(cs_times_s(rec), cs_wide(rec, "error_rad")[:, 0])
+        ax.plot(
+            t, np.abs(y) if log else y, lw=1.0, color=_rgb(data.color(rec.episode)),
+            alpha=_alpha(recs, rec.controller),
+        )  # fmt: skip
+    if log:
+        ax.set_yscale("log")
+        lo, hi = ax.get_ylim()
+        ax.set_ylim(bottom=max(lo, hi * 1e-6))
+    _motion_end(ax, recs)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("|error| [rad] (log)" if log else "error [rad]")
+    ax.grid(True, lw=0.3)
+    _legend(fig, data, recs, reference=False)
+    fig.suptitle(f"{scenario}: joint 1 tracking error, reference - actual (cf. paper Fig. 6)",
+                 fontsize=10, x=0.01, ha="left", y=0.9)  # fmt: skip
+    fig.subplots_adjust(top=0.8)
+    return fig
+
+
 def scenario_figures(
     data: ReportData, scenario: str, out_dir: Path, *, stem: str | None = None
 ) -> list[FigureFile]:
     """Draw and write the figure set of one scenario; return what was written.
 
     Errors and the reference are drawn from ``/controller_state`` (its full rate),
-    measured positions, velocities and efforts from ``/joint_states``.
+    measured positions, velocities and efforts from ``/joint_states``. One colour per
+    controller (:mod:`pipeline.report.colors`); legends above the axes.
 
     Args:
         stem: file-name stem (default :func:`slug` of the scenario; pass the one from
@@ -183,47 +345,23 @@ def scenario_figures(
     """
     recs = data.in_scenario(scenario)
     stem = stem or slug(scenario)
-    first_joint = recs[0].joint_names[0]
-    out: list[FigureFile] = []
-
-    # Fig. 5: joint 1 reference vs each controller.
-    fig, ax = _single()
-    t_ref, y_ref = _thin(cs_times_s(recs[0]), cs_wide(recs[0], "reference_position_rad")[:, 0])
-    ax.plot(t_ref, y_ref, color="k", lw=1.4, ls="--", label="reference")
-    for rec in recs:
-        t, y = _thin(times_s(rec), wide(rec, "position_rad")[:, 0])
-        ax.plot(t, y, lw=1.0, color=_rgb(data.color(rec.episode)), label=data.label(rec.episode))
-    _motion_end(ax, recs)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("position [rad]")
-    ax.grid(True, lw=0.3)
-    ax.legend(fontsize=8)
-    fig.suptitle(f"{scenario}: joint 1 ({first_joint}) reference and actual (cf. paper Fig. 5)")
-    out.append(
+    out = [
         FigureFile(
-            save_figure(fig, out_dir, f"{stem}_fig5_joint1_position.png"),
-            "Joint 1: reference and measured position per controller (paper Fig. 5)",
-        )
-    )
-
-    # Fig. 6: joint 1 error.
-    fig, ax = _single()
-    for rec in recs:
-        t, y = _thin(cs_times_s(rec), cs_wide(rec, "error_rad")[:, 0])
-        ax.plot(t, y, lw=1.0, color=_rgb(data.color(rec.episode)), label=data.label(rec.episode))
-    _motion_end(ax, recs)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("error [rad]")
-    ax.grid(True, lw=0.3)
-    ax.legend(fontsize=8)
-    fig.suptitle(f"{scenario}: joint 1 tracking error, reference - actual (cf. paper Fig. 6)")
-    out.append(
+            save_figure(
+                _position_with_inset(data, recs, scenario),
+                out_dir,
+                f"{stem}_fig5_joint1_position.png",
+            ),
+            "Joint 1: reference and measured position per controller, with a zoom where the "
+            "error is largest (paper Fig. 5)",
+        ),
         FigureFile(
-            save_figure(fig, out_dir, f"{stem}_fig6_joint1_error.png"),
+            save_figure(
+                _error_joint1(data, recs, scenario), out_dir, f"{stem}_fig6_joint1_error.png"
+            ),
             "Joint 1: tracking error per controller (paper Fig. 6)",
-        )
-    )
-
+        ),
+    ]
     panels = (
         (
             "error_rad",
@@ -244,9 +382,10 @@ def scenario_figures(
         (
             "effort_nm",
             "effort [N m]",
-            "applied joint efforts (dashed: effort limits)",
+            "applied joint efforts (scaled to the data; limits noted)",
             "efforts",
-            "Applied joint efforts, with the effort limits dashed",
+            "Applied joint efforts, scaled to the data, with each joint's effort limit noted "
+            "(dashed where the data come near it)",
             True,
         ),
     )
