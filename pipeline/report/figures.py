@@ -280,7 +280,11 @@ def _position_with_inset(data: ReportData, recs: list[Recording], scenario: str)
             t_star = float(cs_times_s(rec)[int(np.nanargmax(e))])
     centre = float(np.interp(t_star, t_ref, y_ref)) if t_ref.size else 0.0
     duration = max(float(t_ref[-1] - t_ref[0]) if t_ref.size else 1.0, 1e-6)
-    slope = abs(float(np.interp(t_star, t_ref, np.gradient(y_ref, t_ref)))) if t_ref.size > 1 else 0
+    slope = 0.0
+    if t_ref.size > 1:
+        with np.errstate(all="ignore"):  # repeated stamps (a bag with duplicates)
+            slope = abs(float(np.interp(t_star, t_ref, np.gradient(y_ref, t_ref))))
+        slope = slope if np.isfinite(slope) else 0.0
     # a window where the reference runs at 45 degrees and the lag is a few widths across
     pad = max(e_star, 1e-9) * 3.0
     span = min(pad / slope, duration * 0.05) if slope > 0 else duration * 0.05
