@@ -122,6 +122,7 @@ def read_all(
     return sorted(good, key=lambda r: r.episode), bad
 
 
+CAMPAIGN_INDEX = f"{TABLE_DIR}/index.csv"
 # Earlier outputs a run removes when it does not produce them again: folder -> suffixes.
 _OWNED = {FIGURES_DIR: (".png",), TABLE_DIR: (".parquet", ".csv")}
 
@@ -284,7 +285,7 @@ def _run_report_locked(
         files = [write_metrics(data, staging), *write_series_csvs(data, staging)]
         files += write_episode_csvs(data, staging)
         sections = _campaigns(data, staging, progress)
-        files += [f for sec in sections for f in (sec.table_path, *sec.files)]
+        files += [CAMPAIGN_INDEX, *[f for sec in sections for f in (sec.table_path, *sec.files)]]
         scenarios = data.scenarios()
         drawn = scenarios[:MAX_FIGURE_SCENARIOS]
         stems = scenario_slugs(scenarios)
@@ -325,10 +326,23 @@ def _campaigns(data: ReportData, staging: Path, progress: Progress) -> list[Camp
     with a lazy scan: the summary is the table's numbers."""
     settings = {ep: view.settings for ep, view in data.protocol.items()}
     tables = campaign_tables(data.metrics, data.episodes, settings)
-    if not tables:
-        return []
     (staging / TABLE_DIR).mkdir(exist_ok=True)
     stems = scenario_slugs(tables)
+    # the index is written even with no campaign, so the folder (a DVC output) always exists
+    pl.DataFrame(
+        {
+            "campaign": list(tables),
+            "episodes": [t.get_column("episode").n_unique() for t in tables.values()],
+            "conditions": [t.get_column("condition").n_unique() for t in tables.values()],
+            "table": [f"{TABLE_DIR}/{stems[name]}.parquet" for name in tables],
+        },
+        schema={
+            "campaign": pl.String,
+            "episodes": pl.Int64,
+            "conditions": pl.Int64,
+            "table": pl.String,
+        },
+    ).write_csv(staging / CAMPAIGN_INDEX)
     sections = []
     for k, (name, table) in enumerate(tables.items()):
         progress("summarising campaigns", k, len(tables))

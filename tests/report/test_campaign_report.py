@@ -48,6 +48,8 @@ def test_campaign_table_has_the_interface_columns(campaign: tuple[ReportResult, 
     assert sorted(table["swept.plant.payload_kg"].unique().to_list()) == list(PAYLOADS_KG)
     # hand-listed episodes are in no campaign table
     assert "paper-pid" not in table["episode"].to_list()
+    index = pl.read_csv(result.out_dir / "campaigns" / "index.csv")
+    assert index.rows() == [("sweep", len(episodes), len(PAYLOADS_KG), "campaigns/sweep.parquet")]
 
 
 def test_campaign_table_equals_metrics_json_and_the_written_arrays(
