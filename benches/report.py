@@ -17,12 +17,18 @@ Prints one JSON object:
   500 Hz, two controllers per scenario), to show the growth, and ``read_s``, the part
   that reads the recordings (figures are drawn for at most 6 scenarios, so they add a
   constant once there are more).
+- ``campaign_sweep`` (``--campaign-sweep 100,300,1000``): ``run_report`` on one synthetic
+  campaign of N episodes (pid and ctc x 3 payload conditions x N/6 seeds, 1 s at 500 Hz,
+  written by tests/analysis/bagfactory.py), each N in a fresh process: wall time, time per
+  episode, the reading part, peak RSS, and the sizes of report.md, recording.rrd and all
+  outputs (the target: linear time, bounded report.md and .rrd).
 
 The recording is written by the project's writer (pipeline.log.bag) when it is
 importable, else by tests/analysis/bagfactory.py (mcap_ros2). ``--recording PATH``
 measures the decode on an existing recording instead.
 
 Usage: python benches/report.py [--repeat 5] [--skip-synthetic] [--recording PATH]
+       [--campaign-sweep 100,300,1000] [--only-campaign-sweep]
 """
 
 from __future__ import annotations
@@ -242,12 +248,76 @@ def synthetic(root: Path, count: int) -> Path:
     return folder
 
 
+def campaign_point(count: int) -> dict[str, Any]:
+    """One campaign size, measured in this process (run it in a fresh one)."""
+    import resource
+
+    from tests.report.campaignfactory import campaign_episodes, write_campaign
+
+    seeds = max(1, count // 6)
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        episodes = campaign_episodes(seeds=seeds)
+        for ep in episodes:  # 1 s at 500 Hz instead of the tests' 0.3 s
+            longer = paper_like(
+                ep.episode, ep.controller, duration_s=1.0, motion_end_s=0.7, seed=ep.seed,
+                error_scale=float(np.abs(ep.q_ref - ep.q).max()), scenario=ep.scenario,
+            )  # fmt: skip
+            longer.campaign = ep.campaign
+            ep.__dict__.update(longer.__dict__)
+        write_campaign(root / "recordings", episodes)
+        t0 = time.perf_counter()
+        read_all(root / "recordings", skip_bad=False)
+        read_s = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        out = root / "reports"
+        run_report(recordings_dir=root / "recordings", out_dir=out)
+        wall = time.perf_counter() - t0
+        sizes = {
+            p.relative_to(out).as_posix(): p.stat().st_size for p in out.rglob("*") if p.is_file()
+        }
+        return {
+            "episodes": len(episodes),
+            "s": round(wall, 2),
+            "s_per_episode": round(wall / len(episodes), 4),
+            "read_s": round(read_s, 2),
+            "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024),
+            "report_md_bytes": sizes["report.md"],
+            "rrd_bytes": sizes["recording.rrd"],
+            "metrics_json_bytes": sizes["metrics.json"],
+            "outputs_bytes": sum(sizes.values()),
+        }
+
+
+def campaign_sweep(counts: list[int]) -> list[dict[str, Any]]:
+    import subprocess
+
+    rows = []
+    for count in counts:
+        proc = subprocess.run(
+            [sys.executable, __file__, "--campaign-point", str(count)],
+            capture_output=True, text=True, check=True, cwd=REPO,
+        )  # fmt: skip
+        rows.append(json.loads(proc.stdout))
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--skip-synthetic", action="store_true")
     parser.add_argument("--recording", type=Path, default=None)
+    parser.add_argument("--campaign-sweep", default="", help="e.g. 100,300,1000")
+    parser.add_argument("--only-campaign-sweep", action="store_true")
+    parser.add_argument("--campaign-point", type=int, default=0, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.campaign_point:
+        sys.stdout.write(json.dumps(campaign_point(args.campaign_point)) + "\n")
+        return
+    counts = [int(c) for c in args.campaign_sweep.split(",") if c.strip()]
+    if args.only_campaign_sweep:
+        sys.stdout.write(json.dumps({"campaign_sweep": campaign_sweep(counts)}, indent=2) + "\n")
+        return
     out: dict[str, Any] = {
         "machine": {
             "cpu": platform.processor() or platform.machine(),
@@ -291,6 +361,8 @@ def main() -> None:
                     }
                 )
             out["report_synthetic"] = rows
+    if counts:
+        out["campaign_sweep"] = campaign_sweep(counts)
     sys.stdout.write(json.dumps(out, indent=2) + "\n")
 
 

@@ -98,6 +98,21 @@ def _axes(n: int, *, width: float = 4.2, height: float = 3.0) -> tuple[Figure, l
     return fig, axes[:n]
 
 
+def _log(ax: Axes, which: str) -> None:
+    """A log axis with decade labels only (labelled minor ticks cost most of a draw)."""
+    from matplotlib.ticker import LogLocator, NullFormatter
+
+    axis = ax.yaxis if which == "y" else ax.xaxis
+    (ax.set_yscale if which == "y" else ax.set_xscale)("log")
+    axis.set_major_locator(LogLocator(numticks=6))
+    axis.set_minor_formatter(NullFormatter())
+
+
+def _title(ax: Axes, text: str) -> None:
+    # Plain text above the axes: set_title re-measures every tick label on each draw.
+    ax.text(0.5, 1.02, text, transform=ax.transAxes, ha="center", va="bottom", fontsize=8)
+
+
 def _legend(fig: Figure, colors: dict[str, tuple[int, int, int]], names: Sequence[str]) -> None:
     """Controllers' colours above the panels: never on the data."""
     from matplotlib.lines import Line2D
@@ -149,10 +164,10 @@ def _distribution_figure(
                     jitter = rng.uniform(-width * 0.3, width * 0.3, vals.size)
                     ax.plot(x + jitter, vals, "o", ms=2.5, color=color, alpha=0.8)
         if metric.log_scale:
-            ax.set_yscale("log")
+            _log(ax, "y")
         ax.set_xticks(range(len(conditions)))
         ax.set_xticklabels([_short(c) for c in conditions], rotation=25, ha="right", fontsize=7)
-        ax.set_title(joint, fontsize=8)
+        _title(ax, joint)
         ax.tick_params(labelsize=7)
         ax.grid(True, axis="y", lw=0.3)
         ax.set_ylabel(metric.label, fontsize=7)
@@ -184,8 +199,8 @@ def _ecdf_figure(
             ax.step(vals, np.arange(1, vals.size + 1) / vals.size, where="post",
                     color=mpl(colors[ctrl]), lw=1.2)  # fmt: skip
         if metric.log_scale:
-            ax.set_xscale("log")
-        ax.set_title(joint, fontsize=8)
+            _log(ax, "x")
+        _title(ax, joint)
         ax.set_xlabel(metric.label, fontsize=7)
         ax.set_ylabel("share of episodes", fontsize=7)
         ax.tick_params(labelsize=7)
@@ -221,8 +236,8 @@ def _parameter_figure(
             ax.fill_between(x, low, high, color=color, alpha=0.25, lw=0)
             ax.plot(x, mean, "o-", color=color, ms=3, lw=1.2)
         if metric.log_scale and bool((stats.get_column("mean") > 0).all()):
-            ax.set_yscale("log")
-        ax.set_title(joint, fontsize=8)
+            _log(ax, "y")
+        _title(ax, joint)
         ax.set_xlabel(axis.removeprefix(SWEPT_PREFIX), fontsize=7)
         ax.set_ylabel(metric.label, fontsize=7)
         ax.tick_params(labelsize=7)
