@@ -6,6 +6,8 @@ optional setting becomes null / "n/a", never a crash).
 
 from __future__ import annotations
 
+import functools
+import json
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -184,20 +186,26 @@ def _robot_dict_to_yaml_form(data: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+@functools.lru_cache(maxsize=64)
+def _parsed_spec(text: str) -> RobotSpec | None:
+    data = json.loads(text)
+    for candidate in (data, _robot_dict_to_yaml_form(data)):
+        try:
+            return parse_spec(candidate, source="settings.robot")
+        except (SpecError, TypeError, ValueError):
+            continue
+    return None
+
+
 def robot_spec(rec: Recording) -> RobotSpec | None:
     """The robot as recorded in settings.robot; else the built-in robot of that name.
 
     Returns None when neither is available (the report then skips what needs it).
     """
     data = rec.settings.get("robot")
-    source = f"{rec.mcap_path}: settings.robot"
     if isinstance(data, dict):
-        for candidate in (data, _robot_dict_to_yaml_form(data)):
-            try:
-                return parse_spec(candidate, source=source)
-            except (SpecError, TypeError, ValueError):
-                continue
-        return None
+        # a campaign's episodes carry the same robot: parse it once
+        return _parsed_spec(json.dumps(data, sort_keys=True))
     name = data if isinstance(data, str) else rec.robot
     if name in builtin_robot_names():
         return load_spec(name)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any
 
@@ -333,13 +334,20 @@ def _stiffness_nm_per_rad(st: EpisodeSettings, spec: RobotSpec | None) -> list[f
         return [float(k) for k in kp]
     if spec is None or not spec.has_dynamics or len(st.planner.goal) != spec.dof:
         return None
+    mass = _mass_diagonal(spec, tuple(float(g) for g in st.planner.goal))
+    return [float(k) * mass[j] for j, k in enumerate(kp)]
+
+
+@functools.lru_cache(maxsize=256)
+def _mass_diagonal(spec: RobotSpec, q: tuple[float, ...]) -> tuple[float, ...]:
+    """diag M_n(q) of the nominal model (a campaign shares robot and goal: computed once)."""
     import pinocchio as pin
 
     from pipeline.model.urdf import build_pinocchio_model
 
     model = build_pinocchio_model(spec)
-    mass = pin.crba(model, model.createData(), np.asarray(st.planner.goal, dtype=float))
-    return [float(k) * float(mass[j, j]) for j, k in enumerate(kp)]
+    mass = pin.crba(model, model.createData(), np.asarray(q, dtype=float))
+    return tuple(float(mass[j, j]) for j in range(len(q)))
 
 
 def _physical_checks(data: ReportData) -> list[str]:
