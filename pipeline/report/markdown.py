@@ -495,7 +495,7 @@ def _planner_line(planner: Any) -> str:
 
 
 def _setup(data: ReportData, scenario: str) -> list[str]:
-    recs = data.in_scenario(scenario)
+    recs = data.in_group(scenario)
     first = recs[0]
     s = first.settings
     sc = setting(s, "scenario", default={})
@@ -1061,10 +1061,16 @@ def render_report(
             "",
         ]
     for section in campaigns:
-        lines += [*section.lines, ""]
         conditions = [
             g for g in data.groups() if g == section.name or g.startswith(f"{section.name}/")
         ]
+        head, rest = list(section.lines[:4]), list(section.lines[4:])
+        if conditions:
+            # robot, plant, planner and gains as run (those of the first condition)
+            setup = _setup(data, conditions[0])
+            setup[0] = f"### Setup (`{conditions[0]}`)"
+            head += [*setup, ""]
+        lines += [*head, *rest, ""]
         for group in conditions[:MAX_CONDITION_TABLES]:
             if data.repeated(group):
                 lines += [f"### `{group}`", "", *_aggregate_tables(data, group)]
