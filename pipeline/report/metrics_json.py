@@ -53,7 +53,8 @@ def _rounded(key: str, value: Any) -> float | None:
 
 
 def _aggregates(data: ReportData) -> dict[str, Any]:
-    """Scenarios with repeated runs (a controller run more than once, e.g. several seeds):
+    """Groups (scenarios, campaign conditions) with repeated runs (a controller run more than
+    once, e.g. several seeds):
     scenario -> {"controllers": controller -> joint -> metric -> stats,
     "reductions": "<candidate> vs <baseline>" -> {"pairing", "joints": joint ->
     <metric>_reduction_pct -> stats}}. Single runs are in "episodes" / "comparisons"."""
@@ -70,7 +71,7 @@ def _aggregates(data: ReportData) -> dict[str, Any]:
         }
 
     out: dict[str, Any] = {}
-    repeated = {sc for sc in data.scenarios() if data.repeated(sc)}
+    repeated = {g for g in data.groups() if data.repeated(g)}
     for row in data.metric_summary.filter(pl.col("scenario").is_in(repeated)).iter_rows(named=True):
         node = out.setdefault(row["scenario"], {"controllers": {}, "reductions": {}})
         joint = node["controllers"].setdefault(row["controller"], {}).setdefault(row["joint"], {})

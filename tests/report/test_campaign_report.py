@@ -101,6 +101,8 @@ def test_headline_keys_are_flat_scalars_reachable_through_dicts(
     assert set(cell) == {"reduction_pct", "ci95_low", "ci95_high", "n"}
     assert cell["n"] == 6
     assert cell["ci95_low"] < cell["reduction_pct"] < cell["ci95_high"] < 0
+    agg = doc["aggregates"]["sweep/plant.payload_kg=1"]["controllers"]["ctc"]
+    assert agg["shoulder_pan_joint"]["max_abs_error"]["n"] == 6
     single = doc["headline"]["paper"]["ctc_vs_pid"]["shoulder_pan_joint"]["max_abs_error"]
     assert single["n"] == 1 and single["ci95_low"] is None
     assert single["reduction_pct"] == pytest.approx(50.0, rel=1e-3)
