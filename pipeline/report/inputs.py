@@ -48,6 +48,8 @@ class ReportData:
         recordings_dir: where the recordings were found.
         protocol: per episode, how the protocol was applied (motion start, error source,
             typed settings).
+        error_series: thinned error series of the episodes whose frames were let go after
+            their metrics (campaign episodes outside the sample).
     """
 
     recordings: tuple[Recording, ...]
@@ -58,6 +60,17 @@ class ReportData:
     skipped: tuple[Skipped, ...]
     recordings_dir: Path
     protocol: dict[str, ProtocolView] = field(default_factory=dict)
+    error_series: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = field(
+        default_factory=dict
+    )
+
+    def errors(self, episode: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(times [s], (M, n) errors) of an episode: the thinned series kept while reading
+        (campaign episodes, whose frames are let go) or its ``/controller_state`` frame."""
+        if episode in self.error_series:
+            return self.error_series[episode]
+        rec = self.recording(episode)
+        return cs_times_s(rec), cs_wide(rec, "error_rad")
 
     @cached_property
     def metric_summary(self) -> pl.DataFrame:

@@ -234,11 +234,12 @@ def _send_bands(stream: rr.RecordingStream, data: ReportData, group: str) -> Non
     for ctrl, recs in by_ctrl.items():
         if len(recs) <= 3:
             continue
-        n = min(cs_times_s(r).size for r in recs)
+        series = [data.errors(r.episode) for r in recs]
+        n = min(t.size for t, _ in series)
         if n == 0:
             continue
-        t = cs_times_s(recs[0])[:n]
-        stack = np.stack([cs_wide(r, "error_rad")[:n] for r in recs])  # (E, n, J)
+        t = series[0][0][:n]
+        stack = np.stack([e[:n] for _, e in series])  # (E, n, J)
         levels = np.nanpercentile(stack, [p for _, p in BAND_LEVELS], axis=0)
         color = data.controller_color(ctrl)
         for j, joint in enumerate(recs[0].joint_names):

@@ -11,6 +11,7 @@ of an earlier run) are removed.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import re
 import shutil
@@ -19,12 +20,15 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import polars as pl
+from numpy.typing import NDArray
 
 from pipeline.analysis.campaign import TABLE_DIR, campaign_tables
+from pipeline.analysis.checks import duplicate_stamp_notes
 from pipeline.analysis.episodes import episode_table, limits_table
 from pipeline.analysis.metrics import check_baseline, comparisons, joint_metrics
-from pipeline.analysis.protocol import protocol_view
+from pipeline.analysis.protocol import ProtocolView, protocol_view
 from pipeline.errors import PipelineError, RecordingError, ReportError
 from pipeline.fsutil import OutputLock, remove_stale
 from pipeline.log.reader import ReadOptions, Recording, find_recordings, read_recording
@@ -36,7 +40,7 @@ from pipeline.report.figures import (
     scenario_figures,
     scenario_slugs,
 )
-from pipeline.report.inputs import ReportData, Skipped
+from pipeline.report.inputs import ReportData, Skipped, cs_times_s, cs_wide
 from pipeline.report.markdown import REPORT_FILE, render_report
 from pipeline.report.metrics_json import write_episode_csvs, write_metrics, write_series_csvs
 from pipeline.report.rerun_rrd import RRD_FILE, write_rrd
@@ -77,9 +81,14 @@ def read_all(
     skip_bad: bool,
     progress: Progress = _noop,
     options: ReadOptions | None = None,
+    measure: Callable[[Recording], Recording] | None = None,
 ) -> tuple[list[Recording], list[tuple[str, str]]]:
     """Read every recording under ``recordings_dir`` (with ``options`` for bags we did not
     write: remaps, salvage, labels).
+
+    ``measure``, when given, is applied to each recording as soon as it is read and its
+    result kept instead (the report computes metrics there and lets go of the frames it no
+    longer needs, so memory does not grow with the samples of every episode).
 
     Raises:
         ReportError: no such folder, or nothing in it; duplicate episode names.
@@ -100,11 +109,13 @@ def read_all(
     for k, source in enumerate(sources):
         progress("reading recordings", k, len(sources))
         try:
-            good.append(read_recording(source, options))
+            rec = read_recording(source, options)
         except RecordingError as err:
             if not skip_bad:
                 raise RecordingError(f"{err} (use --skip-bad to report without it)") from err
             bad.append((str(source), str(err)))
+            continue
+        good.append(measure(rec) if measure is not None else rec)
     progress("reading recordings", len(sources), len(sources))
     if not good:
         raise ReportError(
@@ -254,18 +265,18 @@ def _run_report_locked(
     progress: Progress,
     options: ReadOptions | None,
 ) -> ReportResult:
-    raw, bad = read_all(recordings_dir, skip_bad=skip_bad, progress=progress, options=options)
-    views = {rec.episode: protocol_view(rec)[0] for rec in raw}
-    recordings = [views[rec.episode].recording for rec in raw]
-    episodes = episode_table(recordings, views)
-    check_baseline(episodes, baseline)
-    metrics = joint_metrics(
-        pl.concat([r.samples for r in recordings], how="vertical"),
-        pl.concat([r.controller_states for r in recordings], how="vertical"),
-        episodes,
-        limits_table(recordings),
+    measured = _Measured()
+    recordings, bad = read_all(
+        recordings_dir,
+        skip_bad=skip_bad,
+        progress=progress,
+        options=options,
+        measure=measured.add,
     )
-    data = ReportData(
+    episodes = pl.concat([measured.rows[r.episode] for r in recordings], how="vertical")
+    check_baseline(episodes, baseline)
+    metrics = pl.concat([measured.metrics[r.episode] for r in recordings], how="vertical_relaxed")
+    first = ReportData(
         recordings=tuple(recordings),
         episodes=episodes,
         metrics=metrics,
@@ -273,8 +284,10 @@ def _run_report_locked(
         baseline=baseline,
         skipped=tuple(Skipped(s, p) for s, p in bad),
         recordings_dir=recordings_dir,
-        protocol=views,
+        protocol=measured.views,
+        error_series=measured.errors,
     )
+    data = measured.with_sample_frames(first, options)
     try:
         staging = Path(
             tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-{os.getpid()}-", dir=out_dir.parent)
@@ -319,6 +332,54 @@ def _run_report_locked(
         decoded_messages=sum(r.decoded_messages for r in recordings),
         warnings=tuple(data.warnings()),
     )
+
+
+# Thinned error series kept per campaign episode for the .rrd's percentile bands.
+BAND_POINTS = 1000
+
+
+class _Measured:
+    """What the report keeps of each recording as it is read: its protocol view, episode
+    row and metrics; a campaign episode's frames are let go (only a bounded sample of
+    them is drawn, re-read afterwards) after keeping a thinned error series."""
+
+    def __init__(self) -> None:
+        self.views: dict[str, ProtocolView] = {}
+        self.rows: dict[str, pl.DataFrame] = {}
+        self.metrics: dict[str, pl.DataFrame] = {}
+        self.errors: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
+
+    def add(self, raw: Recording) -> Recording:
+        view, _ = protocol_view(raw)
+        rec = view.recording
+        row = episode_table([rec], {rec.episode: view})
+        self.rows[rec.episode] = row
+        self.metrics[rec.episode] = joint_metrics(
+            rec.samples, rec.controller_states, row, limits_table([rec])
+        )
+        if view.settings is not None and view.settings.campaign is not None:
+            t = cs_times_s(rec)
+            step = max(1, int(np.ceil(t.size / BAND_POINTS)))
+            self.errors[rec.episode] = (t[::step], cs_wide(rec, "error_rad")[::step])
+            rec = dataclasses.replace(
+                rec,
+                samples=rec.samples.clear(),
+                controller_states=rec.controller_states.clear(),
+                notes=(*rec.notes, *duplicate_stamp_notes(rec)),
+            )
+            view = dataclasses.replace(view, recording=rec)
+        self.views[rec.episode] = view
+        return rec
+
+    def with_sample_frames(self, data: ReportData, options: ReadOptions | None) -> ReportData:
+        """``data`` with the frames of the sampled campaign episodes read back."""
+        recordings = list(data.recordings)
+        for k, rec in enumerate(recordings):
+            if rec.episode in data.sample_roles and rec.episode in self.errors:
+                view, _ = protocol_view(read_recording(rec.source, options))
+                self.views[rec.episode] = view
+                recordings[k] = view.recording
+        return dataclasses.replace(data, recordings=tuple(recordings), protocol=self.views)
 
 
 def _campaigns(data: ReportData, staging: Path, progress: Progress) -> list[CampaignSection]:
