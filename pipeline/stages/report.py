@@ -335,7 +335,7 @@ def _run_report_locked(
 
 
 # Thinned error series kept per campaign episode for the .rrd's percentile bands.
-BAND_POINTS = 1000
+BAND_POINTS = 250
 
 
 class _Measured:
