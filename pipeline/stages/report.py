@@ -14,8 +14,8 @@ import contextlib
 import dataclasses
 import os
 import re
+import secrets
 import shutil
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -250,6 +250,20 @@ def run_report(
         raise ReportError(str(err)) from err
 
 
+def _remove_tree(path: Path) -> None:
+    """Remove the staging folder even if Ctrl-C lands while it is being removed (then
+    finish removing it and let the interrupt go on)."""
+    interrupt: KeyboardInterrupt | None = None
+    for _ in range(5):
+        try:
+            shutil.rmtree(path, ignore_errors=True)
+            break
+        except KeyboardInterrupt as err:
+            interrupt = err
+    if interrupt is not None:
+        raise interrupt
+
+
 def _staging_pattern(out_dir: Path) -> re.Pattern[str]:
     # ``.<out>.tmp-<pid>-<random>``; older runs wrote ``.<out>.tmp-<random>`` (no pid: stale
     # whenever we hold the lock)
@@ -288,13 +302,14 @@ def _run_report_locked(
         error_series=measured.errors,
     )
     data = measured.with_sample_frames(first, options)
+    # The name is known before the folder exists, so an interrupt at any point (even
+    # inside mkdir) leaves nothing behind: the finally below removes what exists.
+    staging = out_dir.parent / f".{out_dir.name}.tmp-{os.getpid()}-{secrets.token_hex(4)}"
     try:
-        staging = Path(
-            tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-{os.getpid()}-", dir=out_dir.parent)
-        )
-    except OSError as err:
-        raise ReportError(f"{out_dir.parent}: cannot write the report there ({err})") from err
-    try:
+        try:
+            staging.mkdir()
+        except OSError as err:
+            raise ReportError(f"{out_dir.parent}: cannot write the report there ({err})") from err
         files = [write_metrics(data, staging), *write_series_csvs(data, staging)]
         files += write_episode_csvs(data, staging)
         sections = _campaigns(data, staging, progress)
@@ -323,7 +338,7 @@ def _run_report_locked(
             f"{out_dir}: writing the report failed ({err}); earlier reports are untouched"
         ) from err
     finally:
-        shutil.rmtree(staging, ignore_errors=True)
+        _remove_tree(staging)
     return ReportResult(
         out_dir=out_dir,
         files=tuple(files),
