@@ -102,6 +102,7 @@ RECORD_CODE = (
     "log/rosbag2.py",
     "log/schemas.py",
     "stages/__init__.py",
+    "stages/campaign.py",
     "stages/record.py",
 )
 
@@ -441,6 +442,7 @@ def _run_and_write(
         mujoco_warnings=result.mujoco_warnings,
         package_version=__version__,
         git_commit=commit,
+        campaign=episode.campaign,
     )
     metadata = {
         "episode": episode.name,
@@ -448,6 +450,7 @@ def _run_and_write(
         "controller": episode.controller_name,
         "robot": spec.name,
         "seed": str(episode.seed),
+        **({"campaign": episode.campaign.name} if episode.campaign else {}),
         "status": result.status,
         "settings": json.dumps(settings.to_dict(), sort_keys=True, separators=(",", ":")),
     }
