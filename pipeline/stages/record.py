@@ -103,6 +103,8 @@ RECORD_CODE = (
     "log/schemas.py",
     "stages/__init__.py",
     "stages/campaign.py",
+    "stages/campaign_run.py",
+    "stages/ray_executor.py",
     "stages/record.py",
 )
 
