@@ -192,3 +192,21 @@ def test_keys_are_directory_names():
     for e in episodes:
         assert "/" not in e.name and not e.name.startswith(".")
     assert not math.isnan(episodes[0].scenario.plant.payload_kg)
+
+
+def test_campaigns_command_lists_sizes_that_match_the_expansion():
+    import json
+    import subprocess
+    import sys
+
+    result = subprocess.run(
+        [sys.executable, "-m", "pipeline", "campaigns", "--json", "--params",
+         "examples/gain-sweep.yaml"],
+        cwd=REPO, capture_output=True, text=True, timeout=120, check=True,
+    )  # fmt: skip
+    (row,) = json.loads(result.stdout)["campaigns"]
+    params = load_params(REPO / "examples" / "gain-sweep.yaml")
+    assert row["campaign"] == "gain-sweep"
+    assert row["episodes"] == len(expand(params, "gain-sweep")) == 4 * 2 * 3
+    assert [a["axis"] for a in row["axes"]] == ["controller", "gains.omega_n_rad_s", "seed"]
+    assert row["axes"][1]["values"] == ["20", "30", "40", "60"]
