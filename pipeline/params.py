@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -236,13 +237,12 @@ class CampaignParams(_Strict):
         """What is wrong beyond types ("" if fine), as ``field: message``."""
         lists: tuple[tuple[str, list[Any]], ...] = (
             ("controllers", list(self.controllers)),
-            ("seeds", list(self.seed_list)),
+            ("seeds", self.seeds if isinstance(self.seeds, list) else []),
         )
         for what, items in lists:
-            if isinstance(items, list):
-                dup = sorted({str(x) for x in items if items.count(x) > 1})
-                if dup:
-                    return f"{what}: listed twice: {', '.join(dup)}"
+            dup = sorted({str(x) for x, n in Counter(items).items() if n > 1})
+            if dup:
+                return f"{what}: listed twice: {', '.join(dup)}"
         for path, values in self.sweep.items():
             if isinstance(values, list):
                 if not values:

@@ -210,3 +210,27 @@ def test_campaigns_command_lists_sizes_that_match_the_expansion():
     assert row["episodes"] == len(expand(params, "gain-sweep")) == 4 * 2 * 3
     assert [a["axis"] for a in row["axes"]] == ["controller", "gains.omega_n_rad_s", "seed"]
     assert row["axes"][1]["values"] == ["20", "30", "40", "60"]
+
+
+def test_a_campaign_too_large_is_refused_before_any_work(tmp_path, monkeypatch):
+    import shutil
+    from collections import namedtuple
+
+    from pipeline.stages import campaign_run
+
+    huge = dict(SWEEP, seeds=1_000_000)  # 8 million episodes: refused before expanding
+    with pytest.raises(ParamsError, match=r"campaigns\.c: 8,000,000 episodes, more than"):
+        expand(_params(huge), "c")
+    params = _params(SWEEP)
+    run = campaign_run.plan_run(params, "c", out=tmp_path)
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda _: usage(10**9, 10**9 - 10**6, 10**6))
+    with pytest.raises(ParamsError, match=r"campaigns\.c: 16 episodes would write about "
+                       r"[0-9.]+ GB, more than the 0.0009 GB free") as info:  # fmt: skip
+        campaign_run.check_campaign_size(params, run, motion_s=1.0, jobs=2)
+    assert "\n" not in str(info.value)
+    monkeypatch.setattr(shutil, "disk_usage", lambda _: usage(10**13, 0, 10**13))
+    n_bytes, wall_s = campaign_run.check_campaign_size(params, run, motion_s=1.0, jobs=2)
+    # 16 episodes of (2 s pre-roll + 1 s motion + 1 s hold) at 1 kHz, 6 joints
+    assert n_bytes == 16 * 4001 * 6 * campaign_run.BAG_BYTES_PER_JOINT_STEP
+    assert wall_s > 0
