@@ -38,6 +38,7 @@ from pipeline.settings import CampaignInfo
 
 GOAL_AXIS = "goal"
 MAX_GOAL_ATTEMPTS = 1000  # draws per random goal before giving up (region mostly blocked)
+MAX_KEY_CHARS = 200  # a file name holds 255 bytes, with room for ".<key>.partial-<pid>"
 KEY_DIGITS = 6  # significant digits of a drawn value in an episode key
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.-]")
 TUNING_KEYS = ("omega_n_rad_s", "zeta")
@@ -305,6 +306,11 @@ def expand(params: Params, name: str) -> tuple[Episode, ...]:
                 )
     seen: set[str] = set()
     for e in episodes:
+        if len(e.name) > MAX_KEY_CHARS:
+            raise ParamsError(
+                f"{params.source}: campaigns.{name}: episode key '{e.name[:40]}...' is longer "
+                f"than {MAX_KEY_CHARS} characters (a directory name); sweep fewer axes"
+            )
         if e.name in seen:
             raise ParamsError(
                 f"{params.source}: campaigns.{name}: two episodes share the key '{e.name}' "

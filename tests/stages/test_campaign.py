@@ -234,3 +234,12 @@ def test_a_campaign_too_large_is_refused_before_any_work(tmp_path, monkeypatch):
     # 16 episodes of (2 s pre-roll + 1 s motion + 1 s hold) at 1 kHz, 6 joints
     assert n_bytes == 16 * 4001 * 6 * campaign_run.BAG_BYTES_PER_JOINT_STEP
     assert wall_s > 0
+
+
+def test_a_key_too_long_for_a_directory_name_is_refused():
+    axes = {f"plant.uncertainty.{k}": [0.05, 0.1] for k in ("mass_rel", "com_m", "inertia_rel")}
+    axes |= {f"plant.{k}": [0.123456789, 0.2] for k in ("damping", "frictionloss", "armature")}
+    axes |= {"plant.position_noise_std_rad": [1.23456789e-5], "gains.omega_n_rad_s": [30]}
+    axes |= {"plant.velocity_noise_std_rad_s": [1.23456789e-3], "gains.zeta": [0.7071067811]}
+    with pytest.raises(ParamsError, match=r"is longer than 200 characters"):
+        expand(_params(dict(SWEEP, sweep=axes)), "c")
