@@ -171,7 +171,8 @@ class ControllerParams(_Strict):
             for v in value if isinstance(value, list) else [value]:
                 if isinstance(v, bool) or not isinstance(v, int | float):
                     continue  # flags and the rest: the controller validates them
-                if not (math.isfinite(v) and abs(v) <= MAX_GAIN):
+                # magnitude first: math.isfinite(10**400) overflows
+                if not (abs(v) <= MAX_GAIN and math.isfinite(v)):
                     raise ValueError(
                         f"gains.{key}: {v!r} is not a finite gain of magnitude <= {MAX_GAIN:g}"
                     )
