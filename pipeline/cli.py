@@ -417,6 +417,18 @@ def teach_cmd(
 EXIT_INTERRUPTED = 130  # 128 + SIGINT, what shells report for Ctrl-C
 
 
+def _caused_by_ctrl_c(err: BaseException) -> bool:
+    """A KeyboardInterrupt anywhere in the exception's cause chain."""
+    seen: set[int] = set()
+    cause: BaseException | None = err
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return True
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return False
+
+
 def main() -> None:
     """Console-script entry point."""
     debug = "--debug" in sys.argv[1:]
@@ -434,6 +446,12 @@ def main() -> None:
         raise
     except KeyboardInterrupt:
         if debug:
+            raise
+        sys.stderr.write("interrupted\n")
+        sys.exit(EXIT_INTERRUPTED)
+    except ImportError as err:
+        # Ctrl-C inside a C extension's module init surfaces as "initialization failed"
+        if debug or not _caused_by_ctrl_c(err):
             raise
         sys.stderr.write("interrupted\n")
         sys.exit(EXIT_INTERRUPTED)
