@@ -9,16 +9,26 @@ from __future__ import annotations
 
 import math
 import re
+from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Discriminator,
+    Field,
+    Tag,
+    ValidationError,
+    model_validator,
+)
 
 from pipeline.constants import MAX_SEED
 from pipeline.errors import ParamsError
 from pipeline.robots.spec import Name, format_validation_error
+from pipeline.settings import CampaignInfo
 from pipeline.yamlio import parse_yaml, refuse_bool_numbers
 
 NonNegative = Annotated[float, Field(ge=0, le=1e6, allow_inf_nan=False)]
@@ -161,7 +171,8 @@ class ControllerParams(_Strict):
             for v in value if isinstance(value, list) else [value]:
                 if isinstance(v, bool) or not isinstance(v, int | float):
                     continue  # flags and the rest: the controller validates them
-                if not (math.isfinite(v) and abs(v) <= MAX_GAIN):
+                # magnitude first: math.isfinite(10**400) overflows
+                if not (abs(v) <= MAX_GAIN and math.isfinite(v)):
                     raise ValueError(
                         f"gains.{key}: {v!r} is not a finite gain of magnitude <= {MAX_GAIN:g}"
                     )
@@ -172,6 +183,82 @@ class EpisodeParams(_Strict):
     scenario: str
     controller: str
     seed: int = Field(default=0, ge=0)
+
+
+MAX_CAMPAIGN_EPISODES = 1_000_000  # expansion holds every episode in memory (~1 kB each)
+
+
+class RandomAxis(_Strict):
+    """``n`` seeded uniform draws in ``uniform: [low, high]``; draw i depends on (seed, i) only."""
+
+    uniform: tuple[float, float]
+    n: int = Field(ge=1, le=MAX_CAMPAIGN_EPISODES)
+    seed: int = Field(default=0, ge=0, le=MAX_SEED)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> RandomAxis:
+        if self.uniform[0] > self.uniform[1]:
+            raise ValueError(
+                f"uniform: expected [low, high] with low <= high, got {list(self.uniform)}"
+            )
+        return self
+
+
+class RandomGoals(_Strict):
+    """``random`` joint goals drawn uniformly within ``radius_rad`` of the scenario's goal,
+    each inside the joint limits and collision-free (redrawn until it is)."""
+
+    random: int = Field(ge=1, le=100_000)
+    seed: int = Field(default=0, ge=0, le=MAX_SEED)
+    radius_rad: float = Field(gt=0, le=6.3)
+
+
+SweepValue = Annotated[float, Field(allow_inf_nan=False)]
+# a list of values, or a mapping of random draws: errors come from the branch the input is
+Sweep = Annotated[
+    Annotated[list[SweepValue], Tag("list")] | Annotated[RandomAxis, Tag("draws")],
+    Discriminator(lambda v: "list" if isinstance(v, list) else "draws"),
+]
+
+
+class CampaignParams(_Strict):
+    """A sweep: every combination of goals x sweep values x controllers x seeds."""
+
+    scenario: str
+    controllers: list[str] = Field(min_length=1)
+    seeds: (
+        Annotated[int, Field(ge=1, le=MAX_CAMPAIGN_EPISODES)]
+        | list[Annotated[int, Field(ge=0, le=MAX_SEED)]]
+    ) = 1
+    # params path -> values (one value for every joint where the field is per joint)
+    sweep: dict[str, Sweep] = {}
+    goals: list[list[float]] | dict[str, list[float]] | RandomGoals | None = None
+
+    def problem(self) -> str:
+        """What is wrong beyond types ("" if fine), as ``field: message``."""
+        lists: tuple[tuple[str, list[Any]], ...] = (
+            ("controllers", list(self.controllers)),
+            ("seeds", self.seeds if isinstance(self.seeds, list) else []),
+        )
+        for what, items in lists:
+            dup = sorted({str(x) for x, n in Counter(items).items() if n > 1})
+            if dup:
+                return f"{what}: listed twice: {', '.join(dup)}"
+        for path, values in self.sweep.items():
+            if isinstance(values, list):
+                if not values:
+                    return f"sweep.{path}: give at least one value"
+                keys = [float(v) for v in values]
+                if len(set(keys)) != len(keys):
+                    return f"sweep.{path}: a value is listed twice"
+        if isinstance(self.goals, list | dict) and not self.goals:
+            return "goals: give at least one goal (or leave goals out)"
+        return ""
+
+    @property
+    def seed_list(self) -> tuple[int, ...]:
+        """The seeds: ``seeds: N`` is 0..N-1."""
+        return tuple(range(self.seeds)) if isinstance(self.seeds, int) else tuple(self.seeds)
 
 
 class SimParams(_Strict):
@@ -207,7 +294,40 @@ class _Params(_Strict):
     sim: SimParams = SimParams()
     scenarios: dict[str, ScenarioParams] = Field(min_length=1)
     controllers: dict[str, ControllerParams] = Field(min_length=1)
-    episodes: dict[str, EpisodeParams] = Field(min_length=1)
+    episodes: dict[str, EpisodeParams] = {}
+    campaigns: dict[str, CampaignParams] = {}
+
+    @model_validator(mode="after")
+    def _campaign_references(self) -> _Params:
+        if not self.episodes and not self.campaigns:
+            raise ValueError("episodes: give at least one episode or campaign")
+        for name, c in self.campaigns.items():
+            where = f"campaigns.{name}"
+            if not _NAME.fullmatch(name):
+                raise ValueError(
+                    f"{where}: campaign names are directory names: use letters, digits, "
+                    "'-', '_' and '.' only"
+                )
+            if name in self.episodes:
+                raise ValueError(f"{where}: also an episode name (both would be {name}/)")
+            if c.problem():
+                raise ValueError(f"{where}.{c.problem()}")
+            if c.scenario not in self.scenarios:
+                raise ValueError(
+                    f"{where}.scenario: unknown scenario '{c.scenario}' "
+                    f"(defined: {', '.join(sorted(self.scenarios))})"
+                )
+            for i, ctrl in enumerate(c.controllers):
+                if ctrl not in self.controllers:
+                    raise ValueError(
+                        f"{where}.controllers[{i}]: unknown controller '{ctrl}' "
+                        f"(defined: {', '.join(sorted(self.controllers))})"
+                    )
+            for path in c.sweep:
+                problem = sweep_path_problem(path, self.controllers)
+                if problem:
+                    raise ValueError(f"{where}.sweep.{path}: {problem}")
+        return self
 
     @model_validator(mode="after")
     def _references(self) -> _Params:
@@ -232,6 +352,44 @@ class _Params(_Strict):
 
 
 _NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+# scenario fields a sweep may not set: goals have their own axis, the rest is the scenario
+_NOT_SWEPT = ("robot", "start", "goal", "obstacles", "reproduces_paper")
+
+
+def sweep_path_problem(path: str, controllers: Mapping[str, ControllerParams]) -> str:
+    """What is wrong with a sweep path ("" if fine).
+
+    Valid: ``gains.<key>`` (every controller of the campaign), ``controllers.<name>.gains.<key>``
+    (one controller) and a numeric scenario field such as ``plant.payload_kg``,
+    ``plant.uncertainty.mass_rel``, ``hold_s`` or ``timing.velocity_scaling``.
+    """
+    parts = path.split(".")
+    if parts[0] == "gains":
+        return "" if len(parts) == 2 and parts[1] else "expected gains.<key>"
+    if parts[0] == "controllers":
+        if len(parts) != 4 or parts[2] != "gains" or not parts[3]:
+            return "expected controllers.<name>.gains.<key>"
+        if parts[1] not in controllers:
+            return f"unknown controller '{parts[1]}' (defined: {', '.join(sorted(controllers))})"
+        return ""
+    model: type[BaseModel] = ScenarioParams
+    for i, part in enumerate(parts):
+        fields_ = model.model_fields
+        if part not in fields_ or (i == 0 and part in _NOT_SWEPT):
+            valid = [f for f in fields_ if not (i == 0 and f in _NOT_SWEPT)]
+            where = ".".join(parts[:i]) or "a scenario"
+            extra = "; or gains.<key>, controllers.<name>.gains.<key>" if i == 0 else ""
+            return f"'{part}' is not a field of {where} (valid: {', '.join(valid)}{extra})"
+        annotation = fields_[part].annotation
+        if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+            model = annotation
+            if i == len(parts) - 1:
+                return (
+                    f"{path} is a group; sweep one of its fields ({', '.join(model.model_fields)})"
+                )
+        elif i < len(parts) - 1:
+            return f"{'.'.join(parts[: i + 1])} is a value, not a group"
+    return ""
 
 
 @dataclass(frozen=True)
@@ -245,6 +403,7 @@ class Episode:
     controller: ControllerParams
     seed: int
     sim: SimParams
+    campaign: CampaignInfo | None = None  # None: hand-listed
 
 
 @dataclass(frozen=True)
@@ -256,6 +415,7 @@ class Params:
     scenarios: Mapping[str, ScenarioParams]
     controllers: Mapping[str, ControllerParams]
     episodes: tuple[Episode, ...] = field(default_factory=tuple)
+    campaigns: Mapping[str, CampaignParams] = field(default_factory=dict)
 
     def select(self, only: list[str] | None) -> tuple[Episode, ...]:
         """Episodes named in ``only`` (all when empty); unknown names are an error."""
@@ -303,6 +463,7 @@ def parse_params(data: Any, *, source: str) -> Params:
         scenarios=raw.scenarios,
         controllers=raw.controllers,
         episodes=episodes,
+        campaigns=raw.campaigns,
     )
 
 

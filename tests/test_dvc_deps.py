@@ -58,16 +58,27 @@ def test_stage_deps_cover_every_module_the_stage_loads(tmp_path):
     data["scenarios"]["paper"]["goal"] = {
         "pose": {"position": [0.5, 0.1, 0.3], "rpy": [3.14159, 0.0, 0.0]}
     }
+    for scenario in data["scenarios"].values():
+        scenario.update(preroll_s=0.1, hold_s=0.1)
+    data["campaigns"] = {"c": {"scenario": "paper-realistic", "controllers": ["pid"],
+                               "goals": {"random": 1, "radius_rad": 0.2}}}  # fmt: skip
     params = tmp_path / "params.yaml"
     params.write_text(yaml.safe_dump(data))
     rec, rep = tmp_path / "rec", tmp_path / "rep"
     record = _loaded(tmp_path, "record", "record", "--params", str(params), "--out", str(rec))
+    campaign = _loaded(
+        tmp_path, "campaign", "record", "--params", str(params), "--out", str(rec), "-j", "2",
+        "--campaign", "c",
+    )  # fmt: skip
     report = _loaded(tmp_path, "report", "report", "--recordings", str(rec), "--out", str(rep))
     assert (rep / "metrics.json").is_file()
 
     record_deps = _deps(stages["record"]["do"])
     missing = [f for f in record if not _covered(f, record_deps)]
     assert not missing, f"dvc.yaml record deps miss {missing}"
+    campaign_deps = _deps(stages["campaign"]["do"])
+    missing = [f for f in campaign if not _covered(f, campaign_deps)]
+    assert not missing, f"dvc.yaml campaign deps miss {missing}"
     report_deps = _deps(stages["report"])
     missing = [f for f in report if not _covered(f, report_deps)]
     assert not missing, f"dvc.yaml report deps miss {missing}"
@@ -76,3 +87,4 @@ def test_stage_deps_cover_every_module_the_stage_loads(tmp_path):
 def test_recordings_carry_the_commit_of_exactly_the_record_stage_code():
     stages = yaml.safe_load((REPO / "dvc.yaml").read_text())["stages"]
     assert sorted(f"pipeline/{p}" for p in RECORD_CODE) == sorted(_deps(stages["record"]["do"]))
+    assert _deps(stages["campaign"]["do"]) == _deps(stages["record"]["do"])

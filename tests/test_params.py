@@ -30,8 +30,11 @@ def test_default_params_hold_the_papers_scenario_under_pid_and_ctc():
     # the realistic plant differs from the nominal model, with seeds for an interval
     real = params.scenarios["paper-realistic"]
     assert real.plant.uncertainty.mass_rel > 0 and real.goal == paper.goal
-    for controller in ("pid", "ctc"):
-        seeds = {e.seed for e in params.episodes if e.scenario_name == "paper-realistic"
+    from pipeline.stages.campaign import expand
+
+    realistic = expand(params, "paper-realistic")
+    for controller in ("pid", "ctc", "ctc_pid"):
+        seeds = {e.seed for e in realistic if e.scenario_name == "paper-realistic"
                  and e.controller_name == controller}  # fmt: skip
         assert len(seeds) >= 5
     assert paper.robot == "ur5"
@@ -94,7 +97,7 @@ def test_bad_params_name_the_field(tmp_path, mutate, expected):
 def test_unknown_only_episode_lists_the_known_ones():
     params = load_params(REPO / "params.yaml")
     with pytest.raises(
-        ParamsError, match=r"unknown episode 'paper-lqr' \(episodes: paper-pid, paper-ctc, real-"
+        ParamsError, match=r"unknown episode 'paper-lqr' \(episodes: paper-pid, paper-ctc\)"
     ):
         params.select(["paper-lqr"])
 

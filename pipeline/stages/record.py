@@ -102,6 +102,9 @@ RECORD_CODE = (
     "log/rosbag2.py",
     "log/schemas.py",
     "stages/__init__.py",
+    "stages/campaign.py",
+    "stages/campaign_run.py",
+    "stages/ray_executor.py",
     "stages/record.py",
 )
 
@@ -261,6 +264,38 @@ def _per_joint(value: float | list[float]) -> tuple[float, ...]:
     return tuple(value) if isinstance(value, list) else (float(value),)
 
 
+def failed_outcome(name: str, reason: str, wall_s: float = 0.0) -> EpisodeOutcome:
+    """The outcome of an episode that produced no recording."""
+    return EpisodeOutcome(name, "failed", reason, "", float("nan"), float("nan"), 0.0, wall_s)
+
+
+def plan_all(
+    params: Params, episodes: Sequence[Episode], *, emit: Callable[[str, str, float], None]
+) -> tuple[dict[str, ScenarioPlan], dict[str, str]]:
+    """Plan once per distinct plan input (robot, start, goal, obstacles, planner, timing).
+
+    Returns:
+        The plans by plan key, and each episode's plan key by episode name.
+    """
+    from pipeline.stages.campaign import plan_key
+
+    plan_of: dict[str, str] = {}
+    named: dict[str, str] = {}  # plan key -> a scenario name for messages
+    by_scenario: dict[int, str] = {}  # campaign episodes share scenario objects
+    for e in episodes:
+        key = by_scenario.get(id(e.scenario))
+        if key is None:
+            key = by_scenario[id(e.scenario)] = plan_key(e.scenario)
+        plan_of[e.name] = key
+        named.setdefault(key, e.scenario_name)
+    plans: dict[str, ScenarioPlan] = {}
+    scenarios = {plan_of[e.name]: e.scenario for e in episodes}
+    for key in sorted(named, key=lambda k: (named[k], k)):
+        plans[key] = plan_scenario(named[key], scenarios[key], params.source)
+        emit("plan", named[key], 1.0)
+    return plans, plan_of
+
+
 def run_one(
     episode: Episode,
     plan: ScenarioPlan,
@@ -298,10 +333,7 @@ def run_one(
             reason = "out of memory: shorten the episode (hold_s) or log less"
         else:
             reason = str(err)
-        return EpisodeOutcome(
-            episode.name, "failed", reason, "", float("nan"), float("nan"), 0.0,
-            time.perf_counter() - wall0,
-        )  # fmt: skip
+        return failed_outcome(episode.name, reason, time.perf_counter() - wall0)
     return EpisodeOutcome(**{**asdict(outcome), "wall_s": time.perf_counter() - wall0})
 
 
@@ -441,6 +473,7 @@ def _run_and_write(
         mujoco_warnings=result.mujoco_warnings,
         package_version=__version__,
         git_commit=commit,
+        campaign=episode.campaign,
     )
     metadata = {
         "episode": episode.name,
@@ -448,6 +481,7 @@ def _run_and_write(
         "controller": episode.controller_name,
         "robot": spec.name,
         "seed": str(episode.seed),
+        **({"campaign": episode.campaign.name} if episode.campaign else {}),
         "status": result.status,
         "settings": json.dumps(settings.to_dict(), sort_keys=True, separators=(",", ":")),
     }
@@ -754,7 +788,7 @@ def _run_pool(
         proc, _ = workers[conn]
         if queued:
             episode = queued.pop(0)
-            conn.send((episode, plans[episode.scenario_name]))
+            conn.send((episode, plans[episode.name]))
             workers[conn] = (proc, episode.name)
         else:
             with contextlib.suppress(OSError):
@@ -974,11 +1008,17 @@ def record(
     jobs: int = 1,
     force: bool = False,
     on_event: Callable[[str, str, float], None] | None = None,
+    executor: str = "local",
+    address: str | None = None,
+    commit: str | None = None,
 ) -> list[EpisodeOutcome]:
     """Run prepared episodes; returns one outcome per episode (failures included).
 
     ``on_event(kind, name, value)`` reports progress: kind is "plan" (value 0/1),
-    "episode" (fraction done) or "done".
+    "episode" (fraction done) or "done". ``executor``: "local" (this process, or a pool
+    of ``jobs`` processes) or "ray" (tasks on the Ray instance at ``address``, see
+    :mod:`pipeline.stages.ray_executor`). ``commit``: the recording code's version to
+    record (default: :func:`git_commit`). The bytes do not depend on the executor.
 
     Raises:
         ParamsError: an episode would not fit in memory or time (before any runs).
@@ -986,24 +1026,30 @@ def record(
     """
     emit = on_event or (lambda kind, name, value: None)
     started_s = time.time()
-    commit = git_commit()
-    plans: dict[str, ScenarioPlan] = {}
+    commit = commit if commit is not None else git_commit()
     outcomes: dict[str, EpisodeOutcome] = {}
     try:
-        for name in sorted({e.scenario_name for e in episodes}):
-            plans[name] = plan_scenario(name, params.scenarios[name], params.source)
-            emit("plan", name, 1.0)
-        motion_s = {
-            name: float(p.trajectory.duration_s)
-            for name, p in plans.items()
-            if p.trajectory is not None
-        }
-        check_budget(params, episodes, motion_s=motion_s, jobs=jobs)
-        if jobs <= 1 or len(episodes) == 1:
+        plans, plan_of = plan_all(params, episodes, emit=emit)
+        plan_by_episode = {e.name: plans[plan_of[e.name]] for e in episodes}
+        motion_s: dict[str, float] = {}  # the longest reference of each scenario
+        for e in episodes:
+            trajectory = plan_by_episode[e.name].trajectory
+            if trajectory is not None:
+                duration_s = float(trajectory.duration_s)
+                motion_s[e.scenario_name] = max(motion_s.get(e.scenario_name, 0.0), duration_s)
+        # the estimate depends on the scenario and sim alone: one episode per scenario
+        distinct = list({id(e.scenario): e for e in episodes}.values())
+        check_budget(params, distinct, motion_s=motion_s, jobs=jobs)
+        if executor == "ray":
+            from pipeline.stages.ray_executor import run_on_ray
+
+            outcomes = run_on_ray(episodes, plans, plan_of, out_dir=out_dir, force=force,
+                                  commit=commit, address=address, emit=emit)  # fmt: skip
+        elif jobs <= 1 or len(episodes) == 1:
             for e in episodes:
                 outcomes[e.name] = run_one(
                     e,
-                    plans[e.scenario_name],
+                    plan_by_episode[e.name],
                     out_dir=out_dir,
                     force=force,
                     commit=commit,
@@ -1011,8 +1057,9 @@ def record(
                 )
                 emit("done", e.name, 1.0)
         else:
-            outcomes = _run_pool(episodes, plans, out_dir=out_dir, force=force, commit=commit,
-                                 jobs=jobs, emit=emit, started_s=started_s)  # fmt: skip
+            outcomes = _run_pool(episodes, plan_by_episode, out_dir=out_dir, force=force,
+                                 commit=commit, jobs=jobs, emit=emit,
+                                 started_s=started_s)  # fmt: skip
     except KeyboardInterrupt:
         _sweep(out_dir)
         raise _interrupted(episodes, outcomes, out_dir, started_s=started_s) from None

@@ -1,0 +1,210 @@
+"""Running a campaign: which episodes are already done, the run, and completion marks.
+
+A campaign records into ``<out>/<campaign>/<episode key>/``. After an episode's bag is
+published (atomically, by the bag writer), the parent writes a completion mark
+``<out>/<campaign>/.done/<key>`` holding the episode's fingerprint: the hash of its full
+settings and the recording code's version. A re-run skips an episode only when its
+mark matches its fingerprint today and its bag is whole (metadata present, the MCAP
+file ends with the MCAP magic); anything else (no mark, a changed setting or code, a
+bag a killed run left behind) runs again and replaces what is there.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from pipeline.errors import ParamsError
+from pipeline.params import Episode, Params
+from pipeline.stages.campaign import episode_fingerprint, expand
+
+DONE_DIR = ".done"
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+# Bag bytes per logged control step and joint (paper episode: 1.7 MB for ~4,300 steps x 6
+# joints with /tf, ground truth, reference and effort), rounded up: a disk upper bound.
+BAG_BYTES_PER_JOINT_STEP = 100
+DISK_SHARE = 0.9  # of the free space on --out a campaign may fill
+MAX_CAMPAIGN_WALL_S = 7 * 24 * 3600.0  # longer is a typo (seeds: 1e6), not a study
+
+
+@dataclass(frozen=True)
+class CampaignRun:
+    """What a campaign run will do.
+
+    Attributes:
+        name: the campaign.
+        out_dir: ``<out>/<campaign>``.
+        episodes: every episode of the campaign.
+        pending: the episodes to run (all, with ``force``).
+        skipped: keys of episodes already recorded with today's settings and code.
+        stray: recordings in ``out_dir`` that are not episodes of the campaign (kept).
+        commit: the recording code's version the fingerprints use.
+    """
+
+    name: str
+    out_dir: Path
+    episodes: tuple[Episode, ...]
+    pending: tuple[Episode, ...]
+    skipped: tuple[str, ...]
+    stray: tuple[str, ...]
+    commit: str
+
+
+def bag_is_whole(bag_dir: Path) -> bool:
+    """A published rosbag2 folder: ``metadata.yaml`` and one MCAP file that ends with
+    the MCAP magic (a file cut short does not). Reads 8 bytes, not the file."""
+    if not (bag_dir / "metadata.yaml").is_file():
+        return False
+    mcaps = [p for p in bag_dir.iterdir() if p.suffix == ".mcap"]
+    if len(mcaps) != 1:
+        return False
+    try:
+        with open(mcaps[0], "rb") as f:
+            size = f.seek(0, os.SEEK_END)
+            if size < 2 * len(MCAP_MAGIC):
+                return False
+            f.seek(-len(MCAP_MAGIC), os.SEEK_END)
+            return f.read() == MCAP_MAGIC
+    except OSError:
+        return False
+
+
+def is_done(out_dir: Path, episode: Episode, fingerprint: str) -> bool:
+    """The episode's mark matches ``fingerprint`` and its bag is whole."""
+    try:
+        mark = (out_dir / DONE_DIR / episode.name).read_text(encoding="ascii")
+    except (OSError, UnicodeDecodeError):
+        return False
+    return mark.strip() == fingerprint and bag_is_whole(out_dir / episode.name)
+
+
+def mark_done(out_dir: Path, name: str, fingerprint: str) -> None:
+    """Write the completion mark atomically (a temporary name, then a rename)."""
+    folder = out_dir / DONE_DIR
+    folder.mkdir(exist_ok=True)
+    tmp = folder / f".{name}.tmp-{os.getpid()}"
+    tmp.write_text(fingerprint + "\n", encoding="ascii")
+    os.replace(tmp, folder / name)
+
+
+def unmark(out_dir: Path, name: str) -> None:
+    with contextlib.suppress(FileNotFoundError):
+        (out_dir / DONE_DIR / name).unlink()
+
+
+def plan_run(params: Params, name: str, *, out: Path, force: bool = False) -> CampaignRun:
+    """Expand campaign ``name`` and find what ``<out>/<name>`` already holds.
+
+    Raises:
+        ParamsError: unknown campaign or a bad sweep (names the field).
+    """
+    from pipeline.stages.record import git_commit
+
+    episodes = expand(params, name)
+    out_dir = out / name
+    commit = git_commit()
+    keys = {e.name for e in episodes}
+    skipped: list[str] = []
+    pending: list[Episode] = []
+    for e in episodes:
+        if not force and is_done(out_dir, e, episode_fingerprint(e, commit=commit)):
+            skipped.append(e.name)
+        else:
+            pending.append(e)
+    stray = (
+        sorted(
+            p.name
+            for p in out_dir.iterdir()
+            if p.is_dir() and not p.name.startswith(".") and p.name not in keys
+        )
+        if out_dir.is_dir()
+        else []
+    )
+    return CampaignRun(
+        name, out_dir, episodes, tuple(pending), tuple(skipped), tuple(stray), commit
+    )
+
+
+def distinct_settings(episodes: Sequence[Episode]) -> list[Episode]:
+    """One episode per distinct (scenario, controller) pair: what input checks need to see."""
+    seen: dict[str, Episode] = {}
+    for e in episodes:
+        key = json.dumps(
+            [e.scenario.model_dump(), e.controller.model_dump()], sort_keys=True, default=str
+        )
+        seen.setdefault(key, e)
+    return list(seen.values())
+
+
+def check_campaign_size(
+    params: Params, run: CampaignRun, *, motion_s: float, jobs: int
+) -> tuple[int, float]:
+    """Refuse a campaign whose bags would not fit on the disk of ``--out`` or that would
+    run for longer than a week; returns the estimate (bytes, wall seconds).
+
+    Args:
+        motion_s: the reference's duration [s] (0 before planning: a lower bound).
+    """
+    from pipeline.robots.spec import load_spec
+
+    n_bytes = 0
+    wall_s = 0.0
+    per_step_wall_s = 1e-5  # per physics step and joint, measured 4-6 us (rounded up)
+    for e in run.pending:
+        dof = load_spec(e.scenario.robot).dof
+        duration_s = e.scenario.preroll_s + motion_s + e.scenario.hold_s
+        control_s = e.sim.physics_dt_s * e.sim.control_period_steps
+        steps = int(duration_s / control_s) + 1
+        n_bytes += steps * dof * BAG_BYTES_PER_JOINT_STEP // e.sim.joint_state_decimation
+        wall_s += steps * e.sim.control_period_steps * dof * per_step_wall_s
+    wall_s /= max(1, jobs)
+    probe = run.out_dir if run.out_dir.exists() else run.out_dir.parent
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    free = shutil.disk_usage(probe).free
+    where = f"{params.source}: campaigns.{run.name}"
+    if n_bytes > DISK_SHARE * free:
+        raise ParamsError(
+            f"{where}: {len(run.pending):,} episodes would write about {n_bytes / 1e9:.3g} GB, "
+            f"more than the {DISK_SHARE * free / 1e9:.3g} GB free on {probe}; sweep fewer "
+            "values or seeds, or raise sim.joint_state_decimation"
+        )
+    if wall_s > MAX_CAMPAIGN_WALL_S:
+        raise ParamsError(
+            f"{where}: {len(run.pending):,} episodes would run for about "
+            f"{wall_s / 86400:.3g} days on {jobs} job(s); split the campaign or add jobs"
+        )
+    return n_bytes, wall_s
+
+
+def completion_marker(
+    run: CampaignRun, emit: Callable[[str, str, float], None]
+) -> Callable[[str, str, float], None]:
+    """An ``on_event`` for :func:`pipeline.stages.record.record` that marks each episode
+    done once its bag is published by this run (a new folder, or a replaced one)."""
+    fingerprints = {e.name: episode_fingerprint(e, commit=run.commit) for e in run.pending}
+    before: dict[str, int | None] = {}
+    for e in run.pending:
+        unmark(run.out_dir, e.name)  # a stale mark must not survive a failed re-run
+        try:
+            before[e.name] = (run.out_dir / e.name).stat().st_mtime_ns
+        except OSError:
+            before[e.name] = None
+
+    def on_event(kind: str, name: str, value: float) -> None:
+        if kind == "done" and name in fingerprints:
+            bag = run.out_dir / name
+            try:
+                mtime: int | None = bag.stat().st_mtime_ns
+            except OSError:
+                mtime = None
+            if mtime is not None and mtime != before[name] and bag_is_whole(bag):
+                mark_done(run.out_dir, name, fingerprints[name])
+        emit(kind, name, value)
+
+    return on_event
