@@ -19,6 +19,7 @@ from typing import Any
 import yaml
 
 from pipeline.errors import RecordingError
+from pipeline.fsutil import remove_stale
 from pipeline.log.schemas import MESSAGE_ENCODING, RosDistro
 
 METADATA_FILE = "metadata.yaml"
@@ -183,25 +184,6 @@ def _fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def _remove_stale(parent: Path, name: str) -> None:
-    """Delete ``.<name>.partial-<pid>`` directories left by killed writers."""
-    pattern = re.compile(rf"\.{re.escape(name)}\.partial-(\d+)")
-    for entry in parent.iterdir():
-        match = pattern.fullmatch(entry.name)
-        if match and not _pid_alive(int(match.group(1))):
-            shutil.rmtree(entry, ignore_errors=True)
-
-
 def _publish(tmp: Path, final: Path, *, force: bool) -> None:
     """Move the finished ``tmp`` directory to ``final`` (replacing it only with ``force``)."""
     if not os.path.lexists(final):
@@ -237,7 +219,8 @@ def write_bag_dir(bag_dir: Path, write: Callable[[Path], None], *, force: bool) 
     """
     parent = bag_dir.parent
     parent.mkdir(parents=True, exist_ok=True)
-    _remove_stale(parent, bag_dir.name)
+    # ``.<name>.partial-<pid>`` directories of killed writers
+    remove_stale(parent, re.compile(rf"\.{re.escape(bag_dir.name)}\.partial-(?P<pid>\d+)"))
     tmp = parent / f".{bag_dir.name}.partial-{os.getpid()}"
     if os.path.lexists(tmp):
         shutil.rmtree(tmp)
