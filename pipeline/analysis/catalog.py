@@ -2,17 +2,32 @@
 
 :data:`METRICS` drives the metrics computation (:mod:`pipeline.analysis.metrics`),
 metrics.json, the Markdown tables, the campaign table and the figures. Adding a metric is
-one :class:`Metric` entry: its Polars aggregation, evaluated per (episode, joint) group
-over the frame its ``frame`` names, after the protocol (time from the motion start, true
-state where recorded).
+one :class:`Metric` entry.
 
-Columns an aggregation may use:
+A metric is computed in two steps so that it can run over a recording read in time
+slices (a long bag decoded window by window) as well as over a whole one, with one
+definition:
+
+- ``partials``: named Polars aggregations evaluated per (episode, joint) over one time
+  slice (the rows of one contiguous time interval, in time order) of the prepared frame
+  its ``frame`` names, after the protocol (time from the motion start, true state where
+  recorded). A whole episode is one slice.
+- ``finish``: one Polars aggregation over the partial rows of every slice of an
+  (episode, joint), in time order, that gives the metric. It reads a partial through the
+  accessor it is given (``p("sum_sq")``); every partial is null in a slice that holds no
+  row of the metric's frame, so a finish must ignore nulls (max, min, sum and
+  ``drop_nulls`` do).
+
+The finish of a one-slice run and of any slicing agree exactly (max, min, first, last)
+or up to the rounding of a sum split into slices (~1e-15 relative).
+
+Columns a partial may use (row-local only: no window over the whole episode, a slice
+does not see its neighbours):
 
 - ``controller_state`` frame: ``time_s``, ``error_rad``, ``reference_position_rad``,
   ``feedback_position_rad`` plus ``completed``, ``motion_end_s``, ``after_motion``
-  (t >= motion end), ``in_final`` (inside the final window), ``violating`` (|e| outside
-  the settling band after the motion end) and ``settled`` (this and every later sample
-  inside it).
+  (t >= motion end), ``in_final`` (inside the final window) and ``violating`` (|e|
+  outside the settling band after the motion end).
 - ``joint_states`` frame: ``time_s``, ``velocity_rad_s``, ``effort_nm``,
   ``commanded_effort_nm``, ``effort_limit_nm`` and ``saturated`` (at the limit or clipped;
   null where no effort was recorded).
@@ -34,6 +49,11 @@ MIN_TRAVEL_RAD = 1e-9
 SETTLING_TOLERANCE_RAD = 1e-3
 
 Frame = Literal["controller_state", "joint_states"]
+# A finish reads the partial ``key`` of its own metric as ``p(key)``.
+PartialColumn = Callable[[str], pl.Expr]
+
+# The partial a metric that needs a completed motion gets, and the column it comes from.
+_COMPLETED = "completed"
 
 
 @dataclass(frozen=True)
@@ -45,9 +65,11 @@ class Metric:
         unit: SI unit as printed (``rad``, ``rad/s``, ``N m``, ``s``, ``1`` for a share).
         title: what a table heading or axis says (without the unit).
         fmt: Python format spec for a table cell (``.3e``).
-        frame: which prepared frame the aggregation runs over.
+        frame: which prepared frame the partials run over.
         source: the recorded topic(s) it comes from, as the report says it.
-        aggregate: builds the per-(episode, joint) Polars aggregation.
+        partials: builds the named per-(episode, joint) aggregations over one time slice.
+        finish: builds the aggregation over the partial rows of all slices (in time order)
+            that gives the metric; its argument reads a partial by name.
         needs_completed_motion: null for an episode that did not complete its motion
             (its last samples are not "at the target").
         compared: reductions between controllers are computed for it (and headlines).
@@ -63,13 +85,20 @@ class Metric:
     fmt: str
     frame: Frame
     source: str
-    aggregate: Callable[[], pl.Expr]
+    partials: Callable[[], dict[str, pl.Expr]]
+    finish: Callable[[PartialColumn], pl.Expr]
     needs_completed_motion: bool = False
     compared: bool = False
     lower_is_better: bool = True
     log_scale: bool = False
     in_tables: bool = True
     detail: str = ""
+
+    def __post_init__(self) -> None:
+        if self.needs_completed_motion and self.frame != "controller_state":
+            raise ValueError(f"{self.name}: ``completed`` is a controller_state frame column")
+        if _COMPLETED in self.partials():
+            raise ValueError(f"{self.name}: the partial name '{_COMPLETED}' is reserved")
 
     @property
     def is_time(self) -> bool:
@@ -86,11 +115,27 @@ class Metric:
         """A table heading: the label, then the detail in parentheses."""
         return f"{self.label} ({self.detail})" if self.detail else self.label
 
-    def expr(self) -> pl.Expr:
-        """The aggregation, null where the motion must be complete and is not."""
-        out = self.aggregate()
+    def partial_column(self, key: str) -> str:
+        """The column of the partial ``key`` in a partials frame (``rms_error.sum_sq``)."""
+        return f"{self.name}.{key}"
+
+    def partial_exprs(self) -> list[pl.Expr]:
+        """The per-slice aggregations, named by :meth:`partial_column` (plus ``completed``
+        when the metric needs a completed motion)."""
+        parts = self.partials()
         if self.needs_completed_motion:
-            out = pl.when(pl.col("completed").first()).then(out)
+            parts[_COMPLETED] = pl.col(_COMPLETED).first()
+        return [expr.alias(self.partial_column(key)) for key, expr in parts.items()]
+
+    def finish_expr(self) -> pl.Expr:
+        """The metric from its partials, null where the motion must be complete and is not."""
+
+        def p(key: str) -> pl.Expr:
+            return pl.col(self.partial_column(key))
+
+        out = self.finish(p)
+        if self.needs_completed_motion:
+            out = pl.when(p(_COMPLETED).drop_nulls().first()).then(out)
         return out.alias(self.name)
 
 
@@ -98,60 +143,98 @@ def _e() -> pl.Expr:
     return pl.col("error_rad")
 
 
-def _max_abs_error() -> pl.Expr:
-    return _e().abs().max()
+def _squares(col: str) -> dict[str, pl.Expr]:
+    x = pl.col(col)
+    return {"sum_sq": (x * x).sum(), "n": x.count()}
 
 
-def _rms_error() -> pl.Expr:
-    return (_e() * _e()).mean().sqrt()
+def _root_mean(p: PartialColumn) -> pl.Expr:
+    # Null (not 0, not NaN) when no slice holds a value.
+    n = p("n").sum()
+    return pl.when(n > 0).then((p("sum_sq").sum() / n).sqrt())
 
 
-def _final_error() -> pl.Expr:
-    return _e().abs().filter(pl.col("in_final")).mean()
+def _max_abs_error() -> dict[str, pl.Expr]:
+    return {"max": _e().abs().max()}
 
 
-def _settling_time() -> pl.Expr:
-    motion_end = pl.col("motion_end_s").first()
-    settled_from = pl.col("time_s").filter(pl.col("after_motion") & pl.col("settled")).min()
+def _max_abs_error_finish(p: PartialColumn) -> pl.Expr:
+    return p("max").max()
+
+
+def _final_error() -> dict[str, pl.Expr]:
+    final = _e().abs().filter(pl.col("in_final"))
+    return {"sum": final.sum(), "n": final.count()}
+
+
+def _mean(p: PartialColumn) -> pl.Expr:
+    n = p("n").sum()
+    return pl.when(n > 0).then(p("sum").sum() / n)
+
+
+def _settling_time() -> dict[str, pl.Expr]:
+    t = pl.col("time_s")
+    violating = pl.col("violating")
+    # Inside the band from this row to the end of the slice.
+    calm = (violating.cast(pl.UInt32).cum_sum() == violating.sum()) & ~violating
+    return {
+        "motion_end_s": pl.col("motion_end_s").first(),
+        "last_violation_s": t.filter(violating).max(),
+        # The first after-motion time after the slice's last violation (its first
+        # after-motion time when nothing in it violates).
+        "settled_from_s": t.filter(pl.col("after_motion") & calm).min(),
+    }
+
+
+def _settling_time_finish(p: PartialColumn) -> pl.Expr:
+    # Settled from the first after-motion time after the episode's last violation: in the
+    # slice that holds it or, when that slice ends violating, in a later one.
+    motion_end = p("motion_end_s").drop_nulls().first()
+    violation = p("last_violation_s").is_not_null()
+    slice_no = pl.int_range(pl.len())
+    last_violating_slice = slice_no.filter(violation).max()
+    settled_from = p("settled_from_s").filter(slice_no >= last_violating_slice).min()
     return (
         pl.when(motion_end.is_null())
         .then(None)
-        .when(~pl.col("violating").any())
+        .when(~violation.any())
         .then(0.0)
         .otherwise(settled_from - motion_end)
     )
 
 
-def _overshoot() -> pl.Expr:
-    ref = pl.col("reference_position_rad")
-    goal = ref.drop_nulls().last()
-    travel = goal - ref.drop_nulls().first()
-    direction = pl.when(travel > 0).then(1.0).otherwise(-1.0)
-    past = ((pl.col("feedback_position_rad") - goal) * direction).max().clip(lower_bound=0.0)
-    return pl.when(travel.abs() > MIN_TRAVEL_RAD).then(past)
+def _overshoot() -> dict[str, pl.Expr]:
+    ref = pl.col("reference_position_rad").drop_nulls()
+    fb = pl.col("feedback_position_rad")
+    return {"start": ref.first(), "goal": ref.last(), "fb_max": fb.max(), "fb_min": fb.min()}
 
 
-def _is_peak() -> pl.Expr:
-    # First sample at the largest |v| (nulls never match: all-null gives null, not 0).
+def _overshoot_finish(p: PartialColumn) -> pl.Expr:
+    goal = p("goal").drop_nulls().last()
+    travel = goal - p("start").drop_nulls().first()
+    # max((fb - goal) * direction) is max(fb) - goal or goal - min(fb): rounding is monotone.
+    past = pl.when(travel > 0).then(p("fb_max").max() - goal).otherwise(goal - p("fb_min").min())
+    return pl.when(travel.abs() > MIN_TRAVEL_RAD).then(past.clip(lower_bound=0.0))
+
+
+def _at_peak(col: str) -> dict[str, pl.Expr]:
+    # The slice's largest |v| and ``col`` at its first sample (nulls never match: all-null
+    # gives null, not 0).
     v = pl.col("velocity_rad_s")
-    return v.abs() == v.abs().max()
+    return {"abs_max": v.abs().max(), col: pl.col(col).filter(v.abs() == v.abs().max()).first()}
 
 
-def _peak_velocity() -> pl.Expr:
-    return pl.col("velocity_rad_s").filter(_is_peak()).first()
+def _first_at_peak(col: str) -> Callable[[PartialColumn], pl.Expr]:
+    def finish(p: PartialColumn) -> pl.Expr:
+        # The first slice reaching the overall largest |v| holds its first sample.
+        return p(col).filter(p("abs_max") == p("abs_max").max()).first()
+
+    return finish
 
 
-def _peak_velocity_time() -> pl.Expr:
-    return pl.col("time_s").filter(_is_peak()).first()
-
-
-def _rms_effort() -> pl.Expr:
-    eff = pl.col("effort_nm")
-    return (eff * eff).mean().sqrt()
-
-
-def _saturation_fraction() -> pl.Expr:
-    return pl.col("saturated").cast(pl.Float64).mean()
+def _saturation_fraction() -> dict[str, pl.Expr]:
+    sat = pl.col("saturated")
+    return {"sum": sat.cast(pl.Float64).sum(), "n": sat.count()}
 
 
 _CS = TOPIC_CONTROLLER_STATE
@@ -159,50 +242,58 @@ _JS = TOPIC_JOINT_STATES
 
 METRICS: tuple[Metric, ...] = (
     Metric(
-        "max_abs_error", "rad", "Max |error|", ".3e", "controller_state", _CS, _max_abs_error,
+        "max_abs_error", "rad", "Max |error|", ".3e", "controller_state", _CS,
+        _max_abs_error, _max_abs_error_finish,
         compared=True, log_scale=True,
     ),
     Metric(
-        "rms_error", "rad", "RMS error", ".3e", "controller_state", _CS, _rms_error,
+        "rms_error", "rad", "RMS error", ".3e", "controller_state", _CS,
+        lambda: _squares("error_rad"), _root_mean,
         compared=True, log_scale=True,
     ),
     Metric(
         "final_error", "rad", "Error at the target", ".3e", "controller_state", _CS,
-        _final_error, needs_completed_motion=True, compared=True, log_scale=True,
+        _final_error, _mean, needs_completed_motion=True, compared=True, log_scale=True,
         detail=f"mean |e| over the final window, ≤ {FINAL_WINDOW_S} s",
     ),
     Metric(
-        "settling_time", "s", "Settling time", ".3f", "controller_state", _CS, _settling_time,
+        "settling_time", "s", "Settling time", ".3f", "controller_state", _CS,
+        _settling_time, _settling_time_finish,
         needs_completed_motion=True,
         detail=f"|e| ≤ {SETTLING_TOLERANCE_RAD:g} rad after the motion end",
     ),
     Metric(
         "overshoot", "rad", "Overshoot past the goal", ".2e", "controller_state", _CS,
-        _overshoot, needs_completed_motion=True, log_scale=True,
+        _overshoot, _overshoot_finish, needs_completed_motion=True, log_scale=True,
     ),
     Metric(
         "peak_velocity", "rad/s", "Peak velocity", "+.3f", "joint_states", _JS,
-        _peak_velocity, lower_is_better=False,
+        lambda: _at_peak("velocity_rad_s"), _first_at_peak("velocity_rad_s"),
+        lower_is_better=False,
         detail="signed value at the largest |velocity|",
     ),
     Metric(
         "peak_velocity_time", "s", "Time of the peak velocity", ".2f", "joint_states", _JS,
-        _peak_velocity_time, in_tables=False,
+        lambda: _at_peak("time_s"), _first_at_peak("time_s"), in_tables=False,
     ),
     Metric(
         "rms_effort", "N m", "RMS applied effort", ".3g", "joint_states", _JS,
-        _rms_effort,
+        lambda: _squares("effort_nm"), _root_mean,
     ),
     Metric(
         "saturation_fraction", "1", "Fraction of time in torque saturation", ".3f",
         "joint_states", f"{TOPIC_JOINT_STATES} + {TOPIC_CONTROLLER_STATE}",
-        _saturation_fraction,
+        _saturation_fraction, _mean,
     ),
 )  # fmt: skip
 
 BY_NAME: dict[str, Metric] = {m.name: m for m in METRICS}
 METRIC_COLUMNS: tuple[str, ...] = tuple(m.name for m in METRICS)
 COMPARED_METRICS: tuple[str, ...] = tuple(m.name for m in METRICS if m.compared)
+# The columns of a partials frame after ``episode, joint``, in catalog order.
+PARTIAL_COLUMNS: tuple[str, ...] = tuple(
+    e.meta.output_name() for m in METRICS for e in m.partial_exprs()
+)
 # Which recorded topic each metric is computed from.
 METRIC_SOURCES: dict[str, str] = {m.name: m.source for m in METRICS}
 

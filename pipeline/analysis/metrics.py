@@ -48,6 +48,7 @@ from pipeline.analysis.catalog import (
     METRIC_SOURCES,
     METRICS,
     MIN_TRAVEL_RAD,
+    PARTIAL_COLUMNS,
     SETTLING_TOLERANCE_RAD,
     Frame,
 )
@@ -63,7 +64,9 @@ __all__ = [
     "SETTLING_TOLERANCE_RAD",
     "check_baseline",
     "comparisons",
+    "finish_metrics",
     "joint_metrics",
+    "metric_partials",
     "pairs",
     "reduction_pct",
 ]
@@ -103,33 +106,24 @@ def _episode_columns(episodes: pl.DataFrame, final_window_s: float) -> pl.DataFr
 
 
 def _time_sorted(frame: pl.DataFrame) -> pl.DataFrame:
-    # Every order-dependent expression below (first/last, the settled flag, the peak's
-    # time) needs time order within an (episode, joint) group; a stable sort keeps the
-    # joints in recorded order.
+    # Every order-dependent partial (first/last, the settling scan, the peak's time) needs
+    # time order within an (episode, joint) group; a stable sort keeps the joints in
+    # recorded order.
     return frame.sort("episode", "time_s", maintain_order=True)
 
 
-def error_metrics(
+def _prepared_controller_states(
     controller_states: pl.DataFrame,
     episodes: pl.DataFrame,
     *,
-    settling_tolerance_rad: float = SETTLING_TOLERANCE_RAD,
-    final_window_s: float = FINAL_WINDOW_S,
+    settling_tolerance_rad: float,
+    final_window_s: float,
 ) -> pl.DataFrame:
-    """Error-based metrics from ``/controller_state`` (every message, its full rate).
-
-    Args:
-        controller_states: tidy frame, :data:`pipeline.log.reader.CONTROLLER_STATE_COLUMNS`.
-        episodes: :func:`pipeline.analysis.episodes.episode_table`.
-        settling_tolerance_rad: band |e| must stay in to count as settled [rad].
-        final_window_s: longest window at the end used for the final error [s].
-
-    Returns:
-        ``episode, joint`` and the catalog's ``controller_state`` metrics.
-    """
+    """The ``controller_state`` frame of the catalog: row-local columns only, so a time
+    slice is prepared the same whether or not the rest of its episode is there."""
     e = pl.col("error_rad")
     t = pl.col("time_s")
-    df = (
+    return (
         _time_sorted(controller_states)
         .join(_episode_columns(episodes, final_window_s), on="episode", how="left")
         .with_columns(
@@ -141,35 +135,11 @@ def error_metrics(
                 False
             ),
         )
-        .with_columns(
-            # True where this and every later sample of the group is within tolerance.
-            settled=(
-                pl.col("violating").cast(pl.Int8).reverse().cum_max().reverse().over(_KEY) == 0
-            )
-        )
     )
-    return df.group_by(_KEY, maintain_order=True).agg(_aggregations("controller_state"))
 
 
-def _aggregations(frame: Frame) -> list[pl.Expr]:
-    """The catalog's aggregations over one prepared frame."""
-    return [m.expr() for m in METRICS if m.frame == frame]
-
-
-def state_metrics(
-    samples: pl.DataFrame,
-    limits: pl.DataFrame | None = None,
-) -> pl.DataFrame:
-    """Velocity and effort metrics from ``/joint_states`` (with the commanded effort of the
-    ``/controller_state`` at the same stamp for the saturation share).
-
-    Args:
-        samples: tidy samples, :data:`pipeline.log.reader.SAMPLE_COLUMNS`.
-        limits: ``episode, joint, effort_limit_nm`` (null where unknown); None = unknown.
-
-    Returns:
-        ``episode, joint`` and the catalog's ``joint_states`` metrics.
-    """
+def _prepared_joint_states(samples: pl.DataFrame, limits: pl.DataFrame | None) -> pl.DataFrame:
+    """The ``joint_states`` frame of the catalog (with the saturation flag)."""
     if limits is None:
         limits = pl.DataFrame(
             schema={"episode": pl.String, "joint": pl.String, "effort_limit_nm": pl.Float64}
@@ -179,7 +149,7 @@ def state_metrics(
     limit = pl.col("effort_limit_nm")
     at_limit = limit.is_not_null() & (eff.abs() >= limit * (1 - SATURATION_REL_TOL))
     clipped = cmd.is_not_null() & (cmd.abs() > eff.abs() * (1 + SATURATION_REL_TOL) + 1e-9)
-    df = (
+    return (
         _time_sorted(samples)
         .join(limits, on=_KEY, how="left", maintain_order="left")
         .with_columns(
@@ -187,7 +157,71 @@ def state_metrics(
             saturated=pl.when(eff.is_not_null()).then((at_limit | clipped).fill_null(False)),
         )
     )
-    return df.group_by(_KEY, maintain_order=True).agg(_aggregations("joint_states"))
+
+
+def _partials_over(frame: pl.DataFrame, which: Frame) -> pl.DataFrame:
+    exprs = [e for m in METRICS if m.frame == which for e in m.partial_exprs()]
+    return frame.group_by(_KEY, maintain_order=True).agg(exprs)
+
+
+def metric_partials(
+    samples: pl.DataFrame,
+    controller_states: pl.DataFrame,
+    episodes: pl.DataFrame,
+    limits: pl.DataFrame | None = None,
+    *,
+    settling_tolerance_rad: float = SETTLING_TOLERANCE_RAD,
+    final_window_s: float = FINAL_WINDOW_S,
+) -> pl.DataFrame:
+    """The catalog's partials over one time slice of the recorded frames.
+
+    A slice is the rows of both frames inside one contiguous time interval (the whole
+    recording is one slice); :func:`finish_metrics` merges the partial rows of any
+    number of slices into the metrics.
+
+    Args:
+        samples: tidy samples (:data:`pipeline.log.reader.SAMPLE_COLUMNS`) of the slice,
+            any order.
+        controller_states: tidy frame (:data:`pipeline.log.reader.CONTROLLER_STATE_COLUMNS`)
+            of the same time interval.
+        episodes: :func:`pipeline.analysis.episodes.episode_table` of the WHOLE episodes
+            (``motion_end_s``, ``end_s``, ``motion_completed``): a slice does not know where
+            its episode ends.
+        limits: ``episode, joint, effort_limit_nm`` (null where unknown); None = unknown.
+        settling_tolerance_rad: band |e| must stay in to count as settled [rad].
+        final_window_s: longest window at the end used for the final error [s].
+
+    Returns:
+        One row per (episode, joint) present in either frame of the slice: ``episode``,
+        ``joint``, then one column per partial (:meth:`Metric.partial_column`; null for
+        the partials of a frame with no row of that joint in the slice).
+    """
+    errors = _partials_over(
+        _prepared_controller_states(
+            controller_states,
+            episodes,
+            settling_tolerance_rad=settling_tolerance_rad,
+            final_window_s=final_window_s,
+        ),
+        "controller_state",
+    )
+    states = _partials_over(_prepared_joint_states(samples, limits), "joint_states")
+    out = states.join(errors, on=_KEY, how="full", coalesce=True, maintain_order="left")
+    return out.select(*_KEY, *PARTIAL_COLUMNS)
+
+
+def finish_metrics(partials: pl.DataFrame) -> pl.DataFrame:
+    """Metrics from the partial rows of any number of slices, concatenated in time order.
+
+    Args:
+        partials: :func:`metric_partials` of each slice, concatenated in time order
+            (rows of other (episode, joint) groups may interleave).
+
+    Returns:
+        ``episode``, ``joint``, :data:`METRIC_COLUMNS`; one row per (episode, joint), in
+        first-seen order.
+    """
+    return partials.group_by(_KEY, maintain_order=True).agg([m.finish_expr() for m in METRICS])
 
 
 def joint_metrics(
@@ -202,7 +236,8 @@ def joint_metrics(
     """Metrics per episode and joint (columns ``episode``, ``joint``, :data:`METRIC_COLUMNS`).
 
     Error-based metrics come from ``controller_states`` (full rate), velocity and effort
-    metrics from ``samples`` (``/joint_states``); see :data:`METRIC_SOURCES`.
+    metrics from ``samples`` (``/joint_states``); see :data:`METRIC_SOURCES`. The whole
+    recording is one slice: ``finish_metrics(metric_partials(...))``.
 
     Args:
         samples: tidy samples (:data:`pipeline.log.reader.SAMPLE_COLUMNS`), any order.
@@ -213,15 +248,16 @@ def joint_metrics(
         settling_tolerance_rad: band |e| must stay in to count as settled [rad].
         final_window_s: longest window at the end used for the final error [s].
     """
-    errors = error_metrics(
-        controller_states,
-        episodes,
-        settling_tolerance_rad=settling_tolerance_rad,
-        final_window_s=final_window_s,
+    return finish_metrics(
+        metric_partials(
+            samples,
+            controller_states,
+            episodes,
+            limits,
+            settling_tolerance_rad=settling_tolerance_rad,
+            final_window_s=final_window_s,
+        )
     )
-    states = state_metrics(samples, limits)
-    out = states.join(errors, on=_KEY, how="full", coalesce=True, maintain_order="left")
-    return out.select(*_KEY, *METRIC_COLUMNS)
 
 
 def check_baseline(episodes: pl.DataFrame, baseline: str) -> bool:
