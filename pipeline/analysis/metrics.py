@@ -1,7 +1,12 @@
 """Tracking metrics per episode and joint, and reductions between controllers.
 
 The metrics themselves are declared in :mod:`pipeline.analysis.catalog`; this module
-prepares the frames they aggregate over and pairs episodes for reductions.
+prepares the frames they aggregate over and pairs episodes for reductions. Every metric is
+computed in two steps, so a recording read in time slices (a long bag, window by window)
+gives the same metrics as one read whole: :func:`metric_partials` over each slice (the
+rows of both frames in one contiguous time interval; the prepared columns are row-local),
+then :func:`finish_metrics` over the partial rows of all slices in time order.
+:func:`joint_metrics` is the one-slice case.
 
 Definitions (also in docs/report.md and in every report):
 
