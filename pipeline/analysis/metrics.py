@@ -66,6 +66,7 @@ __all__ = [
     "METRIC_COLUMNS",
     "METRIC_SOURCES",
     "MIN_TRAVEL_RAD",
+    "PARTIAL_COLUMNS",
     "SETTLING_TOLERANCE_RAD",
     "check_baseline",
     "comparisons",
