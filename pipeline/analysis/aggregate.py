@@ -17,6 +17,7 @@ import polars as pl
 from scipy import stats
 
 from pipeline.analysis.catalog import COMPARED_METRICS
+from pipeline.analysis.episodes import compared
 
 CONFIDENCE = 0.95
 
@@ -83,9 +84,10 @@ def mean_ci(values: Iterable[Any], *, confidence: float = CONFIDENCE) -> MeanCI:
 
 
 def _ok(episodes: pl.DataFrame) -> pl.DataFrame:
-    """Completed episodes, with ``scenario`` = the group they are compared in (the
-    scenario, or ``campaign/condition``: :func:`pipeline.analysis.episodes.group_key`)."""
-    ok = episodes.filter(pl.col("status") == "ok")
+    """Completed episodes (not a salvaged one cut before its motion end), with
+    ``scenario`` = the group they are compared in (the scenario, or
+    ``campaign/condition``: :func:`pipeline.analysis.episodes.group_key`)."""
+    ok = episodes.filter(compared(episodes))
     if "group" in ok.columns:
         ok = ok.with_columns(pl.col("group").alias("scenario"))
     return ok

@@ -16,6 +16,7 @@ from typing import Any
 import polars as pl
 
 from pipeline.analysis.catalog import BY_NAME, METRIC_COLUMNS
+from pipeline.analysis.episodes import SALVAGED_CUT, compared
 from pipeline.settings import EpisodeSettings
 
 TABLE_DIR = "campaigns"
@@ -69,8 +70,16 @@ def campaign_tables(
             _column([c.swept.get(axis) for _, _, c in infos]).alias(f"{SWEPT_PREFIX}{axis}")
             for axis in axes
         )
+        # a salvaged recording cut before its motion end is no completed run
+        status = pl.when(compared(episodes)).then(pl.col("status"))
         frame = frame.join(
-            episodes.select("episode", "controller", "status"), on="episode", how="left"
+            episodes.select(
+                "episode",
+                "controller",
+                status.otherwise(pl.lit(SALVAGED_CUT)).alias("status"),
+            ),
+            on="episode",
+            how="left",
         )
         table = frame.join(
             metrics.select("episode", "joint", *METRIC_COLUMNS),

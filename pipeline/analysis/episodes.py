@@ -28,6 +28,8 @@ EPISODE_COLUMNS = (
     "seed",
     "status",
     "reason",
+    "salvaged",
+    "salvage_lost_pct",
     "motion_end_s",
     "end_s",
     "samples",
@@ -63,12 +65,13 @@ def _period_s(rec: Recording) -> float:
 def motion_completed(rec: Recording, end_s: float | None) -> bool:
     """Whether the episode ran through its motion: status "ok" and the recording does not
     end before the motion end (half a control period of slack for the sample grid).
-    True when the motion end is unknown and the status is ok (nothing says otherwise)."""
+    True when the motion end is unknown and the status is ok (nothing says otherwise),
+    unless the recording was salvaged: its end is where the damage was, not the episode's."""
     if rec.status != "ok":
         return False
     motion_end = rec.motion_end_s
     if motion_end is None:
-        return True
+        return not rec.salvaged
     return end_s is not None and end_s >= motion_end - _period_s(rec) / 2
 
 
@@ -103,6 +106,8 @@ def episode_table(
                 "seed": rec.meta("seed"),
                 "status": rec.status,
                 "reason": rec.reason,
+                "salvaged": rec.salvaged,
+                "salvage_lost_pct": rec.salvage_lost_pct,
                 "motion_end_s": rec.motion_end_s,
                 "end_s": end_s,
                 "samples": times.len() // n_joints,
@@ -125,6 +130,8 @@ def episode_table(
         "seed": pl.String,
         "status": pl.String,
         "reason": pl.String,
+        "salvaged": pl.Boolean,
+        "salvage_lost_pct": pl.Float64,
         "motion_end_s": pl.Float64,
         "end_s": pl.Float64,
         "samples": pl.Int64,
@@ -141,6 +148,31 @@ def episode_table(
         "group": pl.String,
     }
     return pl.DataFrame(rows, schema=schema, orient="row").sort("episode")
+
+
+# The campaign tables' status of a salvaged recording cut before its motion end.
+SALVAGED_CUT = "salvaged, cut before the motion end"
+
+
+def shown_status(row: Mapping[str, Any]) -> str:
+    """An episode row's status as the report shows it: a salvaged recording says so, how
+    much was lost and, when cut before its motion end, that it is not compared."""
+    status = str(row["status"])
+    if not row.get("salvaged"):
+        return status
+    pct = row.get("salvage_lost_pct")
+    lost = "loss unknown" if pct is None else f"{pct:.1f} % lost"
+    cut = "" if row.get("motion_completed") else "; cut before the motion end, not compared"
+    return f"{status} (salvaged: {lost}{cut})"
+
+
+def compared(episodes: pl.DataFrame) -> pl.Expr:
+    """Episodes that take part in comparisons: status "ok", and not salvaged recordings cut
+    before their motion end (their max and RMS cover part of the motion only)."""
+    ok = pl.col("status") == "ok"
+    if "salvaged" in episodes.columns and "motion_completed" in episodes.columns:
+        ok = ok & ~(pl.col("salvaged").fill_null(False) & ~pl.col("motion_completed"))
+    return ok
 
 
 def _campaign(view: ProtocolView | None) -> tuple[str | None, str | None]:
@@ -200,8 +232,11 @@ def _parsed_spec(text: str) -> RobotSpec | None:
 def robot_spec(rec: Recording) -> RobotSpec | None:
     """The robot as recorded in settings.robot; else the built-in robot of that name.
 
-    Returns None when neither is available (the report then skips what needs it).
+    Returns None when neither is available (the report then skips what needs it), and
+    for a bag without our metadata: a URDF that names its robot ``ur5`` is not our ur5.
     """
+    if not rec.armlab_metadata:
+        return None
     data = rec.settings.get("robot")
     if isinstance(data, dict):
         # a campaign's episodes carry the same robot: parse it once
@@ -213,19 +248,21 @@ def robot_spec(rec: Recording) -> RobotSpec | None:
 
 
 def effort_limits(rec: Recording, spec: RobotSpec | None) -> dict[str, float | None]:
-    """Effort limit [N m] per joint of the recording (None where unknown)."""
+    """Effort limit [N m] per joint of the recording (None where unknown): from ``spec``,
+    else settings.robot; a bag without our metadata only from its own URDF."""
     limits: dict[str, float | None] = dict.fromkeys(rec.joint_names)
+    data = rec.settings.get("robot")
+    if not rec.armlab_metadata or (spec is None and data is None):
+        # a bag we did not write (or ours without its robot): the limits its
+        # /robot_description (URDF) declares, never a built-in robot's of the same name
+        for name, urdf_limit in urdf_effort_limits(rec.robot_description or "").items():
+            if name in limits:
+                limits[name] = urdf_limit
+        return limits
     if spec is not None:
         for j in spec.joints:
             if j.name in limits:
                 limits[j.name] = j.limits.effort
-        return limits
-    data = rec.settings.get("robot")
-    if data is None and rec.robot_description:
-        # a bag we did not write: the limits its /robot_description (URDF) declares
-        for name, urdf_limit in urdf_effort_limits(rec.robot_description).items():
-            if name in limits:
-                limits[name] = urdf_limit
         return limits
     joints = data.get("joints") if isinstance(data, dict) else None
     for j in joints if isinstance(joints, list) else []:

@@ -9,13 +9,25 @@ control_msgs generations) the generation that the first message's bytes fit exac
 :class:`Db3Scan` streams the messages in timestamp order in batches, lays each batch out
 as MCAP message records and hands it to the same ``on_messages`` hook as
 :class:`pipeline.log.mcap.McapScan`, so decoding does not know which storage it reads.
+
+Damage. sqlite keeps no checksums: a flipped bit in a payload goes unseen (the decoder may
+still refuse the message), but a truncated file (shorter than its header states) or a
+damaged b-tree page is refused in one line naming the file. With ``salvage`` the message
+rows are read in id (recording) order up to the first unreadable one and only those are
+delivered, so a salvaged recording is a prefix of the episode; :attr:`Db3Scan.salvaged`
+says how many rows were read and lost. The user's file is only ever opened read-only; a
+``-wal`` side file (a recorder killed before closing the bag) is read from a copy, since
+sqlite would otherwise write a ``-shm`` beside it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import shutil
 import sqlite3
 import struct
+import tempfile
 from collections import defaultdict
 from pathlib import Path
 
@@ -45,6 +57,8 @@ class Db3Scan:
         self.size = 0
         self.salvage = salvage
         self.salvaged: Salvage | None = None
+        self.notes: list[str] = []
+        self._tables = False
 
     def on_messages(self, channel: McapChannel, buf: bytes, starts: NDArray[np.int64]) -> None:
         """As :meth:`pipeline.log.mcap.McapScan.on_messages`."""
@@ -53,25 +67,57 @@ class Db3Scan:
         return RecordingError(f"{self.path}: {problem}")
 
     def run(self) -> None:
+        wal = self.path.with_name(self.path.name + "-wal")
         try:
             self.size = self.path.stat().st_size
-            with open(self.path, "rb") as f:
-                for block in iter(lambda: f.read(1 << 20), b""):
-                    self.sha.update(block)
-            con = sqlite3.connect(f"file:{self.path}?mode=ro", uri=True)
-        except (OSError, sqlite3.Error) as err:
-            raise self._fail(f"cannot read ({err})") from err
-        try:
-            self._run(con)
-        except sqlite3.DatabaseError as err:
-            raise self._fail(f"not a rosbag2 sqlite3 file, or corrupt ({err})") from err
-        finally:
-            con.close()
+            has_wal = wal.is_file() and wal.stat().st_size > 0
+            for part in (self.path, wal) if has_wal else (self.path,):
+                with open(part, "rb") as f:
+                    for block in iter(lambda: f.read(1 << 20), b""):
+                        self.sha.update(block)
+            truncated = _truncation(self.path, self.size)
+        except OSError as err:
+            raise self._fail(f"cannot read ({err.strerror or err})") from err
+        if truncated and not self.salvage:
+            raise self._fail(f"{truncated}; --salvage reads the messages before the damage")
+        with contextlib.ExitStack() as stack:
+            db = self.path
+            if has_wal:
+                # A recorder killed before closing the bag leaves its last writes in the
+                # write-ahead log. sqlite would fold it in (and create a -shm beside it):
+                # read a copy, so the user's bag is never modified.
+                tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="armlab-db3-")))
+                db = tmp / self.path.name
+                try:
+                    shutil.copyfile(self.path, db)
+                    shutil.copyfile(wal, tmp / wal.name)
+                except OSError as err:
+                    raise self._fail(f"cannot copy it with its {wal.name} ({err})") from err
+                self.notes.append(
+                    f"{self.path.name}: its last writes are in {wal.name} (the recorder did not "
+                    "close the bag); read with them from a copy, the bag is left as it is"
+                )
+            try:
+                con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+                if self.salvage:
+                    # Read a truncated file up to its end instead of refusing it whole
+                    # (a connection flag; the file is open read-only).
+                    con.execute("PRAGMA writable_schema=ON")
+            except sqlite3.Error as err:
+                raise self._fail(f"cannot read ({err})") from err
+            try:
+                self._run(con, truncated=truncated)
+            except sqlite3.DatabaseError as err:
+                hint = "; --salvage reads the messages before the damage" if self._tables else ""
+                raise self._fail(f"not a rosbag2 sqlite3 file, or corrupt ({err}){hint}") from err
+            finally:
+                con.close()
 
-    def _run(self, con: sqlite3.Connection) -> None:
+    def _run(self, con: sqlite3.Connection, *, truncated: str | None) -> None:
         tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
         if not {"topics", "messages"} <= tables:
             raise self._fail("not a rosbag2 sqlite3 file (no topics/messages tables)")
+        self._tables = True
         definitions: dict[str, str] = {}
         if "message_definitions" in tables:
             for type_name, encoding, text in con.execute(
@@ -93,10 +139,24 @@ class Db3Scan:
                     continue
                 text = full_definition(type_name) if short in MSG_TEXTS["jazzy"] else ""
             self.schemas[cid] = McapSchema(cid, str(type_name), "ros2msg", text.encode())
-        cursor = con.execute(
-            "SELECT topic_id, timestamp, data FROM messages ORDER BY timestamp, id"
-        )
+        expected = None
+        if self.salvage:
+            first_id, last_id, expected = self._salvage_scan(con, truncated=truncated)
+            # Rows up to the damage only, by the table itself (its timestamp index may be
+            # what is damaged); sorted by sqlite, in a temporary file when large. The lower
+            # bound is checked row by row (+id): a damaged page can hold rows with id 0.
+            cursor = con.execute(
+                "SELECT topic_id, timestamp, data FROM messages NOT INDEXED "
+                "WHERE id <= ? AND +id >= ? ORDER BY timestamp, id",
+                (last_id, first_id),
+            )
+        else:
+            cursor = con.execute(
+                "SELECT topic_id, timestamp, data FROM messages ORDER BY timestamp, id"
+            )
+        delivered = 0
         while rows := cursor.fetchmany(BATCH_MESSAGES):
+            delivered += len(rows)
             by_topic: dict[int, list[tuple[int, bytes]]] = defaultdict(list)
             for tid, stamp, data in rows:
                 by_topic[int(tid)].append((int(stamp), bytes(data)))
@@ -111,6 +171,61 @@ class Db3Scan:
                 )
                 buf, starts = _records(cid, messages)
                 self.on_messages(channel, buf, starts)
+        if expected is not None and delivered != expected:
+            raise self._fail(
+                f"damaged beyond salvage: {expected} message rows read in id order, "
+                f"{delivered} in time order"
+            )
+
+    def _salvage_scan(
+        self, con: sqlite3.Connection, *, truncated: str | None
+    ) -> tuple[int, int, int]:
+        """Read the message rows in id (recording) order up to the first damaged one; note
+        what was lost in :attr:`salvaged` (None when nothing is). Returns the first and last
+        good id and how many rows there are from one to the other.
+
+        Rows are read whole (payload included: a damaged overflow page shows only then).
+        What follows the damage is not read even where sqlite could reach it: a recording
+        with a hole would pass for a continuous one in every metric, as in MCAP salvage.
+        """
+        read = 0
+        first_id = last_id = 0
+        last_ns: int | None = None
+        problem = truncated
+        try:
+            for rid, tid, stamp, data in con.execute(
+                "SELECT id, topic_id, timestamp, data FROM messages NOT INDEXED ORDER BY id"
+            ):
+                if read and rid <= last_id:  # a rowid scan only ever goes up
+                    problem = f"message rows out of order after id {last_id} (a damaged page)"
+                    break
+                if tid is None or stamp is None or not isinstance(data, bytes):
+                    # a row cut by the damage: sqlite returns what is missing as NULL
+                    problem = f"message row {rid} has lost its values (NOT NULL columns read null)"
+                    break
+                read += 1
+                last_id, last_ns = int(rid), int(stamp)
+                first_id = first_id or last_id
+        except sqlite3.DatabaseError as err:
+            problem = f"message row after id {last_id} unreadable ({err})"
+        if problem is None:
+            return first_id, last_id, read
+        if read == 0:
+            raise self._fail(f"damaged before its first message, nothing to salvage ({problem})")
+        try:
+            max_id = con.execute("SELECT max(id) FROM messages").fetchone()[0]
+        except sqlite3.DatabaseError:
+            max_id = None  # the damaged part holds the table's last page
+        lost = None if max_id is None else max(int(max_id) - last_id, 0)
+        self.salvaged = Salvage(
+            at_byte=-1,
+            problem=problem,
+            lost_bytes=max(_header_size(self.path) - self.size, 0),
+            read_messages=read,
+            lost_messages=lost,
+            lost_after_ns=last_ns,
+        )
+        return first_id, last_id, read
 
     def _pick_definition(self, cid: int, type_name: str, data: bytes) -> None:
         for text in controller_state_candidates():
@@ -138,3 +253,24 @@ def _records(cid: int, messages: list[tuple[int, bytes]]) -> tuple[bytes, NDArra
         starts[k] = pos + RECORD_HEADER
         pos += len(head) + len(data)
     return b"".join(parts), starts
+
+
+def _header_size(path: Path) -> int:
+    """The database size its header states [bytes] (0 when it states none validly)."""
+    with open(path, "rb") as f:
+        head = f.read(100)
+    if len(head) < 100 or not head.startswith(b"SQLite format 3\0"):
+        return 0
+    page = int.from_bytes(head[16:18], "big")
+    page = 65536 if page == 1 else page
+    # the page count is valid only when the change counter matches version-valid-for
+    pages = int.from_bytes(head[28:32], "big") if head[24:28] == head[92:96] else 0
+    return page * pages
+
+
+def _truncation(path: Path, size: int) -> str | None:
+    """How the file falls short of the size its header states, None if it does not."""
+    expected = _header_size(path)
+    if expected > size:
+        return f"truncated: {size} of the {expected} bytes its sqlite header states"
+    return None

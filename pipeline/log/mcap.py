@@ -390,14 +390,21 @@ class Salvage:
     """Where a salvaged scan stopped: the damage, and how much of the file it left unread.
 
     Attributes:
-        at_byte: offset of the first damaged record.
+        at_byte: offset of the first damaged record (a ``.db3``: of the damaged page, or
+            -1 when sqlite does not say).
         problem: what is wrong there.
         lost_bytes: bytes from the damage to the end of the file.
+        read_messages: messages read before the damage (a ``.db3``; None for MCAP).
+        lost_messages: message rows after the damage (a ``.db3``; None: unknown).
+        lost_after_ns: stamp of the last message read (a ``.db3``; None for MCAP).
     """
 
     at_byte: int
     problem: str
     lost_bytes: int
+    read_messages: int | None = None
+    lost_messages: int | None = None
+    lost_after_ns: int | None = None
 
 
 class McapScan:
@@ -420,6 +427,7 @@ class McapScan:
         self.size = 0
         self.salvage = salvage
         self.salvaged: Salvage | None = None
+        self.notes: list[str] = []
         self.chunks_read = 0
         self._damage_at = 0
         self._batch: list[tuple[bytes, dict[int, NDArray[np.int64]]]] = []

@@ -17,7 +17,7 @@ from __future__ import annotations
 import hashlib
 import json
 import struct
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -199,6 +199,10 @@ class Recording:
         decoded_messages: messages decoded into ``samples`` (both control-rate topics).
         notes: non-fatal oddities (unparseable settings, dropped samples, salvage).
         salvaged: read with ``salvage`` from a damaged file: what follows the damage is lost.
+        salvage_lost_pct: share of the recording the salvage could not read [%] (bytes of
+            an MCAP file, messages of a ``.db3``; None when not salvaged or unknown).
+        armlab_metadata: the bag carries our ``armlab.episode`` metadata record; without
+            it nothing (robot, limits, settings) is taken from our built-in robot files.
     """
 
     source: Path
@@ -217,6 +221,8 @@ class Recording:
     notes: tuple[str, ...] = ()
     has_ground_truth: bool = False
     salvaged: bool = False
+    salvage_lost_pct: float | None = None
+    armlab_metadata: bool = True
 
     @property
     def episode(self) -> str:
@@ -482,6 +488,58 @@ def urdf_effort_limits(urdf: str) -> dict[str, float]:
     return limits
 
 
+def _limits_note(urdf: str | None, joints: Sequence[str], topic: str | None) -> str:
+    """Where a bag without our metadata gets its effort limits (saturation) from."""
+    topic = topic or TOPIC_ROBOT_DESCRIPTION
+    if urdf is None:
+        return (
+            f"no robot description ({topic}): effort limits unknown, saturation at the limit is "
+            "n/a (built-in robots of the same name are not assumed)"
+        )
+    limits = urdf_effort_limits(urdf)
+    shown = ", ".join(f"{j} {limits[j]:g}" for j in joints if j in limits)
+    missing = [j for j in joints if j not in limits]
+    return (
+        f"effort limits from the bag's {topic} URDF"
+        + (f" [N m]: {shown}" if shown else ": none declared")
+        + (f"; none for {', '.join(missing)} (saturation at the limit n/a)" if missing else "")
+    )
+
+
+def _salvage_note(
+    path: Path, s: Salvage, size: int, unread: Sequence[Path], unread_bytes: int
+) -> tuple[str, float | None]:
+    """The note on a salvaged file and the share of the recording lost [%] (None: unknown)."""
+    later = (
+        f"; the {len(unread)} later split file(s) ({', '.join(p.name for p in unread)}) "
+        "were not read"
+        if unread
+        else ""
+    )
+    if s.read_messages is None:  # MCAP: bytes
+        lost_bytes = s.lost_bytes + unread_bytes
+        share = 100 * lost_bytes / max(size + unread_bytes, 1)
+        return (
+            f"salvaged: {path.name} is damaged at byte {s.at_byte} ({s.problem}); "
+            f"{s.lost_bytes} bytes after it ({share:.1f} % of the recording) were not read" + later,
+            share,
+        )
+    pct: float | None = None
+    if s.lost_messages is None:
+        lost_text = "an unknown number of message rows after it were lost"
+    else:
+        pct = 100 * s.lost_messages / max(s.read_messages + s.lost_messages, 1)
+        lost_text = (
+            f"{s.lost_messages} of {s.read_messages + s.lost_messages} message rows "
+            f"({pct:.1f} %) after it were lost"
+        )
+    return (
+        f"salvaged: {path.name} is damaged ({s.problem}); {s.read_messages} message rows read "
+        f"up to stamp {s.lost_after_ns} ns, {lost_text}" + later,
+        None if unread else pct,
+    )
+
+
 def _robot_description(collector: _Collector, topic: str | None) -> str | None:
     data = collector.singles.get(topic or "")
     if topic is None or data is None:
@@ -565,6 +623,9 @@ def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
     size = 0
     present: dict[str, str] = {}
     salvaged: list[tuple[Path, Salvage]] = []
+    notes_read: list[str] = []
+    unread: list[Path] = []
+    unread_bytes = 0
     for path in files:
         collector.path = path
         scan: McapScan | Db3Scan
@@ -581,9 +642,13 @@ def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
         for topic, count in scan.topic_counts.items():
             collector.topic_counts[topic] = collector.topic_counts.get(topic, 0) + count
         collector.metadata.update(scan.metadata)
+        notes_read += scan.notes
         if scan.salvaged is not None:
             salvaged.append((path, scan.salvaged))
-            break  # later split files continue after the damage: not contiguous
+            # later split files continue after the damage: not contiguous, not read
+            unread = [p for p in files[files.index(path) + 1 :] if p.is_file()]
+            unread_bytes = sum(p.stat().st_size for p in unread)
+            break
     collector.path = mcap_path
     chosen = {name: _pick(name, collector, present) for name in ROLES}
     for name in ("joint_states", "controller_state"):
@@ -624,13 +689,11 @@ def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
             f"{mcap_path}: no {TOPIC_CONTROLLER_STATE} message shares a time stamp with "
             f"{TOPIC_JOINT_STATES}"
         )
-    notes: list[str] = []
+    notes: list[str] = list(notes_read)
+    lost_pct: float | None = None
     for path, s in salvaged:
-        notes.append(
-            f"salvaged: {path.name} is damaged at byte {s.at_byte} ({s.problem}); "
-            f"{s.lost_bytes} bytes after it ({100 * s.lost_bytes / max(size, 1):.1f} % of "
-            "the recording) were not read"
-        )
+        note, lost_pct = _salvage_note(path, s, size, unread, unread_bytes)
+        notes.append(note)
     if len(js_dec.groups) > 1 or len(js_group.names) > len(names):
         notes.append(
             f"{js_topic}: analysing {', '.join(names)} (the joints of {cs_topic}) from "
@@ -656,6 +719,8 @@ def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
         robot = urdf_robot_name(urdf)
         if robot:
             raw_meta["robot"] = robot
+    if not ours:
+        notes.append(_limits_note(urdf, names, chosen["robot_description"]))
     settings: dict[str, Any] = {}
     if "settings" in raw_meta:
         try:
@@ -792,4 +857,6 @@ def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
         notes=tuple(notes),
         has_ground_truth=truth is not None and truth.count > 0,
         salvaged=bool(salvaged),
+        salvage_lost_pct=lost_pct,
+        armlab_metadata=ours,
     )

@@ -11,7 +11,7 @@ import polars as pl
 
 from pipeline.analysis import catalog
 from pipeline.analysis.aggregate import CONFIDENCE, MeanCI, mean_ci
-from pipeline.analysis.episodes import robot_spec, setting
+from pipeline.analysis.episodes import robot_spec, setting, shown_status
 from pipeline.analysis.metrics import ERROR_FLOOR_RAD, SETTLING_TOLERANCE_RAD, pairs
 from pipeline.constants import (
     FINAL_WINDOW_S,
@@ -38,6 +38,7 @@ MAX_EPISODE_COLUMNS = 8
 NA = "n/a"
 NOT_RECORDED = "n/a (not recorded)"
 ENDED_EARLY = "n/a (episode ended before the motion did)"
+SALVAGE_CUT = "n/a (recording salvaged: cut at the damage, motion end unknown)"
 _FLOOR = f"{ERROR_FLOOR_RAD:.0e}".replace("e-0", "e-")  # "1e-9"
 
 
@@ -155,6 +156,8 @@ def _incomplete(data: ReportData, rec: Recording) -> str:
     motion_end = rec.motion_end_s
     if motion_end is not None and (end is None or end < motion_end):
         return ENDED_EARLY
+    if rec.salvaged and rec.status == "ok":
+        return SALVAGE_CUT
     return f"n/a (episode {rec.status})"
 
 
@@ -193,6 +196,27 @@ def _samples(joint_states: int, controller_states: int) -> str:
 # --- sections -----------------------------------------------------------------------------------
 
 
+def _salvaged_summary(data: ReportData) -> list[str]:
+    """The header's line on salvaged recordings (none when there are none)."""
+    rows = data.episodes.filter(pl.col("salvaged")) if data.episodes.height else data.episodes
+    if not rows.height:
+        return []
+    cut = rows.filter(~pl.col("motion_completed")).get_column("episode").to_list()
+    shown = ", ".join(f"`{e}`" for e in rows.get_column("episode").to_list()[:MAX_ROWS])
+    return [
+        "",
+        f"**{rows.height} episode(s) salvaged** from damaged recordings (`--salvage`, read up "
+        f"to the damage: {shown}); "
+        + (
+            f"{len(cut)} of them cut before the motion end: not compared, their max and RMS "
+            "cover only the part recorded."
+            if cut
+            else "each reaches its motion end, so each is compared."
+        )
+        + " See *status* in the episode table and the warnings.",
+    ]
+
+
 def _intro(data: ReportData) -> list[str]:
     recs = data.recordings
     versions = sorted({_value(setting(r.settings, "package_version")) for r in recs})
@@ -209,6 +233,7 @@ def _intro(data: ReportData) -> list[str]:
             "so no reductions. "
         )
         + f"Recorded by armlab-pipeline {', '.join(versions)} (git {', '.join(commits)}).",
+        *_salvaged_summary(data),
         "",
         "Interactive view: [`recording.rrd`](recording.rrd), next to this file: open it with "
         "`rerun recording.rrd` (per-joint time series, the arm in 3D per controller).",
@@ -236,7 +261,7 @@ def _intro(data: ReportData) -> list[str]:
                 row["controller"],
                 row["robot"],
                 row["seed"],
-                row["status"],
+                shown_status(row),
                 _num(row["motion_end_s"], ".3f"),
                 _num(row["end_s"], ".3f"),
                 _samples(row["samples"], row["controller_samples"]),
@@ -285,7 +310,10 @@ def _intro(data: ReportData) -> list[str]:
         "the plant's true state (`/ground_truth/joint_states`, simulation) or the measured "
         "one (a real robot's bag). *At start*: the worst joint at the motion start. "
         f"*Saturated*: share of samples at the effort limit, worst joint (flagged above "
-        f"{SATURATION_WARN_FRACTION * 100:.0f} %); *status* ok = stable (not diverged).",
+        f"{SATURATION_WARN_FRACTION * 100:.0f} %); *status* ok = stable (not diverged); "
+        "*salvaged*: read with `--salvage` from a damaged file up to the damage (the share "
+        "of the file, or of a `.db3`'s messages, not read); cut before its motion end, "
+        "such an episode takes no part in comparisons.",
     ]
     lines += _physical_checks(data)
     failed = [r for r in recs if r.status != "ok"]
@@ -985,6 +1013,8 @@ def _definitions() -> list[str]:
         f"- '{ENDED_EARLY}': the episode failed or its recording stops before the motion end, "
         "so its last samples are not at the target: error at the target, settling time and "
         "overshoot are not given (max and RMS are, over what was recorded).",
+        f"- '{SALVAGE_CUT}': a salvaged recording (`--salvage`) whose motion end is not "
+        "recorded: where it stops is where the file is damaged, not the episode's end.",
         f"- peak velocity: the velocity of largest magnitude, with its sign (true where "
         f"recorded, else {js}).",
         "- reduction: (baseline − candidate) / baseline × 100 %; a candidate more than twice "

@@ -134,6 +134,9 @@ def metrics_document(data: ReportData) -> dict[str, Any]:
             "seed": row["seed"],
             "status": row["status"],
             "reason": row["reason"],
+            # read with --salvage up to the damage (lost: % of bytes, of a .db3's messages)
+            "salvaged": row["salvaged"],
+            "salvage_lost_pct": row["salvage_lost_pct"],
             "motion_end_s": seconds(row["motion_end_s"]),
             "end_s": seconds(row["end_s"]),
             "motion_completed": row["motion_completed"],

@@ -229,7 +229,7 @@ def _send_bands(stream: rr.RecordingStream, data: ReportData, group: str) -> Non
     """5/50/95 % of the error over every episode of a large (group, controller)."""
     by_ctrl: dict[str, list[Recording]] = {}
     for rec in data.in_group(group):
-        if rec.status == "ok":
+        if rec.status == "ok" and not rec.salvaged:  # a cut series would cut every band
             by_ctrl.setdefault(rec.controller, []).append(rec)
     for ctrl, recs in by_ctrl.items():
         if len(recs) <= 3:
@@ -383,6 +383,8 @@ def _log_all(
             color = data.color(rec.episode)
             role = roles.get(rec.episode, "")
             who = f"{rec.controller}{f' ({role})' if role else ''}"
+            if rec.salvaged:  # read up to the damage of its file
+                who += " (salvaged)"
             label = f"{who} {rec.episode} [{group}]"
             for quantity, column in _COLUMNS.items():
                 # The error at the /controller_state rate, as the metrics use it.

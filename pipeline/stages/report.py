@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 
 from pipeline.analysis.campaign import TABLE_DIR, campaign_tables
 from pipeline.analysis.checks import duplicate_stamp_notes
-from pipeline.analysis.episodes import episode_table, limits_table
+from pipeline.analysis.episodes import episode_table, limits_table, shown_status
 from pipeline.analysis.metrics import check_baseline, comparisons, joint_metrics
 from pipeline.analysis.protocol import ProtocolView, protocol_view
 from pipeline.errors import PipelineError, RecordingError, ReportError
@@ -447,7 +447,10 @@ def _summary(data: ReportData) -> pl.DataFrame:
         worst_final_error=pl.col("final_error").max(),
     )
     return (
-        data.episodes.select("episode", "scenario", "controller", "status")
+        data.episodes.with_columns(
+            pl.struct(pl.all()).map_elements(shown_status, return_dtype=pl.String).alias("status")
+        )
+        .select("episode", "scenario", "controller", "status")
         .join(per_episode, on="episode", how="left")
         .sort("scenario", "controller", "episode")
     )

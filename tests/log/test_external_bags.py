@@ -60,6 +60,9 @@ def write_external_bag(
     with_gripper: bool = True,
     drop_definitions: bool = False,
     t0_ns: int = WALL_T0_NS,
+    joints: tuple[str, str, str] = JOINTS,
+    robot_name: str = "my_arm",
+    urdf_effort_nm: tuple[float, float, float] = (40.0, 50.0, 60.0),
 ) -> dict[str, np.ndarray]:
     """A Humble or Jazzy robot's bag: JTC state + joint_states (arm+gripper in shuffled order,
     plus a gripper-only publisher at a lower rate) + a URDF."""
@@ -95,18 +98,16 @@ def write_external_bag(
         transforms=[], velocities=[], accelerations=[], time_from_start=Duration(sec=0, nanosec=0)
     )
     urdf = (
-        '<robot name="my_arm">'
+        f'<robot name="{robot_name}">'
         + "".join(
-            f'<joint name="{j}" type="revolute"><limit effort="{40 + 10 * i}" velocity="3" '
+            f'<joint name="{j}" type="revolute"><limit effort="{e:g}" velocity="3" '
             'lower="-3" upper="3"/></joint>'
-            for i, j in enumerate(JOINTS)
+            for j, e in zip(joints, urdf_effort_nm, strict=True)
         )
         + "</robot>"
     )
     js_order = (
-        ("wrist", "gripper", "shoulder", "elbow")
-        if with_gripper
-        else ("wrist", "shoulder", "elbow")
+        (joints[2], "gripper", joints[0], joints[1]) if with_gripper else (joints[2], *joints[:2])
     )
     with Writer(path, version=9 if distro == "jazzy" else 8, storage_plugin=storage) as w:
         c_cs = w.add_connection(cs_topic, CS.__msgtype__, typestore=store)
@@ -127,7 +128,7 @@ def write_external_bag(
                 "error": point(err),
                 "output": point(eff=s["effort"][k]),
             }
-            fields: dict[str, Any] = {"header": header(ns), "joint_names": list(JOINTS)}
+            fields: dict[str, Any] = {"header": header(ns), "joint_names": list(joints)}
             if distro == "humble":
                 points |= {"desired": point(ref), "actual": point(q)}
             else:
@@ -139,9 +140,9 @@ def write_external_bag(
             w.write(c_cs, ns, store.serialize_cdr(msg, CS.__msgtype__))
             if c_x is not None:
                 w.write(c_x, ns, store.serialize_cdr(msg, CS.__msgtype__))
-            pos = np.array([0.01 if j == "gripper" else q[JOINTS.index(j)] for j in js_order])
+            pos = np.array([0.01 if j == "gripper" else q[joints.index(j)] for j in js_order])
             eff = np.array(
-                [0.0 if j == "gripper" else s["effort"][k][JOINTS.index(j)] for j in js_order]
+                [0.0 if j == "gripper" else s["effort"][k][joints.index(j)] for j in js_order]
             )
             js = JS(
                 header=header(ns), name=list(js_order), position=pos, velocity=pos * 0, effort=eff
