@@ -915,7 +915,11 @@ def report_cmd(
         table.add_row(
             "  " + escape(str(row["episode"])),
             escape(str(row["controller"])),
-            status if row["status"] == "ok" else f"[red]{status}[/red]",
+            status
+            if row["status"] == "ok"
+            else f"[yellow]{status}[/yellow]"
+            if str(row["status"]).startswith("ok (salvaged")
+            else f"[red]{status}[/red]",
             *("n/a" if c is None else f"{c:.3e}" for c in cells),
         )
     console.print(table)

@@ -527,6 +527,11 @@ def _salvage_note(
     pct: float | None = None
     if s.lost_messages is None:
         lost_text = "an unknown number of message rows after it were lost"
+        if s.lost_bytes:  # truncated: the share of the bytes its header states
+            pct = 100 * s.lost_bytes / (size + s.lost_bytes)
+            lost_text += (
+                f" with the file's last {s.lost_bytes} bytes ({pct:.1f} % of the recording's bytes)"
+            )
     else:
         pct = 100 * s.lost_messages / max(s.read_messages + s.lost_messages, 1)
         lost_text = (
@@ -654,6 +659,12 @@ def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
     for name in ("joint_states", "controller_state"):
         picked = chosen[name]
         if picked is None or picked not in collector.decoders:
+            for path, s in salvaged:  # the damage took every message of the role with it
+                at = f" at byte {s.at_byte}" if s.at_byte >= 0 else ""
+                raise RecordingError(
+                    f"{path}: damaged{at} ({s.problem}); nothing of "
+                    f"{picked or name} before the damage to salvage"
+                )
             role = ROLES[name]
             what = f"no messages on {picked}" if picked else f"no {role.type} topic"
             shown = ", ".join(f"{t} ({ty})" for t, ty in sorted(present.items())) or "none"

@@ -110,3 +110,28 @@ def test_a_changed_data_end_length_is_refused(long_bag: bag.BagSummary, delta: i
     path.write_bytes(bytes(data))
     with pytest.raises(RecordingError, match="corrupt"):
         read_recording(long_bag.path)
+
+
+@pytest.mark.parametrize("damage", ["truncate", "bitflip"])
+def test_a_rosbags_mcap_damaged_in_its_only_chunk_is_refused_even_with_salvage(
+    tmp_path: Path, damage: str
+) -> None:
+    # rosbags' writer puts a short bag in one chunk: damage there leaves no intact chunk
+    # (salvage does not recover single messages from a damaged chunk).
+    from rosbags.rosbag2 import StoragePlugin
+
+    from tests.log.test_external_bags import write_external_bag
+
+    write_external_bag(tmp_path / "run", distro="jazzy", storage=StoragePlugin.MCAP)
+    [path] = (tmp_path / "run").glob("*.mcap")
+    [start] = chunk_offsets(path)
+    data = bytearray(path.read_bytes())
+    if damage == "truncate":
+        data = data[: len(data) // 2]
+    else:
+        data[start + 5000] ^= 0x01
+    path.write_bytes(bytes(data))
+    for options in (None, ReadOptions(salvage=True)):
+        with pytest.raises(RecordingError, match="truncated|corrupt|CRC") as err:
+            read_recording(tmp_path / "run", options)
+        assert "\n" not in str(err.value) and str(path) in str(err.value)
