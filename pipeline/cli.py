@@ -827,8 +827,10 @@ def report_cmd(
         bool,
         typer.Option(
             "--salvage",
-            help="Read a truncated or damaged bag up to the damage (every intact chunk); "
-            "the report says how much was lost. Default: refuse it.",
+            help="Read a truncated or damaged bag up to the damage (every intact MCAP "
+            "chunk, a .db3's message rows before the first unreadable one); its status "
+            "reads 'ok (salvaged: N % lost)' and, cut before the motion end, it is not "
+            "compared. Default: refuse it.",
         ),
     ] = False,
 ) -> None:
@@ -839,7 +841,8 @@ def report_cmd(
     leaves earlier reports untouched.
 
     \b
-    Your own robot's bag (ROS 2 Humble or Jazzy, MCAP; any topic names):
+    Your own robot's bag (ROS 2 Humble or Jazzy, MCAP or sqlite3 .db3; any
+    topic names):
       pipeline report --recordings my_bags/ --baseline jtc \\
         --topic controller_state=/arm_controller/controller_state \\
         --controller jtc --scenario pick
@@ -848,9 +851,11 @@ def report_cmd(
     or Jazzy's reference/feedback, told apart by the schema); --topic picks
     one when a bag has several. The joints analysed are the controller's,
     picked by name from /joint_states (extra joints and other publishers are
-    left out). Robot name and effort limits come from /robot_description if
-    the bag has it; what needs our metadata (gains, plant, motion start) is
-    n/a, with the reason in the report.
+    left out). Robot name and effort limits come from the bag's own
+    /robot_description URDF (never from a built-in robot of the same name;
+    without it saturation is n/a); what needs our metadata (gains, plant,
+    motion start) is n/a, with the reason in the report. A damaged bag is
+    refused; --salvage reads it up to the damage and marks its status.
     """
     from pathlib import Path
 
