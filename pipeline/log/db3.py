@@ -15,9 +15,9 @@ still refuse the message), but a truncated file (shorter than its header states)
 damaged b-tree page is refused in one line naming the file. With ``salvage`` the message
 rows are read in id (recording) order up to the first unreadable one and only those are
 delivered, so a salvaged recording is a prefix of the episode; :attr:`Db3Scan.salvaged`
-says how many rows were read and lost. The user's file is only ever opened read-only; a
-``-wal`` side file (a recorder killed before closing the bag) is read from a copy, since
-sqlite would otherwise write a ``-shm`` beside it.
+says how many rows were read and lost. The user's file is only ever opened read-only and
+immutable (no side file is created); a ``-wal`` side file (a recorder killed before closing
+the bag) is read from a copy, since sqlite would otherwise write a ``-shm`` beside it.
 """
 
 from __future__ import annotations
@@ -97,8 +97,12 @@ class Db3Scan:
                     f"{self.path.name}: its last writes are in {wal.name} (the recorder did not "
                     "close the bag); read with them from a copy, the bag is left as it is"
                 )
+            # Without WAL content the file is all there is: immutable, or sqlite would
+            # create -wal and -shm beside a WAL-mode bag (rosbag2's "resilient" preset)
+            # and leave them there.
+            uri = db.resolve().as_uri() + ("?mode=ro" if has_wal else "?mode=ro&immutable=1")
             try:
-                con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+                con = sqlite3.connect(uri, uri=True)
                 if self.salvage:
                     # Read a truncated file up to its end instead of refusing it whole
                     # (a connection flag; the file is open read-only).

@@ -141,7 +141,9 @@ def _pairs_in(data: ReportData, scenario: str) -> list[tuple[str, str]]:
 
 def _head(data: ReportData, rec: Recording) -> str:
     label = data.label(rec.episode)
-    return f"{label} ({rec.status})" if rec.status != "ok" else label
+    if rec.status != "ok":
+        return f"{label} ({rec.status})"
+    return f"{label} (salvaged)" if rec.salvaged else label
 
 
 def _completed(data: ReportData, episode: str) -> bool:

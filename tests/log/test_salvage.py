@@ -132,6 +132,6 @@ def test_a_rosbags_mcap_damaged_in_its_only_chunk_is_refused_even_with_salvage(
         data[start + 5000] ^= 0x01
     path.write_bytes(bytes(data))
     for options in (None, ReadOptions(salvage=True)):
-        with pytest.raises(RecordingError, match="truncated|corrupt|CRC") as err:
+        with pytest.raises(RecordingError, match=r"truncated|corrupt|CRC") as err:
             read_recording(tmp_path / "run", options)
         assert "\n" not in str(err.value) and str(path) in str(err.value)

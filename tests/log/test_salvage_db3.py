@@ -173,6 +173,19 @@ os.kill(os.getpid(), signal.SIGKILL)
 """
 
 
+def test_a_wal_mode_bag_closed_cleanly_is_read_without_side_files(tmp_path: Path) -> None:
+    db, s = db3_bag(tmp_path / "run", "jazzy", False)
+    with sqlite3.connect(db) as con:  # rosbag2's "resilient" preset, closed: no -wal left
+        con.execute("PRAGMA journal_mode=WAL")
+    con.close()
+    assert db.read_bytes()[18:20] == b"\x02\x02"  # the header says WAL
+    before = _state(tmp_path / "run")
+    rec = read_recording(tmp_path / "run")
+    # a plain read-only connection would leave run.db3-wal and run.db3-shm behind
+    assert _state(tmp_path / "run") == before
+    assert rec.samples["stamp_ns"].n_unique() == s["t_ns"].size
+
+
 def _state(folder: Path) -> dict[str, tuple[str, int]]:
     return {
         p.name: (hashlib.sha256(p.read_bytes()).hexdigest(), p.stat().st_mtime_ns)
