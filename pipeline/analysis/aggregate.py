@@ -17,7 +17,7 @@ import polars as pl
 from scipy import stats
 
 from pipeline.analysis.catalog import COMPARED_METRICS
-from pipeline.analysis.episodes import compared
+from pipeline.analysis.episodes import comparable
 
 CONFIDENCE = 0.95
 
@@ -87,7 +87,7 @@ def _ok(episodes: pl.DataFrame) -> pl.DataFrame:
     """Completed episodes (not a salvaged one cut before its motion end), with
     ``scenario`` = the group they are compared in (the scenario, or
     ``campaign/condition``: :func:`pipeline.analysis.episodes.group_key`)."""
-    ok = episodes.filter(compared(episodes))
+    ok = episodes.filter(comparable(episodes))
     if "group" in ok.columns:
         ok = ok.with_columns(pl.col("group").alias("scenario"))
     return ok

@@ -16,7 +16,7 @@ from typing import Any
 import polars as pl
 
 from pipeline.analysis.catalog import BY_NAME, METRIC_COLUMNS
-from pipeline.analysis.episodes import SALVAGED_CUT, compared
+from pipeline.analysis.episodes import SALVAGED_CUT, comparable
 from pipeline.settings import EpisodeSettings
 
 TABLE_DIR = "campaigns"
@@ -71,7 +71,7 @@ def campaign_tables(
             for axis in axes
         )
         # a salvaged recording cut before its motion end is no completed run
-        status = pl.when(compared(episodes)).then(pl.col("status"))
+        status = pl.when(comparable(episodes)).then(pl.col("status"))
         frame = frame.join(
             episodes.select(
                 "episode",

@@ -166,7 +166,7 @@ def shown_status(row: Mapping[str, Any]) -> str:
     return f"{status} (salvaged: {lost}{cut})"
 
 
-def compared(episodes: pl.DataFrame) -> pl.Expr:
+def comparable(episodes: pl.DataFrame) -> pl.Expr:
     """Episodes that take part in comparisons: status "ok", and not salvaged recordings cut
     before their motion end (their max and RMS cover part of the motion only)."""
     ok = pl.col("status") == "ok"

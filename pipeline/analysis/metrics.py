@@ -57,7 +57,7 @@ from pipeline.analysis.catalog import (
     SETTLING_TOLERANCE_RAD,
     Frame,
 )
-from pipeline.analysis.episodes import compared
+from pipeline.analysis.episodes import comparable
 from pipeline.constants import FINAL_WINDOW_S
 from pipeline.errors import ReportError
 
@@ -290,11 +290,11 @@ def pairs(episodes: pl.DataFrame, *, baseline: str) -> list[tuple[str, str, str]
     Episodes pair within a group (the scenario of hand-listed episodes, a campaign's
     condition: :func:`pipeline.analysis.episodes.group_key`) and robot; only "ok"
     episodes take part, and no salvaged recording cut before its motion end
-    (:func:`pipeline.analysis.episodes.compared`). When a group holds several baseline
+    (:func:`pipeline.analysis.episodes.comparable`). When a group holds several baseline
     runs, a candidate pairs with the ones of its own seed if there are any, else with all
     of them.
     """
-    ok = episodes.filter(compared(episodes)).sort("episode")
+    ok = episodes.filter(comparable(episodes)).sort("episode")
     key = "group" if "group" in ok.columns else "scenario"
     out: list[tuple[str, str, str]] = []
     for (scenario, robot), group in ok.group_by([key, "robot"], maintain_order=True):
