@@ -75,6 +75,16 @@ class Group:
             arrays = {k: v[order] for k, v in arrays.items()}
         return stamps, arrays
 
+    def take(self) -> tuple[NDArray[np.int64], dict[str, F64]]:
+        """The rows decoded since the last take, in the order decoded (not sorted), and
+        let go of them (``count`` keeps counting); a streaming read calls it per batch."""
+        empty = np.zeros((0, len(self.names)))
+        stamps = np.concatenate(self.stamps) if self.stamps else np.zeros(0, dtype=np.int64)
+        arrays = {k: np.concatenate(v) if v else empty for k, v in self.arrays.items()}
+        self.stamps = []
+        self.arrays = {k: [] for k in self.arrays}
+        return stamps, arrays
+
 
 @dataclass
 class TopicDecoder:

@@ -20,7 +20,7 @@ import struct
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 from xml.etree import ElementTree
 
 import numpy as np
@@ -42,14 +42,26 @@ from pipeline.constants import (
 from pipeline.errors import RecordingError
 from pipeline.log import cdr
 from pipeline.log.db3 import Db3Scan
-from pipeline.log.decode import DecodeError, TopicDecoder, Want
+from pipeline.log.decode import DecodeError, Group, TopicDecoder, Want
 from pipeline.log.mcap import MESSAGE_PREFIX, McapChannel, McapScan, Salvage
 from pipeline.log.msgdef import MsgTypes, parse_msgdef, root_type_name
 from pipeline.log.rosbag2 import find_recordings, storage_files
 
-__all__ = ["PlannedTrajectory", "Recording", "find_recordings", "read_recording"]
+__all__ = [
+    "STREAM_ABOVE_BYTES",
+    "PlannedTrajectory",
+    "Recording",
+    "WindowSink",
+    "find_recordings",
+    "read_recording",
+]
 
 F64 = NDArray[np.float64]
+
+# Recordings whose storage files are larger than this in all are read in two streaming
+# passes, in windows (:mod:`pipeline.log.windowed`): memory does not grow with their length.
+# 64 MiB is about five minutes of one of our 1 kHz UR5 episodes.
+STREAM_ABOVE_BYTES = 64 << 20
 
 # Column names of the tidy sample frame (one row per sample and joint).
 SAMPLE_COLUMNS = (
@@ -115,12 +127,17 @@ class ReadOptions:
         salvage: read every intact chunk before damage instead of refusing the file.
         controller: controller label (default: our metadata, else the bag's name).
         scenario: scenario label (default: our metadata, else "external").
+        stream_above_bytes: storage files larger than this in all are read in windows
+            (:mod:`pipeline.log.windowed`); None: :data:`STREAM_ABOVE_BYTES`.
+        window_steps: control steps per window of a windowed read (0: the default).
     """
 
     topics: Mapping[str, str] = field(default_factory=dict)
     salvage: bool = False
     controller: str | None = None
     scenario: str | None = None
+    stream_above_bytes: int | None = None
+    window_steps: int = 0
 
 
 # Our names of the roles' topics: never a by-type candidate for another role.
@@ -203,6 +220,16 @@ class Recording:
             an MCAP file, messages of a ``.db3``; None when not salvaged or unknown).
         armlab_metadata: the bag carries our ``armlab.episode`` metadata record; without
             it nothing (robot, limits, settings) is taken from our built-in robot files.
+        decimation: 1 when the frames hold every message; k > 1 for a long recording read
+            in windows, whose frames hold every k-th control step (and the last one) only,
+            for figures and series: the counts, end and period below then say what the
+            frames no longer tell, and metrics come from the windows (:class:`WindowSink`).
+        windows: how many windows a windowed read streamed (0: read whole).
+        sample_count: ``/joint_states`` messages with a controller state (the rows of an
+            undecimated ``samples`` frame per joint); None: count the frame.
+        controller_sample_count: ``/controller_state`` messages; None: count the frame.
+        end_s: the last control-rate ``time_s`` of the recording [s]; None: from the frames.
+        control_period_s: median ``/controller_state`` period [s]; None: from the frames.
     """
 
     source: Path
@@ -223,6 +250,12 @@ class Recording:
     salvaged: bool = False
     salvage_lost_pct: float | None = None
     armlab_metadata: bool = True
+    decimation: int = 1
+    windows: int = 0
+    sample_count: int | None = None
+    controller_sample_count: int | None = None
+    end_s: float | None = None
+    control_period_s: float | None = None
 
     @property
     def episode(self) -> str:
@@ -558,13 +591,20 @@ def _robot_description(collector: _Collector, topic: str | None) -> str | None:
 
 
 def _match_stamps(
-    js_t: NDArray[np.int64], cs_t: NDArray[np.int64]
+    js_t: NDArray[np.int64], cs_t: NDArray[np.int64], *, period_ns: float | None = None
 ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Row pairs (joint_states, controller_state) at the same instant (nearest, < half a period)."""
+    """Row pairs (joint_states, controller_state) at the same instant (nearest, < half a period).
+
+    ``period_ns``: the ``js_t`` period (default: the median step of ``js_t``); a windowed
+    read passes the whole recording's, so a window pairs rows as the whole read does.
+    """
     if js_t.shape == cs_t.shape and np.array_equal(js_t, cs_t):
         idx = np.arange(js_t.size)
         return idx, idx
-    period = float(np.median(np.diff(js_t))) if js_t.size > 1 else 1.0
+    if cs_t.size == 0:
+        empty = np.zeros(0, dtype=np.intp)
+        return empty, empty
+    period = period_ns if period_ns is not None else stamp_period_ns(js_t)
     j = np.searchsorted(cs_t, js_t).clip(1, max(cs_t.size - 1, 1))
     left = (j - 1).clip(0, cs_t.size - 1)
     right = j.clip(0, cs_t.size - 1)
@@ -573,17 +613,43 @@ def _match_stamps(
     return np.flatnonzero(ok), pick[ok]
 
 
-def read_recording(source: Path, options: ReadOptions | None = None) -> Recording:
+def stamp_period_ns(stamps: NDArray[np.int64]) -> float:
+    """Median step of sorted ``stamps`` [ns] (1.0 for fewer than two)."""
+    return float(np.median(np.diff(stamps))) if stamps.size > 1 else 1.0
+
+
+class WindowSink(Protocol):
+    """Receives a long recording's exact frames, one window at a time, in time order.
+
+    :func:`read_recording` calls :meth:`begin` once (after its first pass) with the
+    recording as then known: empty frames, every other field set (``sample_count`` not
+    yet), then :meth:`window` for each window: tidy frames of a contiguous stamp interval
+    (the rows the whole read would have there). Only a windowed read calls it.
+    """
+
+    def begin(self, header: Recording) -> None: ...
+
+    def window(self, samples: pl.DataFrame, controller_states: pl.DataFrame) -> None: ...
+
+
+def read_recording(
+    source: Path, options: ReadOptions | None = None, *, sink: WindowSink | None = None
+) -> Recording:
     """Read one recording (rosbag2 directory or bare ``.mcap``) into a :class:`Recording`.
 
     Times (``time_s``) count from the recording's first control-rate stamp, so header
     stamps may be simulated (from 0) or wall clock alike; ``stamp_ns`` stays as recorded.
     NaN values and empty arrays (legal in ROS messages) become nulls: "not recorded".
 
+    A recording larger than :data:`STREAM_ABOVE_BYTES` (``options.stream_above_bytes``) is
+    read in two streaming passes (:mod:`pipeline.log.windowed`): its frames are decimated
+    (``decimation`` > 1) and ``sink`` receives the exact frames window by window.
+
     Args:
         source: the recording.
         options: remaps, salvage and labels for bags we did not write (see
             :class:`ReadOptions`); with ``salvage`` the recording says what was lost.
+        sink: receives a windowed read's windows (ignored when the recording is read whole).
 
     Raises:
         RecordingError: missing, empty, not MCAP, truncated, corrupt (CRC), lacking
@@ -598,9 +664,15 @@ def read_recording(source: Path, options: ReadOptions | None = None) -> Recordin
         raise RecordingError(f"--topic {unknown[0]}=...: unknown role (roles: {', '.join(ROLES)})")
     try:
         files = storage_files(source)
+        total = sum(p.stat().st_size for p in files)
     except OSError as err:
         raise RecordingError(f"{source}: cannot read ({err.strerror or err})") from err
+    limit = STREAM_ABOVE_BYTES if options.stream_above_bytes is None else options.stream_above_bytes
     try:
+        if total > limit:
+            from pipeline.log.windowed import read_windowed
+
+            return read_windowed(source, files, options, sink)
         return _read(source, files, options)
     except RecordingError:
         raise
@@ -612,23 +684,42 @@ def read_recording(source: Path, options: ReadOptions | None = None) -> Recordin
 
 def _missing_array_notes(arrays: dict[str, F64], topic: str, fields: dict[str, str]) -> list[str]:
     """Notes for optional arrays that are empty (or NaN) in every message of ``topic``."""
-    notes = []
-    for key, what in fields.items():
-        values = arrays.get(key)
-        if values is not None and values.size and np.isnan(values).all():
-            notes.append(f"{topic} carries no {what} values (empty arrays): {what} metrics are n/a")
-    return notes
+    empty = {k for k in fields if (v := arrays.get(k)) is not None and v.size and np.isnan(v).all()}
+    return _empty_array_notes(empty, topic, fields)
 
 
-def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
-    mcap_path = files[0]
-    salvage = options.salvage
-    collector = _Collector(options.topics)
+def _empty_array_notes(empty: set[str], topic: str, fields: dict[str, str]) -> list[str]:
+    return [
+        f"{topic} carries no {what} values (empty arrays): {what} metrics are n/a"
+        for key, what in fields.items()
+        if key in empty
+    ]
+
+
+# Optional /joint_states arrays whose absence the report notes.
+_JS_OPTIONAL = {"velocity": "velocity", "effort": "effort"}
+
+
+@dataclass
+class _Scanned:
+    """What scanning a recording's storage files gave besides the collector's messages."""
+
+    size: int
+    sha256: str
+    present: dict[str, str]  # topic -> root type
+    salvaged: list[tuple[Path, Salvage]]
+    notes: list[str]  # the storage readers' notes
+    unread: list[Path]  # split files after a salvaged one
+    unread_bytes: int
+
+
+def _scan(files: list[Path], collector: _Collector, *, salvage: bool) -> _Scanned:
+    """Stream every storage file into ``collector`` (stopping after a salvaged one)."""
     sha = hashlib.sha256()
     size = 0
     present: dict[str, str] = {}
     salvaged: list[tuple[Path, Salvage]] = []
-    notes_read: list[str] = []
+    notes: list[str] = []
     unread: list[Path] = []
     unread_bytes = 0
     for path in files:
@@ -647,14 +738,48 @@ def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
         for topic, count in scan.topic_counts.items():
             collector.topic_counts[topic] = collector.topic_counts.get(topic, 0) + count
         collector.metadata.update(scan.metadata)
-        notes_read += scan.notes
+        notes += scan.notes
         if scan.salvaged is not None:
             salvaged.append((path, scan.salvaged))
             # later split files continue after the damage: not contiguous, not read
             unread = [p for p in files[files.index(path) + 1 :] if p.is_file()]
             unread_bytes = sum(p.stat().st_size for p in unread)
             break
-    collector.path = mcap_path
+    collector.path = files[0]
+    return _Scanned(size, sha.hexdigest(), present, salvaged, notes, unread, unread_bytes)
+
+
+@dataclass
+class _Roles:
+    """The chosen topics and joint lists of a recording."""
+
+    chosen: dict[str, str | None]
+    js_dec: TopicDecoder
+    cs_dec: TopicDecoder
+    js_group: Group
+    cs_group: Group
+    truth: Group | None
+    names: tuple[str, ...]
+
+    @property
+    def js_cols(self) -> list[int] | None:
+        """Columns of the joint-state arrays in controller order (None: already)."""
+        cols = [self.js_group.names.index(n) for n in self.names]
+        return None if cols == list(range(len(self.js_group.names))) else cols
+
+    @property
+    def gt_perm(self) -> list[int]:
+        assert self.truth is not None
+        return [self.truth.names.index(n) for n in self.names]
+
+
+def _roles(
+    collector: _Collector,
+    present: dict[str, str],
+    mcap_path: Path,
+    salvaged: Sequence[tuple[Path, Salvage]] = (),
+) -> _Roles:
+    """Pick each role's topic and the joint lists to analyse (from the groups' counts)."""
     chosen = {name: _pick(name, collector, present) for name in ROLES}
     for name in ("joint_states", "controller_state"):
         picked = chosen[name]
@@ -687,34 +812,63 @@ def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
             f"{cs_dec.topic} ({', '.join(cs_names)}); joint lists seen: {shown}"
         )
     js_group = max(covering, key=lambda g: g.count)
-    js_t, js_all = js_group.concat()
-    cs_t, cs_a = cs_group.concat()
-    js_cols = [js_group.names.index(n) for n in cs_names]
-    same_order = js_cols == list(range(len(js_group.names)))
-    js_a = js_all if same_order else {k: v[:, js_cols] for k, v in js_all.items()}
-    names = cs_names
-    js_topic, cs_topic = js_dec.topic, cs_dec.topic
-    rows_js, rows_cs = _match_stamps(js_t, cs_t)
-    if rows_js.size == 0:
+    truth_dec = collector.decoders.get(chosen["ground_truth"] or "")
+    truth = truth_dec.largest() if truth_dec is not None else None
+    if truth is not None and truth.count and not set(cs_names) <= set(truth.names):
         raise RecordingError(
-            f"{mcap_path}: no {TOPIC_CONTROLLER_STATE} message shares a time stamp with "
-            f"{TOPIC_JOINT_STATES}"
+            f"{mcap_path}: joints differ between {TOPIC_GROUND_TRUTH} "
+            f"({', '.join(truth.names)}) and {cs_dec.topic} ({', '.join(cs_names)})"
         )
-    notes: list[str] = list(notes_read)
-    lost_pct: float | None = None
-    for path, s in salvaged:
-        note, lost_pct = _salvage_note(path, s, size, unread, unread_bytes)
-        notes.append(note)
-    if len(js_dec.groups) > 1 or len(js_group.names) > len(names):
-        notes.append(
-            f"{js_topic}: analysing {', '.join(names)} (the joints of {cs_topic}) from "
-            f"{len(js_dec.groups)} joint list(s)"
-        )
-    dropped = js_t.size - rows_js.size
-    if dropped:
-        notes.append(f"{dropped} joint-state samples without a controller state were dropped")
-    notes += _missing_array_notes(js_a, js_topic, {"velocity": "velocity", "effort": "effort"})
+    if truth is not None and not truth.count:
+        truth = None
+    return _Roles(chosen, js_dec, cs_dec, js_group, cs_group, truth, cs_names)
 
+
+def _no_pairs(mcap_path: Path) -> RecordingError:
+    return RecordingError(
+        f"{mcap_path}: no {TOPIC_CONTROLLER_STATE} message shares a time stamp with "
+        f"{TOPIC_JOINT_STATES}"
+    )
+
+
+def _read_notes(scanned: _Scanned, roles: _Roles) -> tuple[list[str], float | None]:
+    """The notes every read starts with (the storage's, salvage, the joints analysed) and
+    the share of the recording a salvage lost [%]."""
+    notes: list[str] = list(scanned.notes)
+    lost_pct: float | None = None
+    for path, s in scanned.salvaged:
+        note, lost_pct = _salvage_note(path, s, scanned.size, scanned.unread, scanned.unread_bytes)
+        notes.append(note)
+    if len(roles.js_dec.groups) > 1 or len(roles.js_group.names) > len(roles.names):
+        notes.append(
+            f"{roles.js_dec.topic}: analysing {', '.join(roles.names)} (the joints of "
+            f"{roles.cs_dec.topic}) from {len(roles.js_dec.groups)} joint list(s)"
+        )
+    return notes, lost_pct
+
+
+def _dropped_note(dropped: int) -> list[str]:
+    return [f"{dropped} joint-state samples without a controller state were dropped"] * bool(
+        dropped
+    )
+
+
+def _truth_note(unmatched: int, cs_topic: str) -> list[str]:
+    return [
+        f"{unmatched} {cs_topic} samples have no {TOPIC_GROUND_TRUTH} sample at their time"
+    ] * bool(unmatched)
+
+
+def _labels(
+    collector: _Collector,
+    source: Path,
+    options: ReadOptions,
+    chosen: dict[str, str | None],
+    names: Sequence[str],
+) -> tuple[dict[str, str], dict[str, Any], str | None, list[str], bool]:
+    """Metadata (ours, else labels), settings, the URDF, the notes about them and whether
+    the bag carries our metadata."""
+    notes: list[str] = []
     raw_meta = dict(collector.metadata.get(METADATA_EPISODE, {}))
     ours = METADATA_EPISODE in collector.metadata
     labels = {"controller": options.controller, "scenario": options.scenario}
@@ -755,66 +909,103 @@ def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
             + ("the command line" if any(labels.values()) else "the bag's name")
             + "; settings (gains, plant, planner, motion start) are n/a"
         )
+    return raw_meta, settings, urdf, notes, ours
+
+
+def _tidy(
+    stamps: NDArray[np.int64],
+    columns: dict[str, F64],
+    *,
+    names: tuple[str, ...],
+    t0_ns: int,
+    episode: str,
+) -> pl.DataFrame:
+    """A tidy frame: one row per stamp and joint, ``time_s`` from ``t0_ns``, NaN -> null."""
+    n = len(names)
+    m = stamps.size
+    frame = pl.DataFrame(
+        {
+            "stamp_ns": np.repeat(stamps, n),
+            "time_s": np.repeat((stamps - t0_ns).astype(np.float64) * 1e-9, n),
+            "joint": pl.Series("joint", names, dtype=pl.String).gather(
+                np.tile(np.arange(n, dtype=np.int64), m)
+            ),
+            **{k: np.ascontiguousarray(v).reshape(-1) for k, v in columns.items()},
+        }
+    )
+    return frame.select(
+        pl.lit(episode, dtype=pl.String).alias("episode"),
+        pl.col("stamp_ns", "time_s", "joint"),
+        pl.col(*columns).fill_nan(None),
+    )
+
+
+def _error_feedback(cs: dict[str, F64]) -> tuple[F64, F64]:
+    """error = reference - feedback: whichever of the two the controller left out."""
+    error = np.where(
+        np.isnan(cs["error"]), cs["reference_position"] - cs["feedback_position"], cs["error"]
+    )
+    feedback = np.where(
+        np.isnan(cs["feedback_position"]), cs["reference_position"] - error, cs["feedback_position"]
+    )
+    return error, feedback
+
+
+def _truth_at(
+    cs_t: NDArray[np.int64],
+    gt: tuple[NDArray[np.int64], dict[str, F64]] | None,
+    perm: list[int],
+    like: F64,
+    *,
+    period_ns: float | None = None,
+) -> tuple[F64, F64, NDArray[np.intp]]:
+    """True position and velocity at each controller-state row (NaN where none), and the
+    rows that have one."""
+    pos = np.full_like(like, np.nan)
+    vel = np.full_like(like, np.nan)
+    if gt is None:
+        return pos, vel, np.zeros(0, dtype=np.intp)
+    gt_t, gt_a = gt
+    rows_cs, rows_gt = _match_stamps(cs_t, gt_t, period_ns=period_ns)
+    pos[rows_cs] = gt_a["position"][rows_gt][:, perm]
+    vel[rows_cs] = gt_a["velocity"][rows_gt][:, perm]
+    return pos, vel, rows_cs
+
+
+def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
+    mcap_path = files[0]
+    collector = _Collector(options.topics)
+    scanned = _scan(files, collector, salvage=options.salvage)
+    roles = _roles(collector, scanned.present, mcap_path, scanned.salvaged)
+    js_t, js_all = roles.js_group.concat()
+    cs_t, cs_a = roles.cs_group.concat()
+    js_cols = roles.js_cols
+    js_a = js_all if js_cols is None else {k: v[:, js_cols] for k, v in js_all.items()}
+    names = roles.names
+    js_topic, cs_topic = roles.js_dec.topic, roles.cs_dec.topic
+    rows_js, rows_cs = _match_stamps(js_t, cs_t)
+    if rows_js.size == 0:
+        raise _no_pairs(mcap_path)
+    notes, lost_pct = _read_notes(scanned, roles)
+    notes += _dropped_note(js_t.size - rows_js.size)
+    notes += _missing_array_notes(js_a, js_topic, _JS_OPTIONAL)
+    raw_meta, settings, urdf, label_notes, ours = _labels(
+        collector, source, options, roles.chosen, names
+    )
+    notes += label_notes
 
     # Relative times: wall-clock header stamps (1.7e9 s) would otherwise swamp float64
     # resolution and put the motion end (a duration from the start) 50 years early.
     t0_ns = int(min(js_t[0], cs_t[0]))
-    n = len(names)
     episode = _episode_name(raw_meta, source)
-
-    def flat(a: F64) -> F64:
-        return np.ascontiguousarray(a).reshape(-1)
-
-    def tidy(stamps: NDArray[np.int64], columns: dict[str, F64]) -> pl.DataFrame:
-        m = stamps.size
-        frame = pl.DataFrame(
-            {
-                "stamp_ns": np.repeat(stamps, n),
-                "time_s": np.repeat((stamps - t0_ns).astype(np.float64) * 1e-9, n),
-                "joint": pl.Series("joint", names, dtype=pl.String).gather(
-                    np.tile(np.arange(n, dtype=np.int64), m)
-                ),
-                **{k: flat(v) for k, v in columns.items()},
-            }
-        )
-        return frame.select(
-            pl.lit(episode, dtype=pl.String).alias("episode"),
-            pl.col("stamp_ns", "time_s", "joint"),
-            pl.col(*columns).fill_nan(None),
-        )
-
     cs_all = cs_a
-    # error = reference - feedback: whichever of the two the controller left out.
-    error = np.where(
-        np.isnan(cs_all["error"]),
-        cs_all["reference_position"] - cs_all["feedback_position"],
-        cs_all["error"],
+    error, feedback = _error_feedback(cs_all)
+    truth = roles.truth
+    truth_pos, truth_vel, rows_cs_gt = _truth_at(
+        cs_t, truth.concat() if truth else None, roles.gt_perm if truth else [], error
     )
-    feedback = np.where(
-        np.isnan(cs_all["feedback_position"]),
-        cs_all["reference_position"] - error,
-        cs_all["feedback_position"],
-    )
-    truth_pos = np.full_like(cs_all["reference_position"], np.nan)
-    truth_vel = np.full_like(cs_all["reference_position"], np.nan)
-    truth_dec = collector.decoders.get(chosen["ground_truth"] or "")
-    truth = truth_dec.largest() if truth_dec is not None else None
-    if truth is not None and truth.count:
-        gt_t, gt_a = truth.concat()
-        if not set(names) <= set(truth.names):
-            raise RecordingError(
-                f"{mcap_path}: joints differ between {TOPIC_GROUND_TRUTH} "
-                f"({', '.join(truth.names)}) and {cs_topic} ({', '.join(names)})"
-            )
-        gt_perm = [truth.names.index(n) for n in names]
-        rows_cs_gt, rows_gt = _match_stamps(cs_t, gt_t)
-        truth_pos[rows_cs_gt] = gt_a["position"][rows_gt][:, gt_perm]
-        truth_vel[rows_cs_gt] = gt_a["velocity"][rows_gt][:, gt_perm]
-        if rows_cs_gt.size < cs_t.size:
-            notes.append(
-                f"{cs_t.size - rows_cs_gt.size} {cs_topic} samples have no "
-                f"{TOPIC_GROUND_TRUTH} sample at their time"
-            )
+    if truth is not None:
+        notes += _truth_note(cs_t.size - rows_cs_gt.size, cs_topic)
     every_cs = rows_cs.size == cs_t.size and bool(np.all(rows_cs == np.arange(cs_t.size)))
     every_js = rows_js.size == js_t.size and bool(np.all(rows_js == np.arange(js_t.size)))
 
@@ -825,7 +1016,7 @@ def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
         return a if every_js else a[rows_js]
 
     cs_rows = {k: at_cs(v) for k, v in cs_all.items()}
-    samples = tidy(
+    samples = _tidy(
         js_t if every_js else js_t[rows_js],
         {
             "position_rad": at_js(js_a["position"]),
@@ -838,8 +1029,11 @@ def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
             "true_position_rad": at_cs(truth_pos),
             "true_velocity_rad_s": at_cs(truth_vel),
         },
+        names=names,
+        t0_ns=t0_ns,
+        episode=episode,
     )
-    controller_states = tidy(
+    controller_states = _tidy(
         cs_t,
         {
             "reference_position_rad": cs_all["reference_position"],
@@ -850,24 +1044,29 @@ def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
             "true_position_rad": truth_pos,
             "true_velocity_rad_s": truth_vel,
         },
+        names=names,
+        t0_ns=t0_ns,
+        episode=episode,
     )
     return Recording(
         source=source,
         mcap_path=mcap_path,
-        sha256=sha.hexdigest(),
-        size_bytes=size,
+        sha256=scanned.sha256,
+        size_bytes=scanned.size,
         metadata=raw_meta,
         settings=settings,
         joint_names=names,
         samples=samples,
         controller_states=controller_states,
-        planned=_planned(collector, chosen["planned_trajectory"]),
+        planned=_planned(collector, roles.chosen["planned_trajectory"]),
         robot_description=urdf,
         topic_counts=dict(collector.topic_counts),
-        decoded_messages=js_group.count + cs_group.count + (truth.count if truth else 0),
+        decoded_messages=roles.js_group.count
+        + roles.cs_group.count
+        + (truth.count if truth else 0),
         notes=tuple(notes),
-        has_ground_truth=truth is not None and truth.count > 0,
-        salvaged=bool(salvaged),
+        has_ground_truth=truth is not None,
+        salvaged=bool(scanned.salvaged),
         salvage_lost_pct=lost_pct,
         armlab_metadata=ours,
     )

@@ -1,0 +1,508 @@
+"""Read a long recording in two streaming passes, in windows: memory does not grow with it.
+
+:func:`pipeline.log.reader.read_recording` sends recordings above
+:data:`pipeline.log.reader.STREAM_ABOVE_BYTES` here.
+
+- **Pass 1** keeps nothing decoded: it finds the channels and picks the roles' topics and
+  joint lists as the whole read does, reads the metadata (ours sits near the end of the
+  file), the planned trajectory and the robot description, and per control-rate joint
+  list the message count, first and last stamp and the histogram of stamp steps (so the
+  median period, which pairs stamps, is the whole recording's, exactly).
+- **Pass 2** decodes the chosen topics chunk by chunk and cuts the rows into windows of
+  contiguous stamp intervals, each flushed once every topic has delivered past its end
+  plus a period (a watermark), so pairing ``/joint_states`` with ``/controller_state`` and
+  that with ``/ground_truth/joint_states`` (nearest stamp within half a period) gives the
+  pairs of the whole read, also across window boundaries. Each window's tidy frames (the
+  rows the whole read has in that interval) go to a :class:`~pipeline.log.reader.WindowSink`;
+  every k-th control step is kept for the returned :class:`~pipeline.log.reader.Recording`.
+
+Memory: one window, one batch of chunks and what the sink keeps.
+
+Stamps out of order: within a batch of chunks they are sorted, as the whole read sorts;
+a stamp that goes back behind an earlier batch of the same topic and joint list is
+refused in one line naming the file and topic (a window may already have been handed on).
+Where both topics carry the same stamp more than once and also have stamps the other
+lacks, a window pairs duplicates as identical stamp runs (the whole read: nearest).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import polars as pl
+from numpy.typing import NDArray
+
+from pipeline.errors import RecordingError
+from pipeline.log.db3 import Db3Scan
+from pipeline.log.decode import DecodeError, TopicDecoder
+from pipeline.log.mcap import McapChannel, McapScan
+from pipeline.log.reader import (
+    _JS_OPTIONAL,
+    _WANT,
+    F64,
+    ReadOptions,
+    Recording,
+    WindowSink,
+    _Collector,
+    _dropped_note,
+    _empty_array_notes,
+    _episode_name,
+    _error_feedback,
+    _labels,
+    _match_stamps,
+    _no_pairs,
+    _planned,
+    _read_notes,
+    _Roles,
+    _roles,
+    _scan,
+    _tidy,
+    _truth_at,
+    _truth_note,
+)
+
+# A decimated recording keeps at most about this many control steps for figures and series.
+MAX_KEPT_STEPS = 20_000
+# Control steps per window (20 s at 1 kHz; some 15 MB of frames for six joints).
+WINDOW_STEPS = 20_000
+# Stamps kept per joint list in pass 1 to find the last paired /joint_states message.
+_TAIL = 4096
+
+I64 = NDArray[np.int64]
+
+
+@dataclass
+class _StampStats:
+    """One joint list's stamps as pass 1 saw them, without keeping them."""
+
+    count: int = 0
+    first: int = 0
+    last: int = 0
+    back: tuple[Path, int, int] | None = None  # (file, stamp, earlier stamp): out of order
+    steps: dict[int, int] = field(default_factory=dict)  # stamp step [ns] -> how often
+    tail: I64 = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+
+    def add(self, stamps: I64, path: Path) -> None:
+        if not stamps.size:
+            return
+        t = np.sort(stamps, kind="stable")
+        if self.count and int(t[0]) < self.last and self.back is None:
+            self.back = (path, int(t[0]), self.last)
+        diffs = np.diff(t) if not self.count else np.diff(np.concatenate([[self.last], t]))
+        values, counts = np.unique(diffs, return_counts=True)
+        for v, c in zip(values.tolist(), counts.tolist(), strict=True):
+            self.steps[v] = self.steps.get(v, 0) + c
+        if not self.count:
+            self.first = int(t[0])
+        self.last = max(self.last, int(t[-1])) if self.count else int(t[-1])
+        self.count += t.size
+        self.tail = np.concatenate([self.tail, t])[-_TAIL:]
+
+    def period_ns(self) -> float:
+        """``np.median(np.diff(sorted stamps))`` of every stamp (1.0 for fewer than two)."""
+        n = sum(self.steps.values())
+        if n == 0:
+            return 1.0
+        keys = sorted(self.steps)
+        cum = np.cumsum([self.steps[k] for k in keys])
+
+        def at(i: int) -> float:
+            return float(keys[int(np.searchsorted(cum, i, side="right"))])
+
+        return at(n // 2) if n % 2 else (at(n // 2 - 1) + at(n // 2)) / 2
+
+
+class _Pass1(_Collector):
+    """Decodes the candidates as the whole read does, keeping only :class:`_StampStats`."""
+
+    def __init__(self, topics: dict[str, str]) -> None:
+        super().__init__(topics)
+        self.stats: dict[tuple[str, tuple[str, ...]], _StampStats] = {}
+
+    def on_messages(
+        self, scan: McapScan | Db3Scan, channel: McapChannel, buf: bytes, starts: I64
+    ) -> None:
+        super().on_messages(scan, channel, buf, starts)
+        dec = self.decoders.get(channel.topic)
+        if dec is None:
+            return
+        for group in dec.groups:
+            stamps, _ = group.take()
+            self.stats.setdefault((dec.topic, group.names), _StampStats()).add(stamps, self.path)
+
+
+@dataclass
+class _Stream:
+    """The not yet windowed rows of one chosen joint list, sorted by stamp."""
+
+    names: tuple[str, ...]
+    last: int  # its last stamp in the recording (pass 1)
+    cols: list[int] | None = None  # columns in controller joint order
+    stamps: I64 = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    arrays: dict[str, F64] = field(default_factory=dict)
+    high: float = -math.inf  # largest stamp delivered so far
+
+    def push(self, stamps: I64, arrays: dict[str, F64]) -> None:
+        if not stamps.size:
+            return
+        order = np.argsort(stamps, kind="stable")
+        if self.cols is not None:
+            arrays = {k: v[:, self.cols] for k, v in arrays.items()}
+        self.stamps = np.concatenate([self.stamps, stamps[order]])
+        for k, v in arrays.items():
+            old = self.arrays.get(k)
+            self.arrays[k] = v[order] if old is None else np.concatenate([old, v[order]])
+        self.high = max(self.high, float(stamps.max()))
+
+    def complete_to(self) -> float:
+        """Every row below this stamp has been delivered."""
+        return math.inf if self.high >= self.last else self.high
+
+    def span(self, lo: float, hi: float) -> tuple[int, int]:
+        return int(np.searchsorted(self.stamps, lo)), int(np.searchsorted(self.stamps, hi))
+
+    def rows(self, a: int, b: int) -> tuple[I64, dict[str, F64]]:
+        return self.stamps[a:b], {k: v[a:b] for k, v in self.arrays.items()}
+
+    def drop_below(self, stamp: float) -> None:
+        a = int(np.searchsorted(self.stamps, stamp))
+        self.stamps = self.stamps[a:]
+        self.arrays = {k: v[a:] for k, v in self.arrays.items()}
+
+
+@dataclass
+class _Facts:
+    """What pass 1 found that pass 2 and the recording need."""
+
+    roles: _Roles
+    js_period_ns: float
+    cs_period_ns: float
+    t0_ns: int
+    end_ns: int
+    episode: str
+    decimation: int
+    window_steps: int
+
+
+class _Windows:
+    """Cuts the chosen streams into windows at a watermark and builds their frames."""
+
+    def __init__(self, facts: _Facts, js: _Stream, cs: _Stream, gt: _Stream | None) -> None:
+        self.f = facts
+        self.js, self.cs, self.gt = js, cs, gt
+        self.margin = max(facts.js_period_ns, facts.cs_period_ns)
+        self.lo = -math.inf
+        self.count = 0
+        self.pairs = 0  # /joint_states rows paired so far
+        self.cs_rows = 0
+        self.dropped = 0
+        self.no_truth = 0
+        self.js_empty = {k: True for k in _JS_OPTIONAL}
+        self.end_ns = -math.inf
+        self.kept: list[tuple[pl.DataFrame, pl.DataFrame]] = []
+        self.last: list[pl.DataFrame | None] = [None, None]  # unkept last steps
+        self.sink: WindowSink | None = None
+
+    def pump(self, *, final: bool = False) -> None:
+        while True:
+            limit = math.inf
+            if not final:
+                limit = min(self.js.complete_to(), self.cs.complete_to() - self.margin)
+                if self.gt is not None:
+                    limit = min(limit, self.gt.complete_to() - self.margin)
+            a, b = self.cs.span(self.lo, limit)
+            steps = self.f.window_steps
+            cut = a + steps
+            if cut < b and self.cs.stamps[cut] == self.cs.stamps[a]:
+                # one stamp repeated over a whole window: cut after its last copy
+                cut = int(np.searchsorted(self.cs.stamps, self.cs.stamps[a], side="right"))
+            if cut < b:
+                hi = float(self.cs.stamps[cut])
+            elif final or limit == math.inf:
+                hi = math.inf
+            else:
+                return
+            self._emit(self.lo, hi)
+            self.lo = hi
+            if math.isinf(hi):
+                return
+
+    def _emit(self, lo: float, hi: float) -> None:
+        f, n = self.f, self.margin
+        ja, jb = self.js.span(lo, hi)
+        js_t, js_a = self.js.rows(ja, jb)
+        xa, xb = self.cs.span(lo - n, hi + n)  # every controller state a js row may pair with
+        cs_t, cs_a = self.cs.rows(xa, xb)
+        wa, wb = self.cs.span(lo, hi)
+        wa, wb = wa - xa, wb - xa  # the window's own controller states, within cs_t
+        if js_t.size and js_t.shape == cs_t[wa:wb].shape and np.array_equal(js_t, cs_t[wa:wb]):
+            rows_js, rows_cs = np.arange(js_t.size), np.arange(wa, wb)
+        else:
+            rows_js, rows_cs = _match_stamps(js_t, cs_t, period_ns=f.js_period_ns)
+        error, feedback = _error_feedback(cs_a)
+        gt = None
+        if self.gt is not None:
+            ga, gb = self.gt.span(lo - n, hi + n)
+            gt = self.gt.rows(ga, gb)
+        truth_pos, truth_vel, with_truth = _truth_at(
+            cs_t,
+            gt,
+            f.roles.gt_perm if gt is not None else [],
+            error,
+            period_ns=f.cs_period_ns,
+        )
+        if gt is not None:
+            self.no_truth += (wb - wa) - int(((with_truth >= wa) & (with_truth < wb)).sum())
+        for k in self.js_empty:
+            self.js_empty[k] = self.js_empty[k] and bool(np.isnan(js_a[k]).all())
+        self.dropped += js_t.size - rows_js.size
+        samples = self._tidy(
+            js_t[rows_js],
+            {
+                "position_rad": js_a["position"][rows_js],
+                "velocity_rad_s": js_a["velocity"][rows_js],
+                "effort_nm": js_a["effort"][rows_js],
+                "reference_position_rad": cs_a["reference_position"][rows_cs],
+                "reference_velocity_rad_s": cs_a["reference_velocity"][rows_cs],
+                "error_rad": error[rows_cs],
+                "commanded_effort_nm": cs_a["commanded_effort"][rows_cs],
+                "true_position_rad": truth_pos[rows_cs],
+                "true_velocity_rad_s": truth_vel[rows_cs],
+            },
+        )
+        w = slice(wa, wb)
+        states = self._tidy(
+            cs_t[w],
+            {
+                "reference_position_rad": cs_a["reference_position"][w],
+                "reference_velocity_rad_s": cs_a["reference_velocity"][w],
+                "feedback_position_rad": feedback[w],
+                "error_rad": error[w],
+                "commanded_effort_nm": cs_a["commanded_effort"][w],
+                "true_position_rad": truth_pos[w],
+                "true_velocity_rad_s": truth_vel[w],
+            },
+        )
+        if rows_js.size:
+            self.end_ns = max(self.end_ns, float(js_t[rows_js[-1]]))
+        if wb > wa:
+            self.end_ns = max(self.end_ns, float(cs_t[wb - 1]))
+        if samples.height or states.height:
+            self.count += 1
+            if self.sink is not None:
+                self.sink.window(samples, states)
+        self.kept.append(
+            (self._decimate(samples, self.pairs, 0), self._decimate(states, self.cs_rows, 1))
+        )
+        self.pairs += rows_js.size
+        self.cs_rows += wb - wa
+        self.js.drop_below(hi)
+        self.cs.drop_below(hi - n)
+        if self.gt is not None:
+            self.gt.drop_below(hi - n)
+
+    def _tidy(self, stamps: I64, columns: dict[str, F64]) -> pl.DataFrame:
+        return _tidy(
+            stamps, columns, names=self.f.roles.names, t0_ns=self.f.t0_ns, episode=self.f.episode
+        )
+
+    def _decimate(self, frame: pl.DataFrame, before: int, which: int) -> pl.DataFrame:
+        """Every k-th step of the recording (by its index ``before`` + row // joints); the
+        window's last step is held back in case it is the recording's last."""
+        j = max(len(self.f.roles.names), 1)
+        steps = frame.height // j
+        if not steps:
+            return frame
+        index = before + np.repeat(np.arange(steps), j)
+        keep = index % self.f.decimation == 0
+        self.last[which] = None if keep[-1] else frame.tail(j)
+        return frame.filter(pl.Series(keep))
+
+    def frames(self) -> tuple[pl.DataFrame, pl.DataFrame]:
+        """The kept (decimated) frames, the last step of each included."""
+        out = []
+        for which in (0, 1):
+            parts = [k[which] for k in self.kept]
+            last = self.last[which]
+            if last is not None:
+                parts.append(last)
+            out.append(pl.concat(parts, how="vertical"))
+        return out[0], out[1]
+
+
+class _Pass2(_Collector):
+    """Decodes the chosen topics only and hands each chosen joint list's rows on."""
+
+    def __init__(self, topics: dict[str, str], streams: dict[str, _Stream], windows: _Windows):
+        super().__init__(topics)
+        self.streams = streams  # topic -> its chosen stream
+        self.windows = windows
+        self.stream_names = {t: s.names for t, s in streams.items()}
+
+    def on_messages(
+        self, scan: McapScan | Db3Scan, channel: McapChannel, buf: bytes, starts: I64
+    ) -> None:
+        stream = self.streams.get(channel.topic)
+        if stream is None:
+            return
+        type_name, types = self.type_of(scan, channel)
+        dec = self.decoders.get(channel.topic)
+        if dec is None:
+            dec = self.decoders[channel.topic] = TopicDecoder(
+                channel.topic, type_name, types, _WANT[type_name]
+            )
+        try:
+            dec.add(buf, starts)
+        except DecodeError as err:
+            raise self.fail(str(err)) from err
+        for group in dec.groups:
+            stamps, arrays = group.take()
+            if group.names == stream.names:
+                stream.push(stamps, arrays)
+        self.windows.pump()
+
+
+def _refuse_unordered(stats: _StampStats, topic: str, limit: int) -> None:
+    if stats.back is None:
+        return
+    path, stamp, earlier = stats.back
+    raise RecordingError(
+        f"{path}: {topic} stamps go back in time across chunks ({stamp} ns after {earlier} ns); "
+        f"a recording above {limit / 2**20:g} MiB is read in windows, which needs each "
+        "topic's stamps in order from one batch of chunks to the next"
+    )
+
+
+def _end_ns(cs: _StampStats, js: _StampStats, js_period_ns: float) -> int:
+    """The last paired stamp: the last controller state, or a later joint state that
+    pairs with it (within half the joint-state period)."""
+    later = js.tail[js.tail <= cs.last + js_period_ns / 2]
+    return max(cs.last, int(later.max())) if later.size else cs.last
+
+
+def read_windowed(
+    source: Path, files: list[Path], options: ReadOptions, sink: WindowSink | None
+) -> Recording:
+    """Read ``source`` in two passes (module doc); ``sink`` receives the exact windows."""
+    from pipeline.log.reader import STREAM_ABOVE_BYTES
+
+    limit = STREAM_ABOVE_BYTES if options.stream_above_bytes is None else options.stream_above_bytes
+    mcap_path = files[0]
+    first = _Pass1(dict(options.topics))
+    scanned = _scan(files, first, salvage=options.salvage)
+    roles = _roles(first, scanned.present, mcap_path)
+    js_topic, cs_topic = roles.js_dec.topic, roles.cs_dec.topic
+    js_stats = first.stats[(js_topic, roles.js_group.names)]
+    cs_stats = first.stats[(cs_topic, roles.names)]
+    _refuse_unordered(js_stats, js_topic, limit)
+    _refuse_unordered(cs_stats, cs_topic, limit)
+    gt_topic = roles.chosen["ground_truth"]
+    gt_stats = first.stats[(str(gt_topic), roles.truth.names)] if roles.truth else None
+    if gt_stats is not None:
+        _refuse_unordered(gt_stats, str(gt_topic), limit)
+    raw_meta, settings, urdf, label_notes = _labels(first, source, options, roles.chosen)
+    js_period = js_stats.period_ns()
+    cs_period = cs_stats.period_ns()
+    steps = max(js_stats.count, cs_stats.count)
+    facts = _Facts(
+        roles=roles,
+        js_period_ns=js_period,
+        cs_period_ns=cs_period,
+        t0_ns=min(js_stats.first, cs_stats.first),
+        end_ns=_end_ns(cs_stats, js_stats, js_period),
+        episode=_episode_name(raw_meta, source),
+        decimation=max(1, math.ceil(steps / MAX_KEPT_STEPS)),
+        window_steps=options.window_steps or WINDOW_STEPS,
+    )
+    js = _Stream(roles.js_group.names, js_stats.last, cols=roles.js_cols)
+    cs = _Stream(roles.names, cs_stats.last)
+    gt = _Stream(roles.truth.names, gt_stats.last) if roles.truth and gt_stats else None
+    windows = _Windows(facts, js, cs, gt)
+    header_notes = _read_notes(scanned, roles)
+    empty = np.zeros(0, dtype=np.int64)
+    no_rows = np.zeros((0, len(roles.names)))
+    header = Recording(
+        source=source,
+        mcap_path=mcap_path,
+        sha256=scanned.sha256,
+        size_bytes=scanned.size,
+        metadata=raw_meta,
+        settings=settings,
+        joint_names=roles.names,
+        samples=windows._tidy(empty, dict.fromkeys(_SAMPLE_VALUES, no_rows)),
+        controller_states=windows._tidy(empty, dict.fromkeys(_CS_VALUES, no_rows)),
+        planned=_planned(first, roles.chosen["planned_trajectory"]),
+        robot_description=urdf,
+        topic_counts=dict(first.topic_counts),
+        decoded_messages=js_stats.count + cs_stats.count + (gt_stats.count if gt_stats else 0),
+        notes=tuple(header_notes + label_notes),
+        has_ground_truth=gt is not None,
+        salvaged=bool(scanned.salvaged),
+        decimation=facts.decimation,
+        controller_sample_count=cs_stats.count,
+        end_s=(facts.end_ns - facts.t0_ns) * 1e-9,
+        control_period_s=cs_period * 1e-9 if cs_stats.count > 1 else 0.0,
+    )
+    del first
+    if sink is not None:
+        sink.begin(header)
+    windows.sink = sink
+    streams = {js_topic: js, cs_topic: cs}
+    if gt is not None:
+        streams[str(gt_topic)] = gt
+    second = _Pass2(dict(options.topics), streams, windows)
+    again = _scan(files, second, salvage=options.salvage)
+    if again.sha256 != scanned.sha256:
+        raise RecordingError(f"{mcap_path}: the recording changed while it was being read")
+    windows.pump(final=True)
+    if windows.pairs == 0:
+        raise _no_pairs(mcap_path)
+    notes = [*header_notes, *_dropped_note(windows.dropped)]
+    notes += _empty_array_notes(
+        {k for k, empty_all in windows.js_empty.items() if empty_all}, js_topic, _JS_OPTIONAL
+    )
+    notes += label_notes
+    if gt is not None:
+        notes += _truth_note(windows.no_truth, cs_topic)
+    if windows.end_ns != facts.end_ns:  # more than _TAIL unpaired joint states at the end
+        notes.append(
+            f"the last paired stamp ({int(windows.end_ns)} ns) is not the one the first pass "
+            f"estimated ({facts.end_ns} ns): the final-window metrics used the estimate"
+        )
+    samples, states = windows.frames()
+    return replace(
+        header,
+        samples=samples,
+        controller_states=states,
+        notes=tuple(notes),
+        windows=windows.count,
+        sample_count=windows.pairs,
+        end_s=(windows.end_ns - facts.t0_ns) * 1e-9,
+    )
+
+
+_SAMPLE_VALUES = (
+    "position_rad",
+    "velocity_rad_s",
+    "effort_nm",
+    "reference_position_rad",
+    "reference_velocity_rad_s",
+    "error_rad",
+    "commanded_effort_nm",
+    "true_position_rad",
+    "true_velocity_rad_s",
+)
+_CS_VALUES = (
+    "reference_position_rad",
+    "reference_velocity_rad_s",
+    "feedback_position_rad",
+    "error_rad",
+    "commanded_effort_nm",
+    "true_position_rad",
+    "true_velocity_rad_s",
+)
+
+__all__ = ["MAX_KEPT_STEPS", "WINDOW_STEPS", "read_windowed"]
