@@ -8,33 +8,65 @@ toward the duplicated instants. We say so instead.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import polars as pl
 
 from pipeline.constants import TOPIC_CONTROLLER_STATE, TOPIC_JOINT_STATES
 from pipeline.log.reader import Recording
 
 
+@dataclass(frozen=True)
+class Duplicates:
+    """Stamps that occur more than once on a topic: how many, the extra copies, the first."""
+
+    stamps: int
+    extra: int
+    first_ns: int
+
+    def __add__(self, other: Duplicates) -> Duplicates:
+        """Of two time slices that share no stamp (windows of a long recording)."""
+        return Duplicates(
+            self.stamps + other.stamps, self.extra + other.extra, min(self.first_ns, other.first_ns)
+        )
+
+
+def duplicate_stamps(frame: pl.DataFrame) -> Duplicates | None:
+    """The (stamp, joint) pairs of a tidy frame that occur more than once (None: none)."""
+    if frame.is_empty():
+        return None
+    dup = (
+        frame.group_by("stamp_ns", "joint")
+        .len()
+        .filter(pl.col("len") > 1)
+        .group_by("stamp_ns")
+        .agg(pl.col("len").max())
+        .sort("stamp_ns")
+    )
+    if dup.is_empty():
+        return None
+    return Duplicates(dup.height, int((dup["len"] - 1).sum()), int(dup["stamp_ns"][0]))
+
+
+def duplicate_note(topic: str, dup: Duplicates) -> str:
+    return (
+        f"{topic}: {dup.stamps} stamp(s) occur more than once ({dup.extra} duplicate "
+        f"message(s), first at stamp {dup.first_ns * 1e-9:.6f} s); metrics count every copy"
+    )
+
+
 def duplicate_stamp_notes(rec: Recording) -> list[str]:
-    """One note per control-rate topic that has a (stamp, joint) more than once."""
+    """One note per control-rate topic that has a (stamp, joint) more than once.
+
+    A recording read in windows (``rec.windows``) has decimated frames: its notes were
+    taken per window as it was read (:func:`duplicate_stamps`), so none are added here.
+    """
+    if rec.windows:
+        return []
     notes: list[str] = []
     frames = ((TOPIC_JOINT_STATES, rec.samples), (TOPIC_CONTROLLER_STATE, rec.controller_states))
     for topic, frame in frames:
-        if frame.is_empty():
-            continue
-        dup = (
-            frame.group_by("stamp_ns", "joint")
-            .len()
-            .filter(pl.col("len") > 1)
-            .group_by("stamp_ns")
-            .agg(pl.col("len").max())
-            .sort("stamp_ns")
-        )
-        if dup.is_empty():
-            continue
-        extra = int((dup["len"] - 1).sum())
-        first_s = int(dup["stamp_ns"][0]) * 1e-9
-        notes.append(
-            f"{topic}: {dup.height} stamp(s) occur more than once ({extra} duplicate "
-            f"message(s), first at stamp {first_s:.6f} s); metrics count every copy"
-        )
+        dup = duplicate_stamps(frame)
+        if dup is not None:
+            notes.append(duplicate_note(topic, dup))
     return notes

@@ -56,7 +56,10 @@ def group_key(scenario: str, campaign: str | None, condition: str | None) -> str
 
 
 def _period_s(rec: Recording) -> float:
-    """Median ``/controller_state`` period [s] (0 when there is one message)."""
+    """Median ``/controller_state`` period [s] (0 when there is one message): the
+    recording's where the reader gives it (decimated frames), else the frames'."""
+    if rec.control_period_s is not None:
+        return rec.control_period_s
     n = max(len(rec.joint_names), 1)
     t = rec.controller_states.get_column("time_s").to_numpy()[::n]
     return float(np.median(np.diff(t))) if t.size > 1 else 0.0
@@ -83,7 +86,9 @@ def episode_table(
     ``motion_end_s`` is when the reference stops (null if unknown); ``end_s``
     the last sample's time [s] (either control-rate topic), both from the recording's
     start; ``motion_completed`` see :func:`motion_completed`; ``samples`` and
-    ``controller_samples`` count ``/joint_states`` and ``/controller_state`` messages;
+    ``controller_samples`` count ``/joint_states`` and ``/controller_state`` messages
+    (the recording's ``end_s``, ``sample_count`` and ``controller_sample_count`` where the
+    reader gives them: a long recording's frames are decimated);
     ``error_source``, ``motion_start_s`` (the pre-roll cut), ``start_abs_error_rad`` and
     ``start_abs_effort_nm`` (the worst joint at the motion start) come from ``views``
     (the protocol applied to each recording; null without one); ``campaign`` and
@@ -97,6 +102,13 @@ def episode_table(
         ends = [float(x.max()) for x in (times, cs_times) if x.len()]  # type: ignore[arg-type]
         end_s = max(ends) if ends else None
         n_joints = max(len(rec.joint_names), 1)
+        samples = times.len() // n_joints
+        controller_samples = cs_times.len() // n_joints
+        if rec.decimation > 1 or rec.windows:
+            end_s = rec.end_s
+            samples = rec.sample_count if rec.sample_count is not None else samples
+            if rec.controller_sample_count is not None:
+                controller_samples = rec.controller_sample_count
         rows.append(
             {
                 "episode": rec.episode,
@@ -110,11 +122,11 @@ def episode_table(
                 "salvage_lost_pct": rec.salvage_lost_pct,
                 "motion_end_s": rec.motion_end_s,
                 "end_s": end_s,
-                "samples": times.len() // n_joints,
+                "samples": samples,
                 "source": str(rec.source),
                 "sha256": rec.sha256,
                 "motion_completed": motion_completed(rec, end_s),
-                "controller_samples": cs_times.len() // n_joints,
+                "controller_samples": controller_samples,
                 **_protocol_columns((views or {}).get(rec.episode)),
             }
         )

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import polars as pl
@@ -101,35 +102,102 @@ def _from_motion_start(frame: pl.DataFrame, start_s: float, eps_s: float) -> pl.
     )
 
 
-def protocol_view(rec: Recording) -> tuple[ProtocolView, list[str]]:
-    """Apply the protocol to ``rec`` (see the module doc); returns the view and notes."""
+@dataclass(frozen=True)
+class Protocol:
+    """The protocol's frame transform for one recording, applicable to any time slice of
+    its frames (a window of a long recording) as to the whole.
+
+    Attributes:
+        motion_start_s: the pre-roll cut [s] (0: none).
+        eps_s: half a control period [s]: a sample this close before the motion start is
+            the motion start's.
+    """
+
+    motion_start_s: float
+    eps_s: float
+
+    def frames(
+        self, samples: pl.DataFrame, controller_states: pl.DataFrame
+    ) -> tuple[pl.DataFrame, pl.DataFrame]:
+        """``samples`` and ``controller_states`` cut at the motion start, time from it, true
+        state where recorded (every frame gets the same columns, ``measured_*`` beside the
+        ones metrics use, so recordings with and without ground truth concatenate)."""
+        start, eps = self.motion_start_s, self.eps_s
+        return (
+            _from_motion_start(_true_state(samples, error=True), start, eps),
+            _from_motion_start(_true_state(controller_states, error=True), start, eps),
+        )
+
+
+def protocol_of(rec: Recording) -> tuple[Protocol, EpisodeSettings | None, list[str]]:
+    """The protocol for ``rec``, its typed settings and the notes about them.
+
+    The control period is the recording's (``rec.control_period_s``) where the reader
+    gives it (a long recording read in windows), else the frames' median step.
+    """
     settings, note = typed_settings(rec)
-    notes = [note] if note else []
     start_s = settings.protocol.motion_start_s if settings is not None else 0.0
-    source = ERROR_SOURCE_TRUE if rec.has_ground_truth else ERROR_SOURCE_MEASURED
-    # every frame gets the same columns (measured_* beside the ones metrics use), so
-    # recordings with and without ground truth concatenate
-    cs = _true_state(rec.controller_states, error=True)
-    samples = _true_state(rec.samples, error=True)
-    n = max(len(rec.joint_names), 1)
-    times = cs.get_column("time_s").to_numpy()[::n]
-    eps_s = 0.5 * float(np.median(np.diff(times))) if times.size > 1 else 1e-9
-    cs = _from_motion_start(cs, start_s, eps_s)
-    samples = _from_motion_start(samples, start_s, eps_s)
-    first = cs.filter(pl.col("time_s") == pl.col("time_s").min()) if cs.height else cs
+    if rec.control_period_s is not None:
+        eps_s = 0.5 * rec.control_period_s if rec.control_period_s > 0 else 1e-9
+    else:
+        n = max(len(rec.joint_names), 1)
+        times = rec.controller_states.get_column("time_s").to_numpy()[::n]
+        eps_s = 0.5 * float(np.median(np.diff(times))) if times.size > 1 else 1e-9
+    return Protocol(start_s, eps_s), settings, [note] if note else []
+
+
+def start_state(
+    samples: pl.DataFrame, controller_states: pl.DataFrame
+) -> tuple[float | None, float | None]:
+    """max over joints of |e| and of |applied effort| at the first time of protocol-applied
+    frames (None where a frame is empty or has no value)."""
+    first = (
+        controller_states.filter(pl.col("time_s") == pl.col("time_s").min())
+        if controller_states.height
+        else controller_states
+    )
     start_err = first.get_column("error_rad").abs().max() if first.height else None
     first_js = (
         samples.filter(pl.col("time_s") == pl.col("time_s").min()) if samples.height else samples
     )
     start_effort = first_js.get_column("effort_nm").abs().max() if first_js.height else None
+    return (
+        float(start_err) if isinstance(start_err, int | float) else None,
+        float(start_effort) if isinstance(start_effort, int | float) else None,
+    )
+
+
+def protocol_view(
+    rec: Recording,
+    *,
+    start: tuple[float | None, float | None] | None = None,
+    counts: tuple[int, int] | None = None,
+) -> tuple[ProtocolView, list[str]]:
+    """Apply the protocol to ``rec`` (see the module doc); returns the view and notes.
+
+    For a recording read in windows (decimated frames), ``start`` (the exact
+    :func:`start_state`) and ``counts`` (``/joint_states`` and ``/controller_state``
+    messages after the cut) come from its windows; its ``end_s`` is moved to the motion
+    start's time origin.
+    """
+    protocol, settings, notes = protocol_of(rec)
+    samples, cs = protocol.frames(rec.samples, rec.controller_states)
+    start_err, start_effort = start if start is not None else start_state(samples, cs)
+    start_s = protocol.motion_start_s
+    moved: dict[str, Any] = {}
+    if rec.end_s is not None:
+        end_s = rec.end_s - start_s if start_s > 0 else rec.end_s
+        moved["end_s"] = end_s if end_s >= -protocol.eps_s else None
+    if counts is not None:
+        moved["sample_count"], moved["controller_sample_count"] = counts
     view = ProtocolView(
         recording=dataclasses.replace(
-            rec, controller_states=cs, samples=samples, notes=(*rec.notes, *notes)
+            rec, controller_states=cs, samples=samples, notes=(*rec.notes, *notes), **moved
         ),
         settings=settings,
-        error_source=source,
+        error_source=ERROR_SOURCE_TRUE if rec.has_ground_truth else ERROR_SOURCE_MEASURED,
         motion_start_s=start_s,
-        start_abs_error_rad=float(start_err) if isinstance(start_err, int | float) else None,
-        start_abs_effort_nm=float(start_effort) if isinstance(start_effort, int | float) else None,
+        start_abs_error_rad=start_err,
+        start_abs_effort_nm=start_effort,
     )
     return view, notes

@@ -72,6 +72,13 @@ WINDOW_STEPS = 20_000
 _TAIL = 4096
 
 I64 = NDArray[np.int64]
+# Stamps are compared as integers: a float64 cannot tell wall-clock nanoseconds apart.
+_LOW = int(np.iinfo(np.int64).min)
+_HIGH = int(np.iinfo(np.int64).max)
+
+
+def _clamp(stamp: int) -> int:
+    return min(max(stamp, _LOW), _HIGH)
 
 
 @dataclass
@@ -143,7 +150,7 @@ class _Stream:
     cols: list[int] | None = None  # columns in controller joint order
     stamps: I64 = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     arrays: dict[str, F64] = field(default_factory=dict)
-    high: float = -math.inf  # largest stamp delivered so far
+    high: int = _LOW  # largest stamp delivered so far
 
     def push(self, stamps: I64, arrays: dict[str, F64]) -> None:
         if not stamps.size:
@@ -155,20 +162,21 @@ class _Stream:
         for k, v in arrays.items():
             old = self.arrays.get(k)
             self.arrays[k] = v[order] if old is None else np.concatenate([old, v[order]])
-        self.high = max(self.high, float(stamps.max()))
+        self.high = max(self.high, int(stamps.max()))
 
-    def complete_to(self) -> float:
-        """Every row below this stamp has been delivered."""
-        return math.inf if self.high >= self.last else self.high
+    def complete_to(self) -> int:
+        """Every row below this stamp has been delivered (``_HIGH``: every row)."""
+        return _HIGH if self.high >= self.last else self.high
 
-    def span(self, lo: float, hi: float) -> tuple[int, int]:
+    def span(self, lo: int, hi: int) -> tuple[int, int]:
+        lo, hi = _clamp(lo), _clamp(hi)
         return int(np.searchsorted(self.stamps, lo)), int(np.searchsorted(self.stamps, hi))
 
     def rows(self, a: int, b: int) -> tuple[I64, dict[str, F64]]:
         return self.stamps[a:b], {k: v[a:b] for k, v in self.arrays.items()}
 
-    def drop_below(self, stamp: float) -> None:
-        a = int(np.searchsorted(self.stamps, stamp))
+    def drop_below(self, stamp: int) -> None:
+        a = int(np.searchsorted(self.stamps, _clamp(stamp)))
         self.stamps = self.stamps[a:]
         self.arrays = {k: v[a:] for k, v in self.arrays.items()}
 
@@ -193,26 +201,26 @@ class _Windows:
     def __init__(self, facts: _Facts, js: _Stream, cs: _Stream, gt: _Stream | None) -> None:
         self.f = facts
         self.js, self.cs, self.gt = js, cs, gt
-        self.margin = max(facts.js_period_ns, facts.cs_period_ns)
-        self.lo = -math.inf
+        self.margin = math.ceil(max(facts.js_period_ns, facts.cs_period_ns))
+        self.lo = _LOW
         self.count = 0
         self.pairs = 0  # /joint_states rows paired so far
         self.cs_rows = 0
         self.dropped = 0
         self.no_truth = 0
         self.js_empty = {k: True for k in _JS_OPTIONAL}
-        self.end_ns = -math.inf
+        self.end_ns: int | None = None  # the last paired stamp so far
         self.kept: list[tuple[pl.DataFrame, pl.DataFrame]] = []
         self.last: list[pl.DataFrame | None] = [None, None]  # unkept last steps
         self.sink: WindowSink | None = None
 
     def pump(self, *, final: bool = False) -> None:
         while True:
-            limit = math.inf
+            limit = _HIGH
             if not final:
-                limit = min(self.js.complete_to(), self.cs.complete_to() - self.margin)
+                limit = min(self.js.complete_to(), self._less(self.cs.complete_to()))
                 if self.gt is not None:
-                    limit = min(limit, self.gt.complete_to() - self.margin)
+                    limit = min(limit, self._less(self.gt.complete_to()))
             a, b = self.cs.span(self.lo, limit)
             steps = self.f.window_steps
             cut = a + steps
@@ -220,17 +228,21 @@ class _Windows:
                 # one stamp repeated over a whole window: cut after its last copy
                 cut = int(np.searchsorted(self.cs.stamps, self.cs.stamps[a], side="right"))
             if cut < b:
-                hi = float(self.cs.stamps[cut])
-            elif final or limit == math.inf:
-                hi = math.inf
+                hi = int(self.cs.stamps[cut])
+            elif limit == _HIGH:
+                hi = _HIGH
             else:
                 return
             self._emit(self.lo, hi)
             self.lo = hi
-            if math.isinf(hi):
+            if hi == _HIGH:
                 return
 
-    def _emit(self, lo: float, hi: float) -> None:
+    def _less(self, complete_to: int) -> int:
+        """A topic complete to a stamp pairs rows up to a margin before it."""
+        return _HIGH if complete_to == _HIGH else complete_to - self.margin
+
+    def _emit(self, lo: int, hi: int) -> None:
         f, n = self.f, self.margin
         ja, jb = self.js.span(lo, hi)
         js_t, js_a = self.js.rows(ja, jb)
@@ -286,10 +298,10 @@ class _Windows:
                 "true_velocity_rad_s": truth_vel[w],
             },
         )
-        if rows_js.size:
-            self.end_ns = max(self.end_ns, float(js_t[rows_js[-1]]))
-        if wb > wa:
-            self.end_ns = max(self.end_ns, float(cs_t[wb - 1]))
+        ends = [int(js_t[rows_js].max())] if rows_js.size else []
+        ends += [int(cs_t[wb - 1])] if wb > wa else []
+        if ends:
+            self.end_ns = max(ends) if self.end_ns is None else max(self.end_ns, *ends)
         if samples.height or states.height:
             self.count += 1
             if self.sink is not None:
@@ -379,7 +391,7 @@ def _refuse_unordered(stats: _StampStats, topic: str, limit: int) -> None:
 def _end_ns(cs: _StampStats, js: _StampStats, js_period_ns: float) -> int:
     """The last paired stamp: the last controller state, or a later joint state that
     pairs with it (within half the joint-state period)."""
-    later = js.tail[js.tail <= cs.last + js_period_ns / 2]
+    later = js.tail[(js.tail - cs.last) <= js_period_ns / 2]
     return max(cs.last, int(later.max())) if later.size else cs.last
 
 
@@ -467,9 +479,10 @@ def read_windowed(
     notes += label_notes
     if gt is not None:
         notes += _truth_note(windows.no_truth, cs_topic)
-    if windows.end_ns != facts.end_ns:  # more than _TAIL unpaired joint states at the end
+    end_ns = facts.end_ns if windows.end_ns is None else windows.end_ns
+    if end_ns != facts.end_ns:  # more than _TAIL unpaired joint states at the end
         notes.append(
-            f"the last paired stamp ({int(windows.end_ns)} ns) is not the one the first pass "
+            f"the last paired stamp ({end_ns} ns) is not the one the first pass "
             f"estimated ({facts.end_ns} ns): the final-window metrics used the estimate"
         )
     samples, states = windows.frames()
@@ -480,7 +493,7 @@ def read_windowed(
         notes=tuple(notes),
         windows=windows.count,
         sample_count=windows.pairs,
-        end_s=(windows.end_ns - facts.t0_ns) * 1e-9,
+        end_s=(end_ns - facts.t0_ns) * 1e-9,
     )
 
 

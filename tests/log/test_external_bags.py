@@ -63,9 +63,13 @@ def write_external_bag(
     joints: tuple[str, str, str] = JOINTS,
     robot_name: str = "my_arm",
     urdf_effort_nm: tuple[float, float, float] = (40.0, 50.0, 60.0),
+    js_offset_ns: int = 0,
+    js_every: int = 1,
 ) -> dict[str, np.ndarray]:
     """A Humble or Jazzy robot's bag: JTC state + joint_states (arm+gripper in shuffled order,
-    plus a gripper-only publisher at a lower rate) + a URDF."""
+    plus a gripper-only publisher at a lower rate) + a URDF. ``js_offset_ns`` stamps the
+    joint states that much after the controller state they go with; ``js_every``: joint
+    states every k-th control step only."""
     store = store_for(distro)
     s = signals(t0_ns)
     T = store.types
@@ -145,9 +149,14 @@ def write_external_bag(
                 [0.0 if j == "gripper" else s["effort"][k][joints.index(j)] for j in js_order]
             )
             js = JS(
-                header=header(ns), name=list(js_order), position=pos, velocity=pos * 0, effort=eff
+                header=header(ns + js_offset_ns),
+                name=list(js_order),
+                position=pos,
+                velocity=pos * 0,
+                effort=eff,
             )
-            w.write(c_js, ns, store.serialize_cdr(js, JS.__msgtype__))
+            if k % js_every == 0:
+                w.write(c_js, ns + js_offset_ns, store.serialize_cdr(js, JS.__msgtype__))
             if with_gripper and k % 5 == 0:  # a gripper driver publishing its own joint at 100 Hz
                 g = JS(
                     header=header(ns + 1000),
