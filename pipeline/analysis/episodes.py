@@ -104,11 +104,12 @@ def episode_table(
         n_joints = max(len(rec.joint_names), 1)
         samples = times.len() // n_joints
         controller_samples = cs_times.len() // n_joints
-        if rec.decimation > 1 or rec.windows:
+        if rec.end_s is not None:
             end_s = rec.end_s
-            samples = rec.sample_count if rec.sample_count is not None else samples
-            if rec.controller_sample_count is not None:
-                controller_samples = rec.controller_sample_count
+        if rec.sample_count is not None:
+            samples = rec.sample_count
+        if rec.controller_sample_count is not None:
+            controller_samples = rec.controller_sample_count
         rows.append(
             {
                 "episode": rec.episode,
