@@ -16,7 +16,9 @@
   rows the whole read has in that interval) go to a :class:`~pipeline.log.reader.WindowSink`;
   every k-th control step is kept for the returned :class:`~pipeline.log.reader.Recording`.
 
-Memory: one window, one batch of chunks and what the sink keeps.
+Memory: one window, one batch of chunks and what the sink keeps, as long as the file holds
+the topics interleaved in time (as recorders write them); a topic stored long after the
+others is buffered until the others reach it (correct, not bounded).
 
 Stamps out of order: within a batch of chunks they are sorted, as the whole read sorts;
 a stamp that goes back behind an earlier batch of the same topic and joint list is

@@ -25,13 +25,37 @@ import polars as pl
 from numpy.typing import NDArray
 
 from pipeline.analysis.campaign import TABLE_DIR, campaign_tables
-from pipeline.analysis.checks import duplicate_stamp_notes
+from pipeline.analysis.checks import (
+    Duplicates,
+    duplicate_note,
+    duplicate_stamp_notes,
+    duplicate_stamps,
+)
 from pipeline.analysis.episodes import episode_table, limits_table, shown_status
-from pipeline.analysis.metrics import check_baseline, comparisons, joint_metrics
-from pipeline.analysis.protocol import ProtocolView, protocol_view
+from pipeline.analysis.metrics import (
+    check_baseline,
+    comparisons,
+    finish_metrics,
+    joint_metrics,
+    metric_partials,
+)
+from pipeline.analysis.protocol import (
+    Protocol,
+    ProtocolView,
+    protocol_of,
+    protocol_view,
+    start_state,
+)
+from pipeline.constants import TOPIC_CONTROLLER_STATE, TOPIC_JOINT_STATES
 from pipeline.errors import PipelineError, RecordingError, ReportError
 from pipeline.fsutil import OutputLock, remove_stale
-from pipeline.log.reader import ReadOptions, Recording, find_recordings, read_recording
+from pipeline.log.reader import (
+    ReadOptions,
+    Recording,
+    WindowSink,
+    find_recordings,
+    read_recording,
+)
 from pipeline.report.campaigns import CampaignSection, campaign_section
 from pipeline.report.figures import (
     FIGURES_DIR,
@@ -82,13 +106,15 @@ def read_all(
     progress: Progress = _noop,
     options: ReadOptions | None = None,
     measure: Callable[[Recording], Recording] | None = None,
+    sink: WindowSink | None = None,
 ) -> tuple[list[Recording], list[tuple[str, str]]]:
     """Read every recording under ``recordings_dir`` (with ``options`` for bags we did not
     write: remaps, salvage, labels).
 
     ``measure``, when given, is applied to each recording as soon as it is read and its
     result kept instead (the report computes metrics there and lets go of the frames it no
-    longer needs, so memory does not grow with the samples of every episode).
+    longer needs, so memory does not grow with the samples of every episode); ``sink``
+    receives the windows of a long recording as it is read (:func:`read_recording`).
 
     Raises:
         ReportError: no such folder, or nothing in it; duplicate episode names.
@@ -109,7 +135,7 @@ def read_all(
     for k, source in enumerate(sources):
         progress("reading recordings", k, len(sources))
         try:
-            rec = read_recording(source, options)
+            rec = read_recording(source, options, sink=sink)
         except RecordingError as err:
             if not skip_bad:
                 raise RecordingError(f"{err} (use --skip-bad to report without it)") from err
@@ -286,6 +312,7 @@ def _run_report_locked(
         progress=progress,
         options=options,
         measure=measured.add,
+        sink=measured,
     )
     episodes = pl.concat([measured.rows[r.episode] for r in recordings], how="vertical")
     check_baseline(episodes, baseline)
@@ -353,25 +380,100 @@ def _run_report_locked(
 BAND_POINTS = 250
 
 
+class _Streamed:
+    """A long recording's windows as they are read: the protocol applied to each, their
+    partial metrics, counts and duplicate stamps, and the exact state at the motion start."""
+
+    def __init__(self, header: Recording) -> None:
+        self.protocol: Protocol = protocol_of(header)[0]
+        view, _ = protocol_view(header)
+        # the episode row as far as the metrics need it (motion end, end, completed)
+        self.row = episode_table([view.recording], {header.episode: view})
+        self.limits = limits_table([header])
+        self.joints = max(len(header.joint_names), 1)
+        self.partials: list[pl.DataFrame] = []
+        self.counts = [0, 0]
+        self.start: list[float | None] = [None, None]
+        self.started = [False, False]
+        self.duplicates: dict[str, Duplicates] = {}
+        self.empty = self.protocol.frames(header.samples, header.controller_states)
+
+    def window(self, samples: pl.DataFrame, controller_states: pl.DataFrame) -> None:
+        js, cs = self.protocol.frames(samples, controller_states)
+        first = start_state(js, cs)
+        for k, (frame, value) in enumerate(((cs, first[0]), (js, first[1]))):
+            if frame.height and not self.started[k]:
+                self.started[k], self.start[k] = True, value
+        self.counts[0] += js.height // self.joints
+        self.counts[1] += cs.height // self.joints
+        for topic, frame in ((TOPIC_JOINT_STATES, js), (TOPIC_CONTROLLER_STATE, cs)):
+            dup = duplicate_stamps(frame)
+            if dup is not None:
+                old = self.duplicates.get(topic)
+                self.duplicates[topic] = dup if old is None else old + dup
+        if js.height or cs.height:
+            self.partials.append(metric_partials(js, cs, self.row, self.limits))
+
+    def view(self, raw: Recording) -> tuple[ProtocolView, pl.DataFrame]:
+        """The recording's view (decimated frames, exact counts and start state) and its
+        metrics over every window."""
+        view, _ = protocol_view(
+            raw, start=(self.start[0], self.start[1]), counts=(self.counts[0], self.counts[1])
+        )
+        rec = view.recording
+        span = rec.end_s + view.motion_start_s if rec.end_s is not None else 0.0
+        length = f"{span / 3600:.3g}-hour" if span >= 3600 else f"{span / 60:.3g}-minute"
+        topics = (TOPIC_JOINT_STATES, TOPIC_CONTROLLER_STATE)
+        notes = [duplicate_note(t, self.duplicates[t]) for t in topics if t in self.duplicates]
+        notes.append(
+            f"{length} recording: metrics over all {self.counts[1]:,} controller-state and "
+            f"{self.counts[0]:,} joint-state samples, streamed in {rec.windows} windows; "
+            f"figures, series CSVs and the .rrd show every {rec.decimation}-th sample"
+        )
+        view = dataclasses.replace(
+            view, recording=dataclasses.replace(rec, notes=(*rec.notes, *notes))
+        )
+        # nothing after the motion start: the metrics of empty frames, as a whole read has
+        parts = self.partials or [metric_partials(*self.empty, self.row, self.limits)]
+        return view, finish_metrics(pl.concat(parts, how="vertical_relaxed"))
+
+
 class _Measured:
     """What the report keeps of each recording as it is read: its protocol view, episode
     row and metrics; a campaign episode's frames are let go (only a bounded sample of
-    them is drawn, re-read afterwards) after keeping a thinned error series."""
+    them is drawn, re-read afterwards) after keeping a thinned error series.
+
+    It is also the reader's :class:`WindowSink`: a long recording's metrics are computed
+    window by window as it is read (:class:`_Streamed`); its frames are decimated."""
 
     def __init__(self) -> None:
         self.views: dict[str, ProtocolView] = {}
         self.rows: dict[str, pl.DataFrame] = {}
         self.metrics: dict[str, pl.DataFrame] = {}
         self.errors: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
+        self.streamed: _Streamed | None = None
+
+    def begin(self, header: Recording) -> None:
+        self.streamed = _Streamed(header)
+
+    def window(self, samples: pl.DataFrame, controller_states: pl.DataFrame) -> None:
+        assert self.streamed is not None
+        self.streamed.window(samples, controller_states)
 
     def add(self, raw: Recording) -> Recording:
-        view, _ = protocol_view(raw)
-        rec = view.recording
-        row = episode_table([rec], {rec.episode: view})
+        streamed, self.streamed = self.streamed, None
+        if raw.windows:
+            assert streamed is not None
+            view, metrics = streamed.view(raw)
+            rec = view.recording
+            row = episode_table([rec], {rec.episode: view})
+        else:
+            view, _ = protocol_view(raw)
+            rec = view.recording
+            row = episode_table([rec], {rec.episode: view})
+            metrics = joint_metrics(rec.samples, rec.controller_states, row, limits_table([rec]))
         self.rows[rec.episode] = row
-        self.metrics[rec.episode] = joint_metrics(
-            rec.samples, rec.controller_states, row, limits_table([rec])
-        )
+        self.metrics[rec.episode] = metrics
         if view.settings is not None and view.settings.campaign is not None:
             t = cs_times_s(rec)
             step = max(1, int(np.ceil(t.size / BAND_POINTS)))
@@ -391,7 +493,19 @@ class _Measured:
         recordings = list(data.recordings)
         for k, rec in enumerate(recordings):
             if rec.episode in data.sample_roles and rec.episode in self.errors:
-                view, _ = protocol_view(read_recording(rec.source, options))
+                raw = read_recording(rec.source, options)
+                if raw.windows:  # as measured from its windows, with the notes they gave
+                    was = self.views[rec.episode]
+                    view, _ = protocol_view(
+                        raw,
+                        start=(was.start_abs_error_rad, was.start_abs_effort_nm),
+                        counts=(rec.sample_count or 0, rec.controller_sample_count or 0),
+                    )
+                    view = dataclasses.replace(
+                        view, recording=dataclasses.replace(view.recording, notes=rec.notes)
+                    )
+                else:
+                    view, _ = protocol_view(raw)
                 self.views[rec.episode] = view
                 recordings[k] = view.recording
         return dataclasses.replace(data, recordings=tuple(recordings), protocol=self.views)
