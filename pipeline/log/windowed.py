@@ -429,7 +429,7 @@ def read_windowed(
         end_ns=_end_ns(cs_stats, js_stats, js_period),
         episode=_episode_name(raw_meta, source),
         decimation=max(1, math.ceil(steps / MAX_KEPT_STEPS)),
-        window_steps=options.window_steps or WINDOW_STEPS,
+        window_steps=options.window_steps if options.window_steps > 0 else WINDOW_STEPS,
     )
     js = _Stream(roles.js_group.names, js_stats.last, cols=roles.js_cols)
     cs = _Stream(roles.names, cs_stats.last)
