@@ -162,8 +162,8 @@ def test_reading_and_measuring_a_long_recording_holds_a_window_not_the_recording
     ur5: RobotSpec, tmp_path: Path
 ) -> None:
     # 10 s and 40 s at 1 kHz in windows of 1 s: the peak RSS of read + protocol + metrics
-    # must not grow with the length (measured: +4 MB; read whole, +100 MB from one to the
-    # other: docs/BENCHMARKS.md "Memory of long bags")
+    # must not grow with the length (measured: +1.4 MB; read whole: +87 MB, so the margin
+    # tells the two apart; docs/BENCHMARKS.md "Memory of long bags")
     peaks = []
     for steps in (10_000, 40_000):
         result, planned = analytic_episode(ur5, n_steps=steps)
