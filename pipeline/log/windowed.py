@@ -407,7 +407,7 @@ def read_windowed(
     mcap_path = files[0]
     first = _Pass1(dict(options.topics))
     scanned = _scan(files, first, salvage=options.salvage)
-    roles = _roles(first, scanned.present, mcap_path)
+    roles = _roles(first, scanned.present, mcap_path, scanned.salvaged)
     js_topic, cs_topic = roles.js_dec.topic, roles.cs_dec.topic
     js_stats = first.stats[(js_topic, roles.js_group.names)]
     cs_stats = first.stats[(cs_topic, roles.names)]
@@ -417,7 +417,9 @@ def read_windowed(
     gt_stats = first.stats[(str(gt_topic), roles.truth.names)] if roles.truth else None
     if gt_stats is not None:
         _refuse_unordered(gt_stats, str(gt_topic), limit)
-    raw_meta, settings, urdf, label_notes = _labels(first, source, options, roles.chosen)
+    raw_meta, settings, urdf, label_notes, ours = _labels(
+        first, source, options, roles.chosen, roles.names
+    )
     js_period = js_stats.period_ns()
     cs_period = cs_stats.period_ns()
     steps = max(js_stats.count, cs_stats.count)
@@ -435,7 +437,7 @@ def read_windowed(
     cs = _Stream(roles.names, cs_stats.last)
     gt = _Stream(roles.truth.names, gt_stats.last) if roles.truth and gt_stats else None
     windows = _Windows(facts, js, cs, gt)
-    header_notes = _read_notes(scanned, roles)
+    header_notes, lost_pct = _read_notes(scanned, roles)
     empty = np.zeros(0, dtype=np.int64)
     no_rows = np.zeros((0, len(roles.names)))
     header = Recording(
@@ -455,6 +457,8 @@ def read_windowed(
         notes=tuple(header_notes + label_notes),
         has_ground_truth=gt is not None,
         salvaged=bool(scanned.salvaged),
+        salvage_lost_pct=lost_pct,
+        armlab_metadata=ours,
         decimation=facts.decimation,
         controller_sample_count=cs_stats.count,
         end_s=(facts.end_ns - facts.t0_ns) * 1e-9,
