@@ -17,6 +17,7 @@ from pipeline.analysis.aggregate import (
     runs_per_controller,
 )
 from pipeline.analysis.checks import duplicate_stamp_notes
+from pipeline.analysis.episodes import comparable
 from pipeline.analysis.protocol import ProtocolView
 from pipeline.log.reader import Recording
 from pipeline.report.colors import controller_colors
@@ -162,7 +163,8 @@ class ReportData:
             if grp.height <= SHOW_ALL_UP_TO:
                 roles.update(dict.fromkeys(grp["episode"].to_list(), ""))
                 continue
-            ok = grp.filter((pl.col("status") == "ok") & pl.col("score").is_not_null())
+            # a salvaged episode cut before its motion end is neither a median nor a worst run
+            ok = grp.filter(comparable(grp) & pl.col("score").is_not_null())
             ok = ok.sort("score", "episode")
             if ok.height:
                 roles[ok["episode"][(ok.height - 1) // 2]] = "median"
