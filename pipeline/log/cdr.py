@@ -246,9 +246,11 @@ def time_value(stamp_ns: int) -> dict[str, int]:
 class _Walk:
     """Walks one CDR message, recording where each numeric leaf and string sits."""
 
-    __slots__ = ("buf", "check", "end", "endian", "leaves", "pos", "texts", "types")
+    __slots__ = (
+        "align", "buf", "check", "end", "endian", "leaves", "pos", "repeat", "texts", "types"
+    )  # fmt: skip
 
-    def __init__(self, types: MsgTypes, buf: bytes | memoryview) -> None:
+    def __init__(self, types: MsgTypes, buf: bytes | memoryview, *, repeat: bool = True) -> None:
         if len(buf) < 4:
             raise ValueError("shorter than the CDR encapsulation header")
         kind = buf[1]
@@ -262,8 +264,20 @@ class _Walk:
         self.leaves: dict[str, Leaf] = {}
         self.texts: dict[str, str | tuple[str, ...]] = {}
         self.check: list[tuple[int, int]] = []
+        self.align = 1  # the largest alignment applied so far [bytes]
+        self.repeat = repeat
+
+    def _sub(self) -> _Walk:
+        """A walker over the same bytes from here, with its own (empty) records."""
+        sub = _Walk.__new__(_Walk)
+        sub.endian, sub.types, sub.buf, sub.end, sub.pos = (
+            self.endian, self.types, self.buf, self.end, self.pos
+        )  # fmt: skip
+        sub.leaves, sub.texts, sub.check, sub.align, sub.repeat = {}, {}, [], 1, self.repeat
+        return sub
 
     def _u32(self, structural: bool = True) -> int:
+        self.align = max(self.align, 4)
         self.pos = _aligned(self.pos, 4)
         if self.pos + 4 > self.end:
             raise ValueError("message ends inside a length field")
@@ -291,6 +305,7 @@ class _Walk:
                 dtype = PRIMITIVES[f.base]
                 size = int(dtype[1])
                 if count:
+                    self.align = max(self.align, min(size, 8))
                     self.pos = _aligned(self.pos, size)
                 if self.pos + size * count > self.end:
                     raise ValueError(f"message ends inside field {path}")
@@ -303,22 +318,91 @@ class _Walk:
                 self.texts[path] = values[0] if f.array is None else values
             elif f.array is None:
                 self.walk(f.base, f"{path}.")
+            elif self.repeat and count >= _REPEAT_FROM:
+                self._elements(f.base, path, count)
             else:
                 for k in range(count):
                     self.walk(f.base, f"{path}[{k}].")
 
+    def _elements(self, type_name: str, path: str, count: int) -> None:
+        """``count`` consecutive ``type_name`` values (a message array), walking one and
+        reusing its layout, shifted, for the following ones that have the same shape.
 
-def walk(types: MsgTypes, root: str, data: bytes | memoryview, *, exact: bool = False) -> Layout:
+        The walk of a value depends only on its start modulo the alignments it applies and on
+        the bytes of its length prefixes and strings (its ``check`` ranges). So if a value is
+        ``size`` bytes long, ``size`` is a multiple of its largest alignment, and the next
+        value's check bytes (``size`` further on) equal this one's, the next value's layout
+        is this one's shifted by ``size``: same leaves, same strings, same end.
+        """
+        k = 0
+        while k < count:
+            sub = self._sub()
+            start = sub.pos
+            sub.walk(type_name)
+            size = sub.pos - start
+            same = 1
+            if k + 1 < count and size > 0 and size % sub.align == 0:
+                same += _repeats(
+                    self.buf,
+                    start,
+                    size,
+                    sub.check,
+                    min(count - k - 1, (self.end - sub.pos) // size),
+                )
+            for j in range(same):
+                shift = j * size
+                prefix = f"{path}[{k + j}]."
+                for p, (off, dtype, n) in sub.leaves.items():
+                    self.leaves[prefix + p] = (off + shift, dtype, n)
+                for p, text in sub.texts.items():
+                    self.texts[prefix + p] = text
+                self.check.extend((a + shift, b + shift) for a, b in sub.check)
+            self.align = max(self.align, sub.align)
+            self.pos = start + same * size
+            k += same
+
+
+_REPEAT_FROM = 8  # shorter message arrays are walked element by element (numpy costs more)
+
+
+def _repeats(
+    buf: bytes | memoryview, start: int, size: int, check: list[tuple[int, int]], most: int
+) -> int:
+    """How many ``size``-byte values after the one at ``start`` have its ``check`` bytes
+    (relative to their own start), counting up to ``most``."""
+    if most <= 0:
+        return 0
+    if not check:
+        return most
+    u8 = np.frombuffer(buf, dtype=np.uint8)
+    cols = np.concatenate([np.arange(a - start, b - start, dtype=np.int64) for a, b in check])
+    ref = u8[start + cols]
+    at = start + size * np.arange(1, most + 1, dtype=np.int64)
+    equal = (u8[at[:, None] + cols[None, :]] == ref[None, :]).all(axis=1)
+    return most if equal.all() else int(np.argmin(equal))
+
+
+def walk(
+    types: MsgTypes,
+    root: str,
+    data: bytes | memoryview,
+    *,
+    exact: bool = False,
+    repeat: bool = True,
+) -> Layout:
     """The layout of one CDR message of type ``root`` (read from its bytes).
 
     Args:
         exact: also refuse bytes left over after the last field (beyond alignment
             padding): tells apart definitions that share a prefix.
+        repeat: walk the first of a run of same-shaped array elements only and shift its
+            layout for the others (the same result as walking each; False walks each, for
+            the tests that compare the two).
 
     Raises:
         ValueError: the bytes do not fit the type (truncated or corrupt).
     """
-    w = _Walk(types, data)
+    w = _Walk(types, data, repeat=repeat)
     w.walk(_resolve(types, root))
     if exact and w.end - w.pos > 3:
         raise ValueError(f"{w.end - w.pos} bytes left after the last field")

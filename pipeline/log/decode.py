@@ -13,6 +13,7 @@ with several publishers (an arm and a gripper on ``/joint_states``) keeps each o
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -57,6 +58,30 @@ class Group:
     stamps: list[NDArray[np.int64]] = field(default_factory=list)
     arrays: dict[str, list[F64]] = field(default_factory=dict)
     count: int = 0
+
+    def __post_init__(self) -> None:
+        # The check bytes as 4-byte words (with a mask for the bytes of a word outside the
+        # check ranges): comparing a quarter as many columns is 2-3x faster than per byte.
+        size = self.layout.size
+        self._words: NDArray[np.intp] | None = None
+        if size % 4 == 0 and self.check_cols.size:
+            template = np.zeros(size, dtype=np.uint8)
+            mask = np.zeros(size, dtype=np.uint8)
+            template[self.check_cols] = self.check_bytes
+            mask[self.check_cols] = 0xFF
+            self._words = np.unique(self.check_cols // 4)
+            self._word_mask = mask.view(np.uint32)[self._words]
+            self._word_ref = template.view(np.uint32)[self._words]
+
+    def same_shape(self, matrix: NDArray[np.uint8]) -> NDArray[np.bool_]:
+        """Which rows of a (N, layout.size) byte matrix have this group's check bytes
+        (length prefixes and strings), i.e. this group's layout and joint names."""
+        if self._words is None:
+            out: NDArray[np.bool_] = (matrix[:, self.check_cols] == self.check_bytes).all(axis=1)
+            return out
+        words = np.ascontiguousarray(matrix).view(np.uint32)[:, self._words]
+        same: NDArray[np.bool_] = ((words & self._word_mask) == self._word_ref).all(axis=1)
+        return same
 
     def concat(self) -> tuple[NDArray[np.int64], dict[str, F64]]:
         """All rows in time order: stamps [ns] and (N, joints) arrays.
@@ -126,7 +151,7 @@ class TopicDecoder:
                 continue
             idx = np.flatnonzero(sel)
             matrix = gather_rows(u8, data_start[idx], group.layout.size)
-            same = (matrix[:, group.check_cols] == group.check_bytes[None, :]).all(axis=1)
+            same = group.same_shape(matrix)
             if same.any():
                 self._append(group, matrix[same])
                 left[idx[same]] = False
@@ -272,3 +297,24 @@ def _leaf_matrix(
             return _column(layout, matrix, path).astype(np.float64)
     # An empty or absent optional array (e.g. no commanded effort): NaN, not a crash.
     return np.full((n, width), np.nan)
+
+
+def leaf_rows(layout: Layout, data: bytes | memoryview, paths: Sequence[str], width: int) -> F64:
+    """The numeric leaves at ``paths`` of one message (e.g. every ``points[k].positions``)
+    as a (len(paths), width) float64 matrix, gathered at once per dtype; a row of NaN where a
+    path is absent or holds another number of values than ``width``."""
+    out = np.full((len(paths), width), np.nan)
+    if not width:
+        return out
+    u8 = np.frombuffer(data, dtype=np.uint8)
+    found: dict[str, tuple[list[int], list[int]]] = {}  # dtype -> (rows, byte offsets)
+    for k, path in enumerate(paths):
+        leaf = layout.leaves.get(path)
+        if leaf is not None and leaf[2] == width:
+            rows, offsets = found.setdefault(leaf[1], ([], []))
+            rows.append(k)
+            offsets.append(leaf[0])
+    for dtype, (rows, offsets) in found.items():
+        block = gather_rows(u8, np.array(offsets, dtype=np.int64), int(dtype[2]) * width)
+        out[rows] = np.ascontiguousarray(block).view(dtype).astype(np.float64)
+    return out
