@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pipeline.log.gather import gather_u32
+from pipeline.log.gather import values_at
 from pipeline.log.msgdef import PRIMITIVES, MsgField, MsgTypes, root_type_name
 
 ENCAPSULATION_CDR_LE = b"\x00\x01\x00\x00"
@@ -450,6 +450,11 @@ class _ManyWalk:
         self.u8 = u8
         self.base = base  # buffer offset of each message's first byte (its CDR header)
         self.size = size
+        self.u32_at = values_at(u8, "<u4")
+        # Every position is known to be this aligned (relative to the byte after the CDR
+        # header) while walking; alignments it implies are skipped. See :meth:`_align`.
+        self.known = 8
+        self.consts: dict[int, NDArray[np.int64]] = {}
         self.leaves: dict[str, tuple[NDArray[np.int64], str, NDArray[np.int64]]] = {}
         self.regions: dict[str, tuple[NDArray[np.int64], NDArray[np.int64]]] = {}
 
@@ -469,8 +474,9 @@ class _ManyWalk:
     ) -> NDArray[np.int64]:
         self._check(rel, 4, path, live)
         if live is None:
-            return gather_u32(self.u8, self.base + rel).astype(np.int64)
-        values = gather_u32(self.u8, np.where(live, self.base + rel, 0)).astype(np.int64)
+            every: NDArray[np.int64] = self.u32_at[self.base + rel].astype(np.int64)
+            return every
+        values = self.u32_at[np.where(live, self.base + rel, 0)].astype(np.int64)
         out: NDArray[np.int64] = np.where(live, values, 0)
         return out
 
@@ -491,29 +497,31 @@ class _ManyWalk:
             path = f"{prefix}{f.name}"
             if f.array is None or f.array >= 0:
                 fixed = 1 if f.array is None else f.array
-                count = (
-                    np.full(rel.size, fixed, dtype=np.int64)
-                    if live is None
-                    else np.where(live, fixed, 0).astype(np.int64)
-                )
+                count = self._const(fixed) if live is None else np.where(live, fixed, 0)
             else:
-                rel = pick(_aligned_v(rel, 4), rel)
+                rel = pick(self._align(rel, 4), rel)
+                if live is None:  # (else the absent values keep their positions)
+                    self.known = max(self.known, 4)
                 count = self._u32(rel, path, live)
                 rel = pick(rel + 4, rel)
+                self.known = min(self.known, 4)
             if f.is_primitive:
                 dtype = PRIMITIVES[f.base]
                 size = int(dtype[1])
-                if live is None and f.array is None:
-                    rel = _aligned_v(rel, size)
-                else:
-                    rel = np.where(count > 0, _aligned_v(rel, size), rel)
-                self._check(rel, count * size, path, live)
+                if self.known < min(size, 8):
+                    if live is None and f.array is None:
+                        rel = self._align(rel, size)
+                        self.known = min(size, 8)
+                    else:  # an empty sequence is not aligned (nor are absent values)
+                        rel = np.where(count > 0, _aligned_v(rel, size), rel)
+                at = self.base + rel
                 self.leaves[path] = (
-                    pick(self.base + rel, np.full(rel.size, -1)),
+                    at if live is None else np.where(live, at, -1),
                     "<" + dtype,
                     count,
                 )
                 rel = rel + count * size
+                self.known = min(self.known, size)
             elif f.is_string:
                 if f.base == "wstring":
                     raise ValueError(f"wstring field {path} is not supported")
@@ -521,14 +529,12 @@ class _ManyWalk:
                 for k in range(int(count.max(initial=0))):
                     has = k < count
                     if has.all():
-                        at = _aligned_v(rel, 4)
+                        at = self._align(rel, 4)
                         rel = at + 4 + self._u32(at, path, None)
-                        self._check(rel, 0, path, None)
-                        continue
-                    at = np.where(has, _aligned_v(rel, 4), rel)
-                    n = self._u32(at, path, has)
-                    rel = np.where(has, at + 4 + n, rel)
-                    self._check(rel, 0, path, has)
+                    else:
+                        at = np.where(has, self._align(rel, 4), rel)
+                        rel = np.where(has, at + 4 + self._u32(at, path, has), rel)
+                    self.known = 1
                 self.regions[path] = (self.base + start, self.base + rel)
             elif f.array is None:
                 rel = self.walk(f.base, rel, live, f"{path}.")
@@ -537,6 +543,22 @@ class _ManyWalk:
                     has = k < count
                     rel = self.walk(f.base, rel, None if has.all() else has, f"{path}[{k}].")
         return rel
+
+    def _align(self, rel: NDArray[np.int64], size: int) -> NDArray[np.int64]:
+        """``rel`` aligned for a ``size``-byte primitive; free when it is known to be."""
+        a = min(size, 8)
+        if self.known >= a:
+            return rel
+        out: NDArray[np.int64] = 4 + ((rel - 4 + (a - 1)) & -a)
+        return out
+
+    def _const(self, value: int) -> NDArray[np.int64]:
+        """A read-only (N,) array of ``value`` (shared: element counts of fixed fields)."""
+        arr = self.consts.get(value)
+        if arr is None:
+            arr = self.consts[value] = np.full(self.base.size, value, dtype=np.int64)
+            arr.flags.writeable = False
+        return arr
 
 
 def _aligned_v(rel: NDArray[np.int64], size: int) -> NDArray[np.int64]:
@@ -567,5 +589,9 @@ def walk_many(
     if np.any(sizes < 4) or not np.all(u8[starts + 1] == 1):
         raise ValueError("not little-endian CDR (encapsulation header)")
     w = _ManyWalk(types, u8, starts.astype(np.int64), sizes.astype(np.int64))
-    w.walk(_resolve(types, root), np.full(starts.size, 4, dtype=np.int64), None)
+    end = w.walk(_resolve(types, root), np.full(starts.size, 4, dtype=np.int64), None)
+    # Positions only grow, so a field or string running past its message shows here; the
+    # length prefixes, read on the way, were checked before each read.
+    if np.any(end > w.size):
+        raise ValueError("a message ends inside a field")
     return ManyLayout(w.leaves, w.regions)

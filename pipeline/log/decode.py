@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.log.cdr import Layout, ManyLayout, walk, walk_many
-from pipeline.log.gather import gather_rows, gather_u64
+from pipeline.log.gather import gather_rows, gather_u64, values_at
 from pipeline.log.mcap import MESSAGE_PREFIX
 from pipeline.log.msgdef import MsgTypes
 
@@ -120,6 +120,8 @@ class TopicDecoder:
     types: MsgTypes
     want: Want
     groups: list[Group] = field(default_factory=list)
+    # the generic path's groups by the bytes of their joint-name list
+    _by_name_bytes: dict[bytes, Group] = field(default_factory=dict, repr=False)
 
     @property
     def count(self) -> int:
@@ -180,9 +182,13 @@ class TopicDecoder:
             rows = gather_rows(u8, a[sel], int(length))
             while sel.size:  # one joint list at a time (usually one in all)
                 same = (rows == rows[0]).all(axis=1)
-                i = int(sel[0])
-                s, n = int(starts[i]), int(sizes[i])
-                group = self._group(self._walk(buf, s, n), u8[s : s + n])
+                key = rows[0].tobytes()  # equal name bytes: equal names
+                group = self._by_name_bytes.get(key)
+                if group is None or not any(g is group for g in self.groups):
+                    i = int(sel[0])
+                    s, n = int(starts[i]), int(sizes[i])
+                    group = self._group(self._walk(buf, s, n), u8[s : s + n])
+                    self._by_name_bytes[key] = group
                 self._append_many(group, u8, many, sel[same])
                 sel, rows = sel[~same], rows[~same]
 
@@ -191,12 +197,11 @@ class TopicDecoder:
     ) -> None:
         def column(path: str) -> NDArray[Any]:
             off, dtype, _ = many.leaves[path]
-            return gather_rows(u8, off[idx], int(dtype[2])).view(dtype)
+            return values_at(u8, dtype)[off[idx]]
 
         n = idx.size
         group.stamps.append(
-            column(STAMP_SEC)[:, 0].astype(np.int64) * 1_000_000_000
-            + column(STAMP_NSEC)[:, 0].astype(np.int64)
+            column(STAMP_SEC).astype(np.int64) * 1_000_000_000 + column(STAMP_NSEC).astype(np.int64)
         )
         width = len(group.names)
         for key, aliases in self.want.arrays.items():
@@ -211,9 +216,11 @@ class TopicDecoder:
                 if bad.any():
                     raise DecodeError(f"{path} has {int(cnt[bad].max())} values for {width} joints")
                 take = todo & (cnt == width)
+                if take.all():
+                    out = values_at(u8, dtype, width)[off[idx]].astype(np.float64)
+                    break
                 if take.any():
-                    block = gather_rows(u8, off[idx[take]], int(dtype[2]) * width)
-                    out[take] = np.ascontiguousarray(block).view(dtype).astype(np.float64)
+                    out[take] = values_at(u8, dtype, width)[off[idx[take]]]
                     todo &= ~take
             group.arrays.setdefault(key, []).append(out)
         group.count += n
