@@ -349,14 +349,15 @@ class _Walk:
                     sub.check,
                     min(count - k - 1, (self.end - sub.pos) // size),
                 )
+            leaves, texts = list(sub.leaves.items()), list(sub.texts.items())
             for j in range(same):
                 shift = j * size
                 prefix = f"{path}[{k + j}]."
-                for p, (off, dtype, n) in sub.leaves.items():
-                    self.leaves[prefix + p] = (off + shift, dtype, n)
-                for p, text in sub.texts.items():
-                    self.texts[prefix + p] = text
-                self.check.extend((a + shift, b + shift) for a, b in sub.check)
+                self.leaves.update(
+                    {prefix + p: (off + shift, dtype, n) for p, (off, dtype, n) in leaves}
+                )
+                self.texts.update({prefix + p: text for p, text in texts})
+                self.check.extend([(a + shift, b + shift) for a, b in sub.check])
             self.align = max(self.align, sub.align)
             self.pos = start + same * size
             k += same

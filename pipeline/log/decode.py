@@ -286,9 +286,11 @@ class TopicDecoder:
 
 def _column(layout: Layout, matrix: NDArray[np.uint8], path: str) -> NDArray[Any]:
     off, dtype, count = layout.leaves[path]
-    size = int(dtype[2])
-    block = np.ascontiguousarray(matrix[:, off : off + size * count])
-    return block.view(dtype).reshape(matrix.shape[0], count)
+    rows = np.ascontiguousarray(matrix)  # (a no-op: rows are gathered or sliced whole)
+    return np.ndarray(
+        (rows.shape[0], count), dtype=dtype, buffer=rows, offset=off,
+        strides=(rows.strides[0], int(dtype[2])),
+    )  # fmt: skip
 
 
 def _leaf_matrix(
@@ -314,6 +316,13 @@ def leaf_rows(layout: Layout, data: bytes | memoryview, paths: Sequence[str], wi
     if not width:
         return out
     u8 = np.frombuffer(data, dtype=np.uint8)
+    leaves = [leaf for leaf in (layout.leaves.get(p) for p in paths) if leaf is not None]
+    if paths and len(leaves) == len(paths):  # the common case: one dtype and width for all
+        dtype = leaves[0][1]
+        if {leaf[1:] for leaf in leaves} == {(dtype, width)}:
+            at = np.array([leaf[0] for leaf in leaves], dtype=np.int64)
+            every: F64 = values_at(u8, dtype, width)[at].astype(np.float64)
+            return every
     found: dict[str, tuple[list[int], list[int]]] = {}  # dtype -> (rows, byte offsets)
     for k, path in enumerate(paths):
         leaf = layout.leaves.get(path)
