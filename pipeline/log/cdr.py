@@ -349,15 +349,19 @@ class _Walk:
                     sub.check,
                     min(count - k - 1, (self.end - sub.pos) // size),
                 )
-            leaves, texts = list(sub.leaves.items()), list(sub.texts.items())
-            for j in range(same):
-                shift = j * size
-                prefix = f"{path}[{k + j}]."
+            prefixes = [f"{path}[{j}]." for j in range(k, k + same)]
+            shifts = range(0, same * size, size)
+            for p, (off, dtype, n) in sub.leaves.items():
                 self.leaves.update(
-                    {prefix + p: (off + shift, dtype, n) for p, (off, dtype, n) in leaves}
+                    zip(
+                        [q + p for q in prefixes],
+                        [(off + d, dtype, n) for d in shifts],
+                        strict=True,
+                    )
                 )
-                self.texts.update({prefix + p: text for p, text in texts})
-                self.check.extend([(a + shift, b + shift) for a, b in sub.check])
+            for p, text in sub.texts.items():
+                self.texts.update((q + p, text) for q in prefixes)
+            self.check.extend([(a + d, b + d) for d in shifts for a, b in sub.check])
             self.align = max(self.align, sub.align)
             self.pos = start + same * size
             k += same

@@ -154,7 +154,10 @@ class TopicDecoder:
             idx = np.flatnonzero(sel)
             matrix = gather_rows(u8, data_start[idx], group.layout.size)
             same = group.same_shape(matrix)
-            if same.any():
+            if same.all():  # the usual case: no copy of the rows
+                self._append(group, matrix)
+                left[idx] = False
+            elif same.any():
                 self._append(group, matrix[same])
                 left[idx[same]] = False
         rest = np.flatnonzero(left)
