@@ -267,11 +267,11 @@ class _Walk:
         self.align = 1  # the largest alignment applied so far [bytes]
         self.repeat = repeat
 
-    def _sub(self) -> _Walk:
-        """A walker over the same bytes from here, with its own (empty) records."""
+    def _sub(self, pos: int) -> _Walk:
+        """A walker over the same bytes from ``pos``, with its own (empty) records."""
         sub = _Walk.__new__(_Walk)
         sub.endian, sub.types, sub.buf, sub.end, sub.pos = (
-            self.endian, self.types, self.buf, self.end, self.pos
+            self.endian, self.types, self.buf, self.end, pos
         )  # fmt: skip
         sub.leaves, sub.texts, sub.check, sub.align, sub.repeat = {}, {}, [], 1, self.repeat
         return sub
@@ -325,46 +325,57 @@ class _Walk:
                     self.walk(f.base, f"{path}[{k}].")
 
     def _elements(self, type_name: str, path: str, count: int) -> None:
-        """``count`` consecutive ``type_name`` values (a message array), walking one and
-        reusing its layout, shifted, for the following ones that have the same shape.
+        """``count`` consecutive ``type_name`` values (a message array), walking a block of
+        them and reusing its layout, shifted, for the following blocks of the same shape.
 
         The walk of a value depends only on its start modulo the alignments it applies and on
-        the bytes of its length prefixes and strings (its ``check`` ranges). So if a value is
-        ``size`` bytes long, ``size`` is a multiple of its largest alignment, and the next
-        value's check bytes (``size`` further on) equal this one's, the next value's layout
-        is this one's shifted by ``size``: same leaves, same strings, same end.
+        the bytes of its length prefixes and strings (its ``check`` ranges). A block is one
+        value, or as many (up to 8) as make its length a multiple of their largest alignment
+        (an 18-byte value after a 16-byte one, say); if the next block's check bytes
+        (``size`` further on) equal this one's, its layout is this one's shifted by ``size``:
+        same leaves, same strings, same end.
         """
         k = 0
         while k < count:
-            sub = self._sub()
-            start = sub.pos
-            sub.walk(type_name)
-            size = sub.pos - start
+            start = pos = self.pos
+            block: list[tuple[_Walk, str]] = []
+            align = 1
+            while True:
+                first = f"{path}[{k + len(block)}]."  # (the walk's own names, for its errors)
+                sub = self._sub(pos)
+                sub.walk(type_name, first)
+                block.append((sub, first))
+                pos, align = sub.pos, max(align, sub.align)
+                size = pos - start
+                if size % align == 0 or len(block) == 8 or k + len(block) == count:
+                    break
+            m = len(block)
             same = 1
-            if k + 1 < count and size > 0 and size % sub.align == 0:
-                same += _repeats(
-                    self.buf,
-                    start,
-                    size,
-                    sub.check,
-                    min(count - k - 1, (self.end - sub.pos) // size),
-                )
-            prefixes = [f"{path}[{j}]." for j in range(k, k + same)]
+            if size > 0 and size % align == 0 and k + m < count:
+                check = [c for sub, _ in block for c in sub.check]
+                most = min((count - k - m) // m, (self.end - pos) // size)
+                same += _repeats(self.buf, start, size, check, most)
             shifts = range(0, same * size, size)
-            for p, (off, dtype, n) in sub.leaves.items():
-                self.leaves.update(
-                    zip(
-                        [q + p for q in prefixes],
-                        [(off + d, dtype, n) for d in shifts],
-                        strict=True,
+            for i, (sub, first) in enumerate(block):
+                prefixes = [f"{path}[{k + j * m + i}]." for j in range(same)]
+                cut = len(first)
+                for p, (off, dtype, n) in sub.leaves.items():
+                    tail = p[cut:]
+                    self.leaves.update(
+                        zip(
+                            [q + tail for q in prefixes],
+                            [(off + d, dtype, n) for d in shifts],
+                            strict=True,
+                        )
                     )
-                )
-            for p, text in sub.texts.items():
-                self.texts.update((q + p, text) for q in prefixes)
-            self.check.extend([(a + d, b + d) for d in shifts for a, b in sub.check])
-            self.align = max(self.align, sub.align)
+                for p, text in sub.texts.items():
+                    self.texts.update((q + p[cut:], text) for q in prefixes)
+            self.check.extend(
+                [(a + d, b + d) for d in shifts for sub, _ in block for a, b in sub.check]
+            )
+            self.align = max(self.align, align)
             self.pos = start + same * size
-            k += same
+            k += same * m
 
 
 _REPEAT_FROM = 8  # shorter message arrays are walked element by element (numpy costs more)
