@@ -453,7 +453,12 @@ class ManyLayout:
 
 
 class _ManyWalk:
-    """The :class:`_Walk` over N messages in lockstep: numpy per field, not per message."""
+    """The :class:`_Walk` over N messages in lockstep: numpy per field, not per message.
+
+    Bounds: a length prefix is checked to lie inside its message before it is read (its
+    value moves every later position); the fields and strings are checked once, at the end
+    (:func:`walk_many`): positions only grow, so one past its message's end shows there.
+    """
 
     def __init__(
         self,
