@@ -455,9 +455,10 @@ class ManyLayout:
 class _ManyWalk:
     """The :class:`_Walk` over N messages in lockstep: numpy per field, not per message.
 
-    Bounds: a length prefix is checked to lie inside its message before it is read (its
-    value moves every later position); the fields and strings are checked once, at the end
-    (:func:`walk_many`): positions only grow, so one past its message's end shows there.
+    Bounds: the count of a string or message sequence is checked to lie inside its message
+    before it is read (loops run over it); the fields, strings and the counts of primitive
+    sequences are checked once, at the end (:func:`walk_many`): positions only grow, so one
+    past its message's end shows there (or sends a read off the buffer: IndexError).
     """
 
     def __init__(
@@ -487,13 +488,24 @@ class _ManyWalk:
         live: NDArray[np.bool_] | None,
     ) -> None:
         over = rel + nbytes > self.size
-        if np.any(over if live is None else live & over):
+        if (over if live is None else live & over).any():
             raise ValueError(f"message ends inside field {path}")
 
     def _u32(
-        self, rel: NDArray[np.int64], path: str, live: NDArray[np.bool_] | None
+        self,
+        rel: NDArray[np.int64],
+        path: str,
+        live: NDArray[np.bool_] | None,
+        *,
+        check: bool = True,
     ) -> NDArray[np.int64]:
-        self._check(rel, 4, path, live)
+        """The uint32 at ``rel`` in each message (0 where not ``live``).
+
+        ``check=False`` (a count that only moves positions, no loop runs over it) leaves the
+        bounds to the final check; a read past the buffer raises IndexError there.
+        """
+        if check:
+            self._check(rel, 4, path, live)
         if live is None:
             every: NDArray[np.int64] = self.u32_at[self.base + rel].astype(np.int64)
             return every
@@ -523,7 +535,7 @@ class _ManyWalk:
                 rel = pick(self._align(rel, 4), rel)
                 if live is None:  # (else the absent values keep their positions)
                     self.known = max(self.known, 4)
-                count = self._u32(rel, path, live)
+                count = self._u32(rel, path, live, check=not f.is_primitive)
                 rel = pick(rel + 4, rel)
                 self.known = min(self.known, 4)
             if f.is_primitive:
@@ -610,9 +622,12 @@ def walk_many(
     if np.any(sizes < 4) or not np.all(u8[starts + 1] == 1):
         raise ValueError("not little-endian CDR (encapsulation header)")
     w = _ManyWalk(types, u8, starts.astype(np.int64), sizes.astype(np.int64))
-    end = w.walk(_resolve(types, root), np.full(starts.size, 4, dtype=np.int64), None)
-    # Positions only grow, so a field or string running past its message shows here; the
-    # length prefixes, read on the way, were checked before each read.
-    if np.any(end > w.size):
+    try:
+        end = w.walk(_resolve(types, root), np.full(starts.size, 4, dtype=np.int64), None)
+    except IndexError as err:  # a count read past its message sent a position off the buffer
+        raise ValueError("a message ends inside a field") from err
+    # Positions only grow, so a field, string or count running past its message shows here;
+    # the counts that loops run over were checked before they were read.
+    if (end > w.size).any():
         raise ValueError("a message ends inside a field")
     return ManyLayout(w.leaves, w.regions)
