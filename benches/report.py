@@ -6,7 +6,7 @@ Prints one JSON object:
   Polars sample frame (read, CRC checks, SHA-256, decompression, decoding; best of
   repeats) in messages/s, against rosbags' ``deserialize_cdr`` and mcap_ros2's decoder on
   the same two topics (raw message bytes loaded beforehand, so only their decoding is
-  timed), and the ratio to rosbags (target >= 10).
+  timed), and the ratio to rosbags (target >= 30).
 - ``decode_generic``: a bag written by rosbags (Jazzy, MCAP; /joint_states and a
   controller state, 10 s at 1 kHz) where every message has another layout (frame_id
   lengths vary), so our reader takes the generic path for all: our read_recording from

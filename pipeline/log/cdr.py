@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pipeline.log.gather import gather_u32
+from pipeline.log.gather import values_at
 from pipeline.log.msgdef import PRIMITIVES, MsgField, MsgTypes, root_type_name
 
 ENCAPSULATION_CDR_LE = b"\x00\x01\x00\x00"
@@ -246,9 +246,11 @@ def time_value(stamp_ns: int) -> dict[str, int]:
 class _Walk:
     """Walks one CDR message, recording where each numeric leaf and string sits."""
 
-    __slots__ = ("buf", "check", "end", "endian", "leaves", "pos", "texts", "types")
+    __slots__ = (
+        "align", "buf", "check", "end", "endian", "leaves", "pos", "repeat", "texts", "types"
+    )  # fmt: skip
 
-    def __init__(self, types: MsgTypes, buf: bytes | memoryview) -> None:
+    def __init__(self, types: MsgTypes, buf: bytes | memoryview, *, repeat: bool = True) -> None:
         if len(buf) < 4:
             raise ValueError("shorter than the CDR encapsulation header")
         kind = buf[1]
@@ -262,8 +264,20 @@ class _Walk:
         self.leaves: dict[str, Leaf] = {}
         self.texts: dict[str, str | tuple[str, ...]] = {}
         self.check: list[tuple[int, int]] = []
+        self.align = 1  # the largest alignment applied so far [bytes]
+        self.repeat = repeat
+
+    def _sub(self, pos: int) -> _Walk:
+        """A walker over the same bytes from ``pos``, with its own (empty) records."""
+        sub = _Walk.__new__(_Walk)
+        sub.endian, sub.types, sub.buf, sub.end, sub.pos = (
+            self.endian, self.types, self.buf, self.end, pos
+        )  # fmt: skip
+        sub.leaves, sub.texts, sub.check, sub.align, sub.repeat = {}, {}, [], 1, self.repeat
+        return sub
 
     def _u32(self, structural: bool = True) -> int:
+        self.align = max(self.align, 4)
         self.pos = _aligned(self.pos, 4)
         if self.pos + 4 > self.end:
             raise ValueError("message ends inside a length field")
@@ -291,6 +305,7 @@ class _Walk:
                 dtype = PRIMITIVES[f.base]
                 size = int(dtype[1])
                 if count:
+                    self.align = max(self.align, min(size, 8))
                     self.pos = _aligned(self.pos, size)
                 if self.pos + size * count > self.end:
                     raise ValueError(f"message ends inside field {path}")
@@ -303,22 +318,107 @@ class _Walk:
                 self.texts[path] = values[0] if f.array is None else values
             elif f.array is None:
                 self.walk(f.base, f"{path}.")
+            elif self.repeat and count >= _REPEAT_FROM:
+                self._elements(f.base, path, count)
             else:
                 for k in range(count):
                     self.walk(f.base, f"{path}[{k}].")
 
+    def _elements(self, type_name: str, path: str, count: int) -> None:
+        """``count`` consecutive ``type_name`` values (a message array), walking a block of
+        them and reusing its layout, shifted, for the following blocks of the same shape.
 
-def walk(types: MsgTypes, root: str, data: bytes | memoryview, *, exact: bool = False) -> Layout:
+        The walk of a value depends only on its start modulo the alignments it applies and on
+        the bytes of its length prefixes and strings (its ``check`` ranges). A block is one
+        value, or as many (up to 8) as make its length a multiple of their largest alignment
+        (an 18-byte value after a 16-byte one, say); if the next block's check bytes
+        (``size`` further on) equal this one's, its layout is this one's shifted by ``size``:
+        same leaves, same strings, same end.
+        """
+        k = 0
+        while k < count:
+            start = pos = self.pos
+            block: list[tuple[_Walk, str]] = []
+            align = 1
+            while True:
+                first = f"{path}[{k + len(block)}]."  # (the walk's own names, for its errors)
+                sub = self._sub(pos)
+                sub.walk(type_name, first)
+                block.append((sub, first))
+                pos, align = sub.pos, max(align, sub.align)
+                size = pos - start
+                if size % align == 0 or len(block) == 8 or k + len(block) == count:
+                    break
+            m = len(block)
+            same = 1
+            if size > 0 and size % align == 0 and k + m < count:
+                check = [c for sub, _ in block for c in sub.check]
+                most = min((count - k - m) // m, (self.end - pos) // size)
+                same += _repeats(self.buf, start, size, check, most)
+            shifts = range(0, same * size, size)
+            for i, (sub, first) in enumerate(block):
+                prefixes = [f"{path}[{k + j * m + i}]." for j in range(same)]
+                cut = len(first)
+                for p, (off, dtype, n) in sub.leaves.items():
+                    tail = p[cut:]
+                    self.leaves.update(
+                        zip(
+                            [q + tail for q in prefixes],
+                            [(off + d, dtype, n) for d in shifts],
+                            strict=True,
+                        )
+                    )
+                for p, text in sub.texts.items():
+                    self.texts.update((q + p[cut:], text) for q in prefixes)
+            self.check.extend(
+                [(a + d, b + d) for d in shifts for sub, _ in block for a, b in sub.check]
+            )
+            self.align = max(self.align, align)
+            self.pos = start + same * size
+            k += same * m
+
+
+_REPEAT_FROM = 8  # shorter message arrays are walked element by element (numpy costs more)
+
+
+def _repeats(
+    buf: bytes | memoryview, start: int, size: int, check: list[tuple[int, int]], most: int
+) -> int:
+    """How many ``size``-byte values after the one at ``start`` have its ``check`` bytes
+    (relative to their own start), counting up to ``most``."""
+    if most <= 0:
+        return 0
+    if not check:
+        return most
+    u8 = np.frombuffer(buf, dtype=np.uint8)
+    cols = np.concatenate([np.arange(a - start, b - start, dtype=np.int64) for a, b in check])
+    ref = u8[start + cols]
+    at = start + size * np.arange(1, most + 1, dtype=np.int64)
+    equal = (u8[at[:, None] + cols[None, :]] == ref[None, :]).all(axis=1)
+    return most if equal.all() else int(np.argmin(equal))
+
+
+def walk(
+    types: MsgTypes,
+    root: str,
+    data: bytes | memoryview,
+    *,
+    exact: bool = False,
+    repeat: bool = True,
+) -> Layout:
     """The layout of one CDR message of type ``root`` (read from its bytes).
 
     Args:
         exact: also refuse bytes left over after the last field (beyond alignment
             padding): tells apart definitions that share a prefix.
+        repeat: walk the first of a run of same-shaped array elements only and shift its
+            layout for the others (the same result as walking each; False walks each, for
+            the tests that compare the two).
 
     Raises:
         ValueError: the bytes do not fit the type (truncated or corrupt).
     """
-    w = _Walk(types, data)
+    w = _Walk(types, data, repeat=repeat)
     w.walk(_resolve(types, root))
     if exact and w.end - w.pos > 3:
         raise ValueError(f"{w.end - w.pos} bytes left after the last field")
@@ -353,7 +453,13 @@ class ManyLayout:
 
 
 class _ManyWalk:
-    """The :class:`_Walk` over N messages in lockstep: numpy per field, not per message."""
+    """The :class:`_Walk` over N messages in lockstep: numpy per field, not per message.
+
+    Bounds: the count of a string or message sequence is checked to lie inside its message
+    before it is read (loops run over it); the fields, strings and the counts of primitive
+    sequences are checked once, at the end (:func:`walk_many`): positions only grow, so one
+    past its message's end shows there (or sends a read off the buffer: IndexError).
+    """
 
     def __init__(
         self,
@@ -366,6 +472,11 @@ class _ManyWalk:
         self.u8 = u8
         self.base = base  # buffer offset of each message's first byte (its CDR header)
         self.size = size
+        self.u32_at = values_at(u8, "<u4")
+        # Every position is known to be this aligned (relative to the byte after the CDR
+        # header) while walking; alignments it implies are skipped. See :meth:`_align`.
+        self.known = 8
+        self.consts: dict[int, NDArray[np.int64]] = {}
         self.leaves: dict[str, tuple[NDArray[np.int64], str, NDArray[np.int64]]] = {}
         self.regions: dict[str, tuple[NDArray[np.int64], NDArray[np.int64]]] = {}
 
@@ -377,16 +488,28 @@ class _ManyWalk:
         live: NDArray[np.bool_] | None,
     ) -> None:
         over = rel + nbytes > self.size
-        if np.any(over if live is None else live & over):
+        if (over if live is None else live & over).any():
             raise ValueError(f"message ends inside field {path}")
 
     def _u32(
-        self, rel: NDArray[np.int64], path: str, live: NDArray[np.bool_] | None
+        self,
+        rel: NDArray[np.int64],
+        path: str,
+        live: NDArray[np.bool_] | None,
+        *,
+        check: bool = True,
     ) -> NDArray[np.int64]:
-        self._check(rel, 4, path, live)
+        """The uint32 at ``rel`` in each message (0 where not ``live``).
+
+        ``check=False`` (a count that only moves positions, no loop runs over it) leaves the
+        bounds to the final check; a read past the buffer raises IndexError there.
+        """
+        if check:
+            self._check(rel, 4, path, live)
         if live is None:
-            return gather_u32(self.u8, self.base + rel).astype(np.int64)
-        values = gather_u32(self.u8, np.where(live, self.base + rel, 0)).astype(np.int64)
+            every: NDArray[np.int64] = self.u32_at[self.base + rel].astype(np.int64)
+            return every
+        values = self.u32_at[np.where(live, self.base + rel, 0)].astype(np.int64)
         out: NDArray[np.int64] = np.where(live, values, 0)
         return out
 
@@ -407,29 +530,31 @@ class _ManyWalk:
             path = f"{prefix}{f.name}"
             if f.array is None or f.array >= 0:
                 fixed = 1 if f.array is None else f.array
-                count = (
-                    np.full(rel.size, fixed, dtype=np.int64)
-                    if live is None
-                    else np.where(live, fixed, 0).astype(np.int64)
-                )
+                count = self._const(fixed) if live is None else np.where(live, fixed, 0)
             else:
-                rel = pick(_aligned_v(rel, 4), rel)
-                count = self._u32(rel, path, live)
+                rel = pick(self._align(rel, 4), rel)
+                if live is None:  # (else the absent values keep their positions)
+                    self.known = max(self.known, 4)
+                count = self._u32(rel, path, live, check=not f.is_primitive)
                 rel = pick(rel + 4, rel)
+                self.known = min(self.known, 4)
             if f.is_primitive:
                 dtype = PRIMITIVES[f.base]
                 size = int(dtype[1])
-                if live is None and f.array is None:
-                    rel = _aligned_v(rel, size)
-                else:
-                    rel = np.where(count > 0, _aligned_v(rel, size), rel)
-                self._check(rel, count * size, path, live)
+                if self.known < min(size, 8):
+                    if live is None and f.array is None:
+                        rel = self._align(rel, size)
+                        self.known = min(size, 8)
+                    else:  # an empty sequence is not aligned (nor are absent values)
+                        rel = np.where(count > 0, _aligned_v(rel, size), rel)
+                at = self.base + rel
                 self.leaves[path] = (
-                    pick(self.base + rel, np.full(rel.size, -1)),
+                    at if live is None else np.where(live, at, -1),
                     "<" + dtype,
                     count,
                 )
                 rel = rel + count * size
+                self.known = min(self.known, size)
             elif f.is_string:
                 if f.base == "wstring":
                     raise ValueError(f"wstring field {path} is not supported")
@@ -437,14 +562,12 @@ class _ManyWalk:
                 for k in range(int(count.max(initial=0))):
                     has = k < count
                     if has.all():
-                        at = _aligned_v(rel, 4)
+                        at = self._align(rel, 4)
                         rel = at + 4 + self._u32(at, path, None)
-                        self._check(rel, 0, path, None)
-                        continue
-                    at = np.where(has, _aligned_v(rel, 4), rel)
-                    n = self._u32(at, path, has)
-                    rel = np.where(has, at + 4 + n, rel)
-                    self._check(rel, 0, path, has)
+                    else:
+                        at = np.where(has, self._align(rel, 4), rel)
+                        rel = np.where(has, at + 4 + self._u32(at, path, has), rel)
+                    self.known = 1
                 self.regions[path] = (self.base + start, self.base + rel)
             elif f.array is None:
                 rel = self.walk(f.base, rel, live, f"{path}.")
@@ -453,6 +576,22 @@ class _ManyWalk:
                     has = k < count
                     rel = self.walk(f.base, rel, None if has.all() else has, f"{path}[{k}].")
         return rel
+
+    def _align(self, rel: NDArray[np.int64], size: int) -> NDArray[np.int64]:
+        """``rel`` aligned for a ``size``-byte primitive; free when it is known to be."""
+        a = min(size, 8)
+        if self.known >= a:
+            return rel
+        out: NDArray[np.int64] = 4 + ((rel - 4 + (a - 1)) & -a)
+        return out
+
+    def _const(self, value: int) -> NDArray[np.int64]:
+        """A read-only (N,) array of ``value`` (shared: element counts of fixed fields)."""
+        arr = self.consts.get(value)
+        if arr is None:
+            arr = self.consts[value] = np.full(self.base.size, value, dtype=np.int64)
+            arr.flags.writeable = False
+        return arr
 
 
 def _aligned_v(rel: NDArray[np.int64], size: int) -> NDArray[np.int64]:
@@ -483,5 +622,12 @@ def walk_many(
     if np.any(sizes < 4) or not np.all(u8[starts + 1] == 1):
         raise ValueError("not little-endian CDR (encapsulation header)")
     w = _ManyWalk(types, u8, starts.astype(np.int64), sizes.astype(np.int64))
-    w.walk(_resolve(types, root), np.full(starts.size, 4, dtype=np.int64), None)
+    try:
+        end = w.walk(_resolve(types, root), np.full(starts.size, 4, dtype=np.int64), None)
+    except IndexError as err:  # a count read past its message sent a position off the buffer
+        raise ValueError("a message ends inside a field") from err
+    # Positions only grow, so a field, string or count running past its message shows here;
+    # the counts that loops run over were checked before they were read.
+    if (end > w.size).any():
+        raise ValueError("a message ends inside a field")
     return ManyLayout(w.leaves, w.regions)

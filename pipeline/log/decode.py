@@ -13,6 +13,7 @@ with several publishers (an arm and a gripper on ``/joint_states``) keeps each o
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -20,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.log.cdr import Layout, ManyLayout, walk, walk_many
-from pipeline.log.gather import gather_rows, gather_u64
+from pipeline.log.gather import gather_rows, gather_u64, values_at
 from pipeline.log.mcap import MESSAGE_PREFIX
 from pipeline.log.msgdef import MsgTypes
 
@@ -57,6 +58,30 @@ class Group:
     stamps: list[NDArray[np.int64]] = field(default_factory=list)
     arrays: dict[str, list[F64]] = field(default_factory=dict)
     count: int = 0
+
+    def __post_init__(self) -> None:
+        # The check bytes as 4-byte words (with a mask for the bytes of a word outside the
+        # check ranges): comparing a quarter as many columns is 2-3x faster than per byte.
+        size = self.layout.size
+        self._words: NDArray[np.intp] | None = None
+        if size % 4 == 0 and self.check_cols.size:
+            template = np.zeros(size, dtype=np.uint8)
+            mask = np.zeros(size, dtype=np.uint8)
+            template[self.check_cols] = self.check_bytes
+            mask[self.check_cols] = 0xFF
+            self._words = np.unique(self.check_cols // 4)
+            self._word_mask = mask.view(np.uint32)[self._words]
+            self._word_ref = template.view(np.uint32)[self._words]
+
+    def same_shape(self, matrix: NDArray[np.uint8]) -> NDArray[np.bool_]:
+        """Which rows of a (N, layout.size) byte matrix have this group's check bytes
+        (length prefixes and strings), i.e. this group's layout and joint names."""
+        if self._words is None:
+            out: NDArray[np.bool_] = (matrix[:, self.check_cols] == self.check_bytes).all(axis=1)
+            return out
+        words = np.ascontiguousarray(matrix).view(np.uint32)[:, self._words]
+        same: NDArray[np.bool_] = ((words & self._word_mask) == self._word_ref).all(axis=1)
+        return same
 
     def concat(self) -> tuple[NDArray[np.int64], dict[str, F64]]:
         """All rows in time order: stamps [ns] and (N, joints) arrays.
@@ -95,6 +120,8 @@ class TopicDecoder:
     types: MsgTypes
     want: Want
     groups: list[Group] = field(default_factory=list)
+    # the generic path's groups by the bytes of their joint-name list
+    _by_name_bytes: dict[bytes, Group] = field(default_factory=dict, repr=False)
 
     @property
     def count(self) -> int:
@@ -126,8 +153,11 @@ class TopicDecoder:
                 continue
             idx = np.flatnonzero(sel)
             matrix = gather_rows(u8, data_start[idx], group.layout.size)
-            same = (matrix[:, group.check_cols] == group.check_bytes[None, :]).all(axis=1)
-            if same.any():
+            same = group.same_shape(matrix)
+            if same.all():  # the usual case: no copy of the rows
+                self._append(group, matrix)
+                left[idx] = False
+            elif same.any():
                 self._append(group, matrix[same])
                 left[idx[same]] = False
         rest = np.flatnonzero(left)
@@ -155,9 +185,13 @@ class TopicDecoder:
             rows = gather_rows(u8, a[sel], int(length))
             while sel.size:  # one joint list at a time (usually one in all)
                 same = (rows == rows[0]).all(axis=1)
-                i = int(sel[0])
-                s, n = int(starts[i]), int(sizes[i])
-                group = self._group(self._walk(buf, s, n), u8[s : s + n])
+                key = rows[0].tobytes()  # equal name bytes: equal names
+                group = self._by_name_bytes.get(key)
+                if group is None or not any(g is group for g in self.groups):
+                    i = int(sel[0])
+                    s, n = int(starts[i]), int(sizes[i])
+                    group = self._group(self._walk(buf, s, n), u8[s : s + n])
+                    self._by_name_bytes[key] = group
                 self._append_many(group, u8, many, sel[same])
                 sel, rows = sel[~same], rows[~same]
 
@@ -166,12 +200,11 @@ class TopicDecoder:
     ) -> None:
         def column(path: str) -> NDArray[Any]:
             off, dtype, _ = many.leaves[path]
-            return gather_rows(u8, off[idx], int(dtype[2])).view(dtype)
+            return values_at(u8, dtype)[off[idx]]
 
         n = idx.size
         group.stamps.append(
-            column(STAMP_SEC)[:, 0].astype(np.int64) * 1_000_000_000
-            + column(STAMP_NSEC)[:, 0].astype(np.int64)
+            column(STAMP_SEC).astype(np.int64) * 1_000_000_000 + column(STAMP_NSEC).astype(np.int64)
         )
         width = len(group.names)
         for key, aliases in self.want.arrays.items():
@@ -186,9 +219,11 @@ class TopicDecoder:
                 if bad.any():
                     raise DecodeError(f"{path} has {int(cnt[bad].max())} values for {width} joints")
                 take = todo & (cnt == width)
+                if take.all():
+                    out = values_at(u8, dtype, width)[off[idx]].astype(np.float64)
+                    break
                 if take.any():
-                    block = gather_rows(u8, off[idx[take]], int(dtype[2]) * width)
-                    out[take] = np.ascontiguousarray(block).view(dtype).astype(np.float64)
+                    out[take] = values_at(u8, dtype, width)[off[idx[take]]]
                     todo &= ~take
             group.arrays.setdefault(key, []).append(out)
         group.count += n
@@ -254,9 +289,11 @@ class TopicDecoder:
 
 def _column(layout: Layout, matrix: NDArray[np.uint8], path: str) -> NDArray[Any]:
     off, dtype, count = layout.leaves[path]
-    size = int(dtype[2])
-    block = np.ascontiguousarray(matrix[:, off : off + size * count])
-    return block.view(dtype).reshape(matrix.shape[0], count)
+    rows = np.ascontiguousarray(matrix)  # (a no-op: rows are gathered or sliced whole)
+    return np.ndarray(
+        (rows.shape[0], count), dtype=dtype, buffer=rows, offset=off,
+        strides=(rows.strides[0], int(dtype[2])),
+    )  # fmt: skip
 
 
 def _leaf_matrix(
@@ -272,3 +309,31 @@ def _leaf_matrix(
             return _column(layout, matrix, path).astype(np.float64)
     # An empty or absent optional array (e.g. no commanded effort): NaN, not a crash.
     return np.full((n, width), np.nan)
+
+
+def leaf_rows(layout: Layout, data: bytes | memoryview, paths: Sequence[str], width: int) -> F64:
+    """The numeric leaves at ``paths`` of one message (e.g. every ``points[k].positions``)
+    as a (len(paths), width) float64 matrix, gathered at once per dtype; a row of NaN where a
+    path is absent or holds another number of values than ``width``."""
+    out = np.full((len(paths), width), np.nan)
+    if not width:
+        return out
+    u8 = np.frombuffer(data, dtype=np.uint8)
+    leaves = [leaf for leaf in (layout.leaves.get(p) for p in paths) if leaf is not None]
+    if paths and len(leaves) == len(paths):  # the common case: one dtype and width for all
+        dtype = leaves[0][1]
+        if {leaf[1:] for leaf in leaves} == {(dtype, width)}:
+            at = np.array([leaf[0] for leaf in leaves], dtype=np.int64)
+            every: F64 = values_at(u8, dtype, width)[at].astype(np.float64)
+            return every
+    found: dict[str, tuple[list[int], list[int]]] = {}  # dtype -> (rows, byte offsets)
+    for k, path in enumerate(paths):
+        leaf = layout.leaves.get(path)
+        if leaf is not None and leaf[2] == width:
+            rows, offsets = found.setdefault(leaf[1], ([], []))
+            rows.append(k)
+            offsets.append(leaf[0])
+    for dtype, (rows, offsets) in found.items():
+        block = gather_rows(u8, np.array(offsets, dtype=np.int64), int(dtype[2]) * width)
+        out[rows] = np.ascontiguousarray(block).view(dtype).astype(np.float64)
+    return out

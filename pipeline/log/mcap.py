@@ -28,7 +28,7 @@ import zstandard
 from numpy.typing import NDArray
 
 from pipeline.errors import RecordingError
-from pipeline.log.gather import gather_rows, gather_u64
+from pipeline.log.gather import gather_u64, values_at
 
 MAGIC = b"\x89MCAP0\r\n"
 PROFILE = "ros2"
@@ -683,14 +683,10 @@ class McapScan:
             return None
         if not (u8[order] == Op.MESSAGE).all():
             return None
-        out: dict[int, NDArray[np.int64]] = {}
-        for cid, offs in index.items():
-            starts = np.sort(offs.astype(np.int64)) + 9
-            ids = gather_rows(u8, starts, 2).view("<u2").reshape(-1)
-            if not (ids == cid).all():
-                return None
-            out[cid] = starts
-        return out
+        owners = np.repeat(np.array(list(index), dtype=np.uint16), [v.size for v in index.values()])
+        if not np.array_equal(values_at(u8, "<u2")[offsets + 9], owners):
+            return None  # a message indexed under another channel than its record's
+        return {cid: np.sort(offs.astype(np.int64)) + 9 for cid, offs in index.items()}
 
     def _records(
         self, buf: bytes, pos: int, indexed: dict[int, NDArray[np.int64]] | None = None

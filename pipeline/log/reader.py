@@ -42,7 +42,7 @@ from pipeline.constants import (
 from pipeline.errors import RecordingError
 from pipeline.log import cdr
 from pipeline.log.db3 import Db3Scan
-from pipeline.log.decode import DecodeError, Group, TopicDecoder, Want
+from pipeline.log.decode import DecodeError, Group, TopicDecoder, Want, leaf_rows
 from pipeline.log.mcap import MESSAGE_PREFIX, McapChannel, McapScan, Salvage
 from pipeline.log.msgdef import MsgTypes, parse_msgdef, root_type_name
 from pipeline.log.rosbag2 import find_recordings, storage_files
@@ -466,26 +466,16 @@ def _planned(collector: _Collector, topic: str | None) -> PlannedTrajectory | No
         raise collector.fail(f"corrupt: {topic} cannot be decoded ({err})") from err
     names = lay.texts.get("joint_names", ())
     joints = tuple(names) if isinstance(names, tuple) else ()
-    n = len(joints)
-    times: list[float] = []
-    pos: list[F64] = []
-    vel: list[F64] = []
-    k = 0
-    while f"points[{k}].time_from_start.sec" in lay.leaves:
-        p = f"points[{k}]."
-        sec = float(lay.values(data, p + "time_from_start.sec")[0])
-        nsec = float(lay.values(data, p + "time_from_start.nanosec")[0])
-        times.append(sec + nsec * 1e-9)
-        for out, key in ((pos, "positions"), (vel, "velocities")):
-            v = lay.values(data, p + key).astype(float) if p + key in lay.leaves else None
-            out.append(v if v is not None and v.size == n else np.full(n, np.nan))
-        k += 1
-    shape = (len(times), n)
+    points: list[str] = []
+    while f"points[{len(points)}].time_from_start.sec" in lay.leaves:
+        points.append(f"points[{len(points)}].")
+    sec = leaf_rows(lay, data, [p + "time_from_start.sec" for p in points], 1)[:, 0]
+    nsec = leaf_rows(lay, data, [p + "time_from_start.nanosec" for p in points], 1)[:, 0]
     return PlannedTrajectory(
         joint_names=joints,
-        times_s=np.asarray(times, dtype=float),
-        positions=np.asarray(pos, dtype=np.float64).reshape(shape),
-        velocities=np.asarray(vel, dtype=np.float64).reshape(shape),
+        times_s=sec + nsec * 1e-9,
+        positions=leaf_rows(lay, data, [p + "positions" for p in points], len(joints)),
+        velocities=leaf_rows(lay, data, [p + "velocities" for p in points], len(joints)),
     )
 
 
