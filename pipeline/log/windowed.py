@@ -18,7 +18,9 @@
 
 Memory: one window, one batch of chunks and what the sink keeps, as long as the file holds
 the topics interleaved in time (as recorders write them); a topic stored long after the
-others is buffered until the others reach it (correct, not bounded).
+others is buffered until the others reach it (correct, not bounded). A topic that pauses
+(no stamp for more than :data:`GAP_NS`) does not hold the others back: pass 1 notes its
+gaps, so pass 2 knows that nothing of it lies inside one once it has all rows before.
 
 Stamps out of order: within a batch of chunks they are sorted, as the whole read sorts;
 a stamp that goes back behind an earlier batch of the same topic and joint list is
@@ -72,6 +74,9 @@ MAX_KEPT_STEPS = 20_000
 WINDOW_STEPS = 20_000
 # Stamps kept per joint list in pass 1 to find the last paired /joint_states message.
 _TAIL = 4096
+# A joint list's stamp step longer than this is a gap pass 1 notes (so pass 2 does not
+# buffer the other topics while this one is silent): at most one per second of recording.
+GAP_NS = 1_000_000_000
 
 I64 = NDArray[np.int64]
 # Stamps are compared as integers: a float64 cannot tell wall-clock nanoseconds apart.
@@ -93,6 +98,8 @@ class _StampStats:
     back: tuple[Path, int, int] | None = None  # (file, stamp, earlier stamp): out of order
     steps: dict[int, int] = field(default_factory=dict)  # stamp step [ns] -> how often
     tail: I64 = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    # stamp before a gap (a step > GAP_NS) -> (the stamp after it, stamps up to the one before)
+    gaps: dict[int, tuple[int, int]] = field(default_factory=dict)
 
     def add(self, stamps: I64, path: Path) -> None:
         if not stamps.size:
@@ -100,7 +107,13 @@ class _StampStats:
         t = np.sort(stamps, kind="stable")
         if self.count and int(t[0]) < self.last and self.back is None:
             self.back = (path, int(t[0]), self.last)
-        diffs = np.diff(t) if not self.count else np.diff(np.concatenate([[self.last], t]))
+        before = t if not self.count else np.concatenate([[self.last], t])
+        diffs = np.diff(before)
+        for i in np.flatnonzero(diffs > GAP_NS).tolist():
+            # before[i] is the (count + i)-th stamp in order when a batch starts at the
+            # previous one's last (its index 0), else the (i + 1)-th
+            upto = self.count + i if self.count else i + 1
+            self.gaps[int(before[i])] = (int(before[i + 1]), upto)
         values, counts = np.unique(diffs, return_counts=True)
         for v, c in zip(values.tolist(), counts.tolist(), strict=True):
             self.steps[v] = self.steps.get(v, 0) + c
@@ -150,9 +163,11 @@ class _Stream:
     names: tuple[str, ...]
     last: int  # its last stamp in the recording (pass 1)
     cols: list[int] | None = None  # columns in controller joint order
+    gaps: dict[int, tuple[int, int]] = field(default_factory=dict)  # _StampStats.gaps
     stamps: I64 = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     arrays: dict[str, F64] = field(default_factory=dict)
     high: int = _LOW  # largest stamp delivered so far
+    delivered: int = 0  # rows delivered so far
 
     def push(self, stamps: I64, arrays: dict[str, F64]) -> None:
         if not stamps.size:
@@ -165,10 +180,17 @@ class _Stream:
             old = self.arrays.get(k)
             self.arrays[k] = v[order] if old is None else np.concatenate([old, v[order]])
         self.high = max(self.high, int(stamps.max()))
+        self.delivered += stamps.size
 
     def complete_to(self) -> int:
-        """Every row below this stamp has been delivered (``_HIGH``: every row)."""
-        return _HIGH if self.high >= self.last else self.high
+        """Every row below this stamp has been delivered (``_HIGH``: every row); at the
+        start of a gap, with every row up to it delivered, the stamp after the gap."""
+        if self.high >= self.last:
+            return _HIGH
+        gap = self.gaps.get(self.high)
+        if gap is not None and gap[1] == self.delivered:
+            return gap[0]
+        return self.high
 
     def span(self, lo: int, hi: int) -> tuple[int, int]:
         lo, hi = _clamp(lo), _clamp(hi)
@@ -433,9 +455,13 @@ def read_windowed(
         decimation=max(1, math.ceil(steps / MAX_KEPT_STEPS)),
         window_steps=options.window_steps if options.window_steps > 0 else WINDOW_STEPS,
     )
-    js = _Stream(roles.js_group.names, js_stats.last, cols=roles.js_cols)
-    cs = _Stream(roles.names, cs_stats.last)
-    gt = _Stream(roles.truth.names, gt_stats.last) if roles.truth and gt_stats else None
+    js = _Stream(roles.js_group.names, js_stats.last, cols=roles.js_cols, gaps=js_stats.gaps)
+    cs = _Stream(roles.names, cs_stats.last, gaps=cs_stats.gaps)
+    gt = (
+        _Stream(roles.truth.names, gt_stats.last, gaps=gt_stats.gaps)
+        if roles.truth and gt_stats
+        else None
+    )
     windows = _Windows(facts, js, cs, gt)
     header_notes, lost_pct = _read_notes(scanned, roles)
     empty = np.zeros(0, dtype=np.int64)

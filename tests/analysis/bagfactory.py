@@ -145,6 +145,8 @@ class Episode:
     # /joint_states arrays written empty (legal in ROS: "not recorded"), e.g. ("effort",).
     empty_joint_state_fields: Sequence[str] = ()
     joint_state_every: int = 1  # write /joint_states every k-th sample (decimation)
+    # /joint_states not written in [start, end) [ns] (a publisher that paused)
+    joint_state_gap_ns: tuple[int, int] | None = None
     # Schema text and name for /joint_states instead of the Humble sensor_msgs/msg/JointState.
     joint_state_msgdef: tuple[str, str] | None = None
     episode_metadata: bool = True  # False: no armlab.episode metadata record
@@ -312,7 +314,9 @@ def write_bag(
         for k, t_ns in enumerate(ep.stamp_ns.tolist()):
             frame = ep.frame_ids[k] if ep.frame_ids is not None else ""
             header = {"stamp": _stamp(t_ns), "frame_id": frame}
-            if "/joint_states" in topics and k % ep.joint_state_every == 0:
+            gap = ep.joint_state_gap_ns
+            paused = gap is not None and gap[0] <= t_ns < gap[1]
+            if "/joint_states" in topics and k % ep.joint_state_every == 0 and not paused:
                 js_msg: dict[str, Any] = {
                     "header": header,
                     "name": names,
