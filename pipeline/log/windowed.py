@@ -32,6 +32,7 @@ lacks, a window pairs duplicates as identical stamp runs (the whole read: neares
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -369,7 +370,51 @@ class _Windows:
         return out[0], out[1]
 
 
-class _Pass2(_Collector):
+class _Chosen(_Collector):
+    """Decodes a chosen control-rate topic's messages (no other)."""
+
+    def decode(
+        self, scan: McapScan | Db3Scan, channel: McapChannel, buf: bytes, starts: I64
+    ) -> TopicDecoder:
+        type_name, types = self.type_of(scan, channel)
+        dec = self.decoders.get(channel.topic)
+        if dec is None:
+            dec = self.decoders[channel.topic] = TopicDecoder(
+                channel.topic, type_name, types, _WANT[type_name]
+            )
+        try:
+            dec.add(buf, starts)
+        except DecodeError as err:
+            raise self.fail(str(err)) from err
+        return dec
+
+
+class _LastPaired(_Chosen):
+    """The largest stamp of one joint list within ``(after, after + reach]`` (a pass over
+    its stamps alone, when pass 1's tail does not reach back to the last controller state)."""
+
+    def __init__(
+        self, topics: dict[str, str], topic: str, names: tuple[str, ...], after: int, reach: float
+    ) -> None:
+        super().__init__(topics)
+        self.topic, self.names, self.after, self.reach = topic, names, after, reach
+        self.found: int | None = None
+
+    def on_messages(
+        self, scan: McapScan | Db3Scan, channel: McapChannel, buf: bytes, starts: I64
+    ) -> None:
+        if channel.topic != self.topic:
+            return
+        for group in self.decode(scan, channel, buf, starts).groups:
+            stamps, _ = group.take()
+            if group.names != self.names:
+                continue
+            near = stamps[(stamps > self.after) & ((stamps - self.after) <= self.reach)]
+            if near.size:
+                self.found = max(int(near.max()), self.found or self.after)
+
+
+class _Pass2(_Chosen):
     """Decodes the chosen topics only and hands each chosen joint list's rows on."""
 
     def __init__(self, topics: dict[str, str], streams: dict[str, _Stream], windows: _Windows):
@@ -384,16 +429,7 @@ class _Pass2(_Collector):
         stream = self.streams.get(channel.topic)
         if stream is None:
             return
-        type_name, types = self.type_of(scan, channel)
-        dec = self.decoders.get(channel.topic)
-        if dec is None:
-            dec = self.decoders[channel.topic] = TopicDecoder(
-                channel.topic, type_name, types, _WANT[type_name]
-            )
-        try:
-            dec.add(buf, starts)
-        except DecodeError as err:
-            raise self.fail(str(err)) from err
+        dec = self.decode(scan, channel, buf, starts)
         for group in dec.groups:
             stamps, arrays = group.take()
             if group.names == stream.names:
@@ -412,10 +448,20 @@ def _refuse_unordered(stats: _StampStats, topic: str, limit: int) -> None:
     )
 
 
-def _end_ns(cs: _StampStats, js: _StampStats, js_period_ns: float) -> int:
+def _end_ns(
+    cs: _StampStats, js: _StampStats, js_period_ns: float, scan_js: Callable[[int, float], int]
+) -> int:
     """The last paired stamp: the last controller state, or a later joint state that
-    pairs with it (within half the joint-state period)."""
-    later = js.tail[(js.tail - cs.last) <= js_period_ns / 2]
+    pairs with it (within half the joint-state period).
+
+    ``scan_js(after, reach)`` reads the joint states' stamps again for the largest within
+    ``(after, after + reach]``: needed when more than :data:`_TAIL` joint states follow
+    the pairing ones (a joint-state publisher that outlives the controller).
+    """
+    reach = js_period_ns / 2
+    if js.count > js.tail.size and int(js.tail[0]) - cs.last > reach:
+        return scan_js(cs.last, reach)
+    later = js.tail[(js.tail - cs.last) <= reach]
     return max(cs.last, int(later.max())) if later.size else cs.last
 
 
@@ -443,6 +489,12 @@ def read_windowed(
         first, source, options, roles.chosen, roles.names
     )
     js_period = js_stats.period_ns()
+
+    def scan_js(after: int, reach: float) -> int:
+        last = _LastPaired(dict(options.topics), js_topic, roles.js_group.names, after, reach)
+        _scan(files, last, salvage=options.salvage)
+        return after if last.found is None else last.found
+
     cs_period = cs_stats.period_ns()
     steps = max(js_stats.count, cs_stats.count)
     facts = _Facts(
@@ -450,7 +502,7 @@ def read_windowed(
         js_period_ns=js_period,
         cs_period_ns=cs_period,
         t0_ns=min(js_stats.first, cs_stats.first),
-        end_ns=_end_ns(cs_stats, js_stats, js_period),
+        end_ns=_end_ns(cs_stats, js_stats, js_period, scan_js),
         episode=_episode_name(raw_meta, source),
         decimation=max(1, math.ceil(steps / MAX_KEPT_STEPS)),
         window_steps=options.window_steps if options.window_steps > 0 else WINDOW_STEPS,
@@ -512,7 +564,7 @@ def read_windowed(
     if gt is not None:
         notes += _truth_note(windows.no_truth, cs_topic)
     end_ns = facts.end_ns if windows.end_ns is None else windows.end_ns
-    if end_ns != facts.end_ns:  # more than _TAIL unpaired joint states at the end
+    if end_ns != facts.end_ns:  # not expected: pass 1 (with _end_ns) found the same stamp
         notes.append(
             f"the last paired stamp ({end_ns} ns) is not the one the first pass "
             f"estimated ({facts.end_ns} ns): the final-window metrics used the estimate"

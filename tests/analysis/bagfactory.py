@@ -147,6 +147,8 @@ class Episode:
     joint_state_every: int = 1  # write /joint_states every k-th sample (decimation)
     # /joint_states not written in [start, end) [ns] (a publisher that paused)
     joint_state_gap_ns: tuple[int, int] | None = None
+    joint_state_offset_ns: int = 0  # /joint_states stamped this much after its sample
+    controller_state_until_ns: int | None = None  # /controller_state stops at this stamp
     # Schema text and name for /joint_states instead of the Humble sensor_msgs/msg/JointState.
     joint_state_msgdef: tuple[str, str] | None = None
     episode_metadata: bool = True  # False: no armlab.episode metadata record
@@ -318,7 +320,7 @@ def write_bag(
             paused = gap is not None and gap[0] <= t_ns < gap[1]
             if "/joint_states" in topics and k % ep.joint_state_every == 0 and not paused:
                 js_msg: dict[str, Any] = {
-                    "header": header,
+                    "header": {"stamp": _stamp(t_ns + ep.joint_state_offset_ns), "frame_id": frame},
                     "name": names,
                     "position": ep.q[k].tolist(),
                     "velocity": ep.qd[k].tolist(),
@@ -346,7 +348,8 @@ def write_bag(
                 counts["/ground_truth/joint_states"] = (
                     counts.get("/ground_truth/joint_states", 0) + 1
                 )
-            if "/controller_state" in topics:
+            until = ep.controller_state_until_ns
+            if "/controller_state" in topics and (until is None or t_ns < until):
                 err = ep.q_ref[k] - ep.q[k]
                 w.write_message(
                     "/controller_state",

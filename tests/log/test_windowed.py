@@ -209,3 +209,18 @@ def test_a_topic_that_pauses_does_not_hold_the_others_back(
     # a batch of chunks, a window and up to GAP_NS of the others (measured: 1,203 rows;
     # 6,253 when the pause was buffered)
     assert most[0] < 2_500, most[0]
+
+
+def test_joint_states_published_long_after_the_controller_stops(tmp_path: Path) -> None:
+    # /joint_states stamped 0.4 ms after the controller state it goes with, and published
+    # for 10 s (5,000 messages) after the controller stopped: the last joint state that
+    # pairs (0.4 ms after the last controller state) ends the recording, in both reads
+    from tests.analysis.bagfactory import paper_like, write_bag
+
+    ep = paper_like("after", "pid", duration_s=16.0, motion_end_s=3.0)
+    ep = replace(ep, joint_state_offset_ns=400_000, controller_state_until_ns=6 * 10**9)
+    path = write_bag(tmp_path, ep)
+    whole, win, sink = both(path)
+    assert_same(whole, win, sink)
+    assert whole.samples["stamp_ns"].max() == 6 * 10**9 - 2_000_000 + 400_000
+    assert not any("estimated" in n for n in win.notes)

@@ -177,3 +177,12 @@ def test_reading_and_measuring_a_long_recording_holds_a_window_not_the_recording
         del result, planned
         peaks.append(peak_rss_mb(tmp_path / str(steps)))
     assert peaks[1] - peaks[0] < MEMORY_MARGIN_MB, peaks
+
+
+def test_joint_states_that_outlive_the_controller(tmp_path: Path) -> None:
+    # the last pairing joint state (0.4 ms after the last controller state) ends the
+    # recording and so places the final window, with 5,000 joint states after it
+    ep = paper_like("after", "pid", duration_s=16.0, motion_end_s=3.0)
+    ep = dataclasses.replace(ep, joint_state_offset_ns=400_000, controller_state_until_ns=6 * 10**9)
+    write_bag(tmp_path / "recs", ep)
+    assert_report_inputs_equal(tmp_path / "recs")
