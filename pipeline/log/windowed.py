@@ -18,9 +18,10 @@
 
 Memory: one window, one batch of chunks and what the sink keeps, as long as the file holds
 the topics interleaved in time (as recorders write them); a topic stored long after the
-others is buffered until the others reach it (correct, not bounded). A topic that pauses
-(no stamp for more than :data:`GAP_NS`) does not hold the others back: pass 1 notes its
-gaps, so pass 2 knows that nothing of it lies inside one once it has all rows before.
+others is buffered until the others reach it (correct, not bounded). A topic that starts
+late or pauses (no stamp for more than :data:`GAP_NS`) does not hold the others back: pass 1
+notes its first stamp and its gaps, so pass 2 knows that nothing of it lies before or inside
+one.
 
 Stamps out of order: within a batch of chunks they are sorted, as the whole read sorts;
 a stamp that goes back behind an earlier batch of the same topic and joint list is
@@ -162,6 +163,7 @@ class _Stream:
     """The not yet windowed rows of one chosen joint list, sorted by stamp."""
 
     names: tuple[str, ...]
+    first: int  # its first stamp in the recording (pass 1)
     last: int  # its last stamp in the recording (pass 1)
     cols: list[int] | None = None  # columns in controller joint order
     gaps: dict[int, tuple[int, int]] = field(default_factory=dict)  # _StampStats.gaps
@@ -169,6 +171,11 @@ class _Stream:
     arrays: dict[str, F64] = field(default_factory=dict)
     high: int = _LOW  # largest stamp delivered so far
     delivered: int = 0  # rows delivered so far
+    keys: tuple[str, ...] = ()  # its arrays, empty until rows come (a window may come first)
+
+    def __post_init__(self) -> None:
+        width = len(self.cols) if self.cols is not None else len(self.names)
+        self.arrays = {k: np.zeros((0, width)) for k in self.keys}
 
     def push(self, stamps: I64, arrays: dict[str, F64]) -> None:
         if not stamps.size:
@@ -188,6 +195,8 @@ class _Stream:
         start of a gap, with every row up to it delivered, the stamp after the gap."""
         if self.high >= self.last:
             return _HIGH
+        if not self.delivered:  # nothing lies before its first stamp (a late start)
+            return self.first
         gap = self.gaps.get(self.high)
         if gap is not None and gap[1] == self.delivered:
             return gap[0]
@@ -507,10 +516,19 @@ def read_windowed(
         decimation=max(1, math.ceil(steps / MAX_KEPT_STEPS)),
         window_steps=options.window_steps if options.window_steps > 0 else WINDOW_STEPS,
     )
-    js = _Stream(roles.js_group.names, js_stats.last, cols=roles.js_cols, gaps=js_stats.gaps)
-    cs = _Stream(roles.names, cs_stats.last, gaps=cs_stats.gaps)
+    js_keys = tuple(_WANT[roles.js_dec.type_name].arrays)
+    js = _Stream(
+        roles.js_group.names,
+        js_stats.first,
+        js_stats.last,
+        roles.js_cols,
+        js_stats.gaps,
+        keys=js_keys,
+    )
+    cs_keys = tuple(_WANT[roles.cs_dec.type_name].arrays)
+    cs = _Stream(roles.names, cs_stats.first, cs_stats.last, gaps=cs_stats.gaps, keys=cs_keys)
     gt = (
-        _Stream(roles.truth.names, gt_stats.last, gaps=gt_stats.gaps)
+        _Stream(roles.truth.names, gt_stats.first, gt_stats.last, gaps=gt_stats.gaps, keys=js_keys)
         if roles.truth and gt_stats
         else None
     )

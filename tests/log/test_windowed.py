@@ -185,16 +185,19 @@ def test_stamps_going_back_across_chunks_are_refused_in_one_line(tmp_path: Path)
     assert "\n" not in str(err.value) and str(path) in str(err.value)
 
 
+@pytest.mark.parametrize("start_s", [4, 0], ids=["pause", "late-start"])
 def test_a_topic_that_pauses_does_not_hold_the_others_back(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, start_s: int
 ) -> None:
-    # /joint_states silent for 12 s of 20 s (6,000 controller states at 500 Hz): the
-    # controller states of the pause must be windowed as they come, not buffered until
-    # the joint states resume (memory would grow with the length of the pause)
+    # /joint_states silent for 12 s of 20 s (6,000 controller states at 500 Hz), in the
+    # middle or from the start: the controller states of the pause must be windowed as
+    # they come, not buffered until the joint states resume (memory would grow with the
+    # length of the pause)
     from tests.analysis.bagfactory import paper_like, write_bag
 
     ep = paper_like("pause", "pid", duration_s=20.0, motion_end_s=3.0)
-    path = write_bag(tmp_path, replace(ep, joint_state_gap_ns=(4 * 10**9, 16 * 10**9)))
+    gap = (start_s * 10**9, (start_s + 12) * 10**9)
+    path = write_bag(tmp_path, replace(ep, joint_state_gap_ns=gap))
     most = [0]
     push = windowed._Stream.push
 
