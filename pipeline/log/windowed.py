@@ -74,6 +74,8 @@ from pipeline.log.reader import (
 MAX_KEPT_STEPS = 20_000
 # Control steps per window (20 s at 1 kHz; some 15 MB of frames for six joints).
 WINDOW_STEPS = 20_000
+# Distinct stamp steps of batches held before merging them into a joint list's histogram.
+_MERGE_STEPS = 1 << 18
 # Stamps kept per joint list in pass 1 to find the last paired /joint_states message.
 _TAIL = 4096
 # A joint list's stamp step longer than this is a gap pass 1 notes (so pass 2 does not
@@ -98,7 +100,13 @@ class _StampStats:
     first: int = 0
     last: int = 0
     back: tuple[Path, int, int] | None = None  # (file, stamp, earlier stamp): out of order
-    steps: dict[int, int] = field(default_factory=dict)  # stamp step [ns] -> how often
+    # the histogram of stamp steps [ns]: sorted distinct steps and how often each occurs
+    # (16 bytes a distinct step: wall-clock stamps with jitter have many), and batches'
+    # histograms not merged yet
+    step_values: I64 = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    step_counts: I64 = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    pending: list[tuple[I64, I64]] = field(default_factory=list)
+    pending_size: int = 0
     tail: I64 = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     # stamp before a gap (a step > GAP_NS) -> (the stamp after it, stamps up to the one before)
     gaps: dict[int, tuple[int, int]] = field(default_factory=dict)
@@ -117,24 +125,41 @@ class _StampStats:
             upto = self.count + i if self.count else i + 1
             self.gaps[int(before[i])] = (int(before[i + 1]), upto)
         values, counts = np.unique(diffs, return_counts=True)
-        for v, c in zip(values.tolist(), counts.tolist(), strict=True):
-            self.steps[v] = self.steps.get(v, 0) + c
+        self.pending.append((values, counts.astype(np.int64)))
+        self.pending_size += values.size
+        if self.pending_size > _MERGE_STEPS:
+            self._merge()
         if not self.count:
             self.first = int(t[0])
         self.last = max(self.last, int(t[-1])) if self.count else int(t[-1])
         self.count += t.size
         self.tail = np.concatenate([self.tail, t])[-_TAIL:]
 
+    def _merge(self) -> None:
+        if not self.pending:
+            return
+        values, where = np.unique(np.concatenate([v for v, _ in self.pending]), return_inverse=True)
+        counts = np.zeros(values.size, dtype=np.int64)
+        np.add.at(counts, where, np.concatenate([c for _, c in self.pending]))
+        self.pending, self.pending_size = [], 0
+        # into the sorted histogram: add to the steps it has, insert the others (one copy)
+        at = np.searchsorted(self.step_values, values)
+        known = at < self.step_values.size
+        known[known] = self.step_values[at[known]] == values[known]
+        self.step_counts[at[known]] += counts[known]
+        self.step_values = np.insert(self.step_values, at[~known], values[~known])
+        self.step_counts = np.insert(self.step_counts, at[~known], counts[~known])
+
     def period_ns(self) -> float:
         """``np.median(np.diff(sorted stamps))`` of every stamp (1.0 for fewer than two)."""
-        n = sum(self.steps.values())
+        self._merge()
+        cum = np.cumsum(self.step_counts)
+        n = int(cum[-1]) if cum.size else 0
         if n == 0:
             return 1.0
-        keys = sorted(self.steps)
-        cum = np.cumsum([self.steps[k] for k in keys])
 
         def at(i: int) -> float:
-            return float(keys[int(np.searchsorted(cum, i, side="right"))])
+            return float(self.step_values[int(np.searchsorted(cum, i, side="right"))])
 
         return at(n // 2) if n % 2 else (at(n // 2 - 1) + at(n // 2)) / 2
 
