@@ -8,6 +8,7 @@ import hashlib
 import sqlite3
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -193,9 +194,13 @@ def _state(folder: Path) -> dict[str, tuple[str, int]]:
     }
 
 
-@pytest.mark.parametrize("salvage", [False, True])
+@pytest.mark.parametrize(
+    ("salvage", "windowed"),
+    [(False, False), (True, False), (False, True)],
+    ids=["plain", "salvage", "windowed"],
+)
 def test_a_killed_recorders_wal_is_read_and_the_bag_left_untouched(
-    tmp_path: Path, salvage: bool
+    tmp_path: Path, salvage: bool, windowed: bool, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     db, s = db3_bag(tmp_path / "run", "jazzy", False)
     total = len(rows(db))
@@ -208,8 +213,15 @@ def test_a_killed_recorders_wal_is_read_and_the_bag_left_untouched(
         assert con.execute("SELECT count(*) FROM messages").fetchone()[0] == keep
     before = _state(tmp_path / "run")
 
-    rec = read_recording(tmp_path / "run", ReadOptions(salvage=salvage))
+    # windowed: two passes over it (and the temporary copies), as for a long recording
+    options = ReadOptions(salvage=salvage, stream_above_bytes=0 if windowed else None)
+    temporary = tmp_path / "tmp"
+    temporary.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temporary))
+    rec = read_recording(tmp_path / "run", options)
     assert _state(tmp_path / "run") == before  # no byte, no file, no mtime changed
+    assert not any(temporary.iterdir())  # the copies are gone
+    assert rec.windows > 0 if windowed else rec.windows == 0
     assert not rec.salvaged
     assert any(wal.name in n and "did not close" in n for n in rec.notes)
     frame = rec.samples.filter(rec.samples["joint"] == JOINTS[1]).sort("stamp_ns")
