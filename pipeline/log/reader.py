@@ -400,7 +400,7 @@ def _deliver(
 ) -> None:
     try:
         collector.on_messages(scan, channel, buf, starts)
-    except RecordingError:
+    except (RecordingError, SinkError):
         raise
     except Exception as err:  # a decoder bug or an input it did not foresee
         raise RecordingError(
@@ -608,6 +608,12 @@ def stamp_period_ns(stamps: NDArray[np.int64]) -> float:
     return float(np.median(np.diff(stamps))) if stamps.size > 1 else 1.0
 
 
+class SinkError(Exception):
+    """Carries what a :class:`WindowSink` raised out of a windowed read, whose boundary
+    would otherwise report it as a recording that cannot be decoded; :func:`read_recording`
+    raises the sink's own exception (its ``__cause__``)."""
+
+
 class WindowSink(Protocol):
     """Receives a long recording's exact frames, one window at a time, in time order.
 
@@ -666,6 +672,9 @@ def read_recording(
         return _read(source, files, options)
     except RecordingError:
         raise
+    except SinkError as err:  # the caller's sink failed, not the recording
+        assert err.__cause__ is not None
+        raise err.__cause__ from None
     except Exception as err:  # the boundary: nothing else may escape a per-recording read
         raise RecordingError(
             f"{files[0]}: cannot decode the recording: {type(err).__name__}: {err}"

@@ -51,6 +51,7 @@ from pipeline.log.reader import (
     F64,
     ReadOptions,
     Recording,
+    SinkError,
     WindowSink,
     _Collector,
     _dropped_note,
@@ -364,7 +365,10 @@ class _Windows:
         if samples.height or states.height:
             self.count += 1
             if self.sink is not None:
-                self.sink.window(samples, states)
+                try:
+                    self.sink.window(samples, states)
+                except Exception as err:
+                    raise SinkError() from err
         self.kept.append(
             (self._decimate(samples, self.pairs, 0), self._decimate(states, self.cs_rows, 1))
         )
@@ -587,7 +591,10 @@ def read_windowed(
     )
     del first
     if sink is not None:
-        sink.begin(header)
+        try:
+            sink.begin(header)
+        except Exception as err:
+            raise SinkError() from err
     windows.sink = sink
     streams = {js_topic: js, cs_topic: cs}
     if gt is not None:

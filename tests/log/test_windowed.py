@@ -260,3 +260,16 @@ def test_the_stamp_step_histogram_of_jittered_wall_clock_stamps_stays_small() ->
         tracemalloc.stop()
     assert period == float(np.median(np.diff(t)))
     assert held < 20e6, held
+
+
+def test_what_the_sink_raises_is_not_blamed_on_the_recording(our_bag: Path) -> None:
+    # the report's metrics run inside the read: their failure is not "cannot decode the
+    # recording" (which --skip-bad would skip as a bad bag)
+    class Failing(Windows):
+        def window(self, samples: pl.DataFrame, controller_states: pl.DataFrame) -> None:
+            raise ZeroDivisionError("in the sink")
+
+    for salvage in (False, True):
+        options = replace(WINDOW, salvage=salvage)
+        with pytest.raises(ZeroDivisionError, match="in the sink"):
+            read_recording(our_bag, options, sink=Failing())
