@@ -10,13 +10,19 @@ import json
 import signal
 import sys
 import threading
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, NoReturn
 
 import typer
 from rich.console import Console
 from rich.table import Table
 
-from pipeline.errors import PipelineError
+from pipeline.errors import (
+    EXIT_INTERRUPTED,
+    EXIT_TERMINATED,
+    PipelineError,
+    handle_sigterm,
+    interrupt_exit,
+)
 
 app = typer.Typer(
     help=(
@@ -414,19 +420,24 @@ def teach_cmd(
     console.print("teach: stopped")
 
 
-EXIT_INTERRUPTED = 130  # 128 + SIGINT, what shells report for Ctrl-C
-
-
-def _caused_by_ctrl_c(err: BaseException) -> bool:
-    """A KeyboardInterrupt anywhere in the exception's cause chain."""
+def _interrupt_in_chain(err: BaseException) -> KeyboardInterrupt | None:
+    """The KeyboardInterrupt (Ctrl-C, or :class:`Terminated` for SIGTERM) anywhere in the
+    exception's cause chain, or None."""
     seen: set[int] = set()
     cause: BaseException | None = err
     while cause is not None and id(cause) not in seen:
         if isinstance(cause, KeyboardInterrupt):
-            return True
+            return cause
         seen.add(id(cause))
         cause = cause.__cause__ or cause.__context__
-    return False
+    return None
+
+
+def _stop(err: BaseException) -> NoReturn:
+    """One line (``interrupted`` or ``terminated``) and 130 or 143."""
+    word, code = interrupt_exit(err)
+    sys.stderr.write(f"{word}\n")
+    sys.exit(code)
 
 
 def main() -> None:
@@ -438,29 +449,30 @@ def main() -> None:
     # `kill -INT` must still stop a run (and say what it finished).
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.default_int_handler)
+    handle_sigterm()  # SIGTERM takes Ctrl-C's path: the same cleanup, then 143
     try:
         app()
     except SystemExit as exit_:
         if exit_.code == EXIT_INTERRUPTED:  # typer ends a command's Ctrl-C silently with 130
-            sys.stderr.write("interrupted\n")
+            _stop(_interrupt_in_chain(exit_) or KeyboardInterrupt())
         raise
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as err:
         if debug:
             raise
-        sys.stderr.write("interrupted\n")
-        sys.exit(EXIT_INTERRUPTED)
+        _stop(err)
     except ImportError as err:
         # Ctrl-C inside a C extension's module init surfaces as "initialization failed"
-        if debug or not _caused_by_ctrl_c(err):
+        interrupt = _interrupt_in_chain(err)
+        if debug or interrupt is None:
             raise
-        sys.stderr.write("interrupted\n")
-        sys.exit(EXIT_INTERRUPTED)
+        _stop(interrupt)
     except PipelineError as err:
         if debug:
             raise
-        if getattr(err, "exit_code", 1) == EXIT_INTERRUPTED:  # record's Interrupted
+        code = getattr(err, "exit_code", 1)
+        if code in (EXIT_INTERRUPTED, EXIT_TERMINATED):  # record's Interrupted
             sys.stderr.write(f"{err}\n")
-            sys.exit(EXIT_INTERRUPTED)
+            sys.exit(code)
         sys.stderr.write(f"error: {err}\n")
         sys.exit(1)
 

@@ -6,6 +6,10 @@ else is a bug and shows a traceback.
 
 from __future__ import annotations
 
+import signal
+import threading
+from types import FrameType
+
 
 class PipelineError(Exception):
     """Base class of all errors that are the user's input, not our bug."""
@@ -45,3 +49,40 @@ class ReportError(PipelineError):
 
 class TeachError(PipelineError):
     """The teach page cannot start (e.g. its port is in use)."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, ``timeout``, a scheduler): raised where Ctrl-C would be.
+
+    A subclass of :class:`KeyboardInterrupt`, so every cleanup that Ctrl-C runs
+    (``finally`` blocks, ``except KeyboardInterrupt``) runs for SIGTERM too; the CLI then
+    says ``terminated`` and exits :data:`EXIT_TERMINATED`.
+    """
+
+
+EXIT_INTERRUPTED = 130  # 128 + SIGINT, what shells report for Ctrl-C
+EXIT_TERMINATED = 143  # 128 + SIGTERM
+
+
+def interrupt_exit(err: BaseException) -> tuple[str, int]:
+    """The word and exit code for an interrupt: ``terminated``/143 for SIGTERM, else
+    ``interrupted``/130."""
+    if isinstance(err, Terminated):
+        return "terminated", EXIT_TERMINATED
+    return "interrupted", EXIT_INTERRUPTED
+
+
+def _raise_terminated(signum: int, frame: FrameType | None) -> None:
+    # One cleanup: a second SIGTERM (a scheduler repeating itself) must not cut it short.
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    raise Terminated
+
+
+def handle_sigterm() -> None:
+    """Make SIGTERM raise :class:`Terminated` in the main thread (no-op elsewhere).
+
+    Python's default for SIGTERM ends the process on the spot: no ``finally`` runs, so
+    staging folders, partial bags and temporary copies would stay behind.
+    """
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _raise_terminated)

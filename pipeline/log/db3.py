@@ -18,6 +18,8 @@ delivered, so a salvaged recording is a prefix of the episode; :attr:`Db3Scan.sa
 says how many rows were read and lost. The user's file is only ever opened read-only and
 immutable (no side file is created); a ``-wal`` side file (a recorder killed before closing
 the bag) is read from a copy, since sqlite would otherwise write a ``-shm`` beside it.
+:func:`wal_copies` makes that copy once for all the passes of one read and removes it
+when the read ends, however it ends (an error, Ctrl-C, SIGTERM).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ import sqlite3
 import struct
 import tempfile
 from collections import defaultdict
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -44,11 +47,52 @@ from pipeline.log.schemas import MSG_TEXTS, controller_state_candidates, full_de
 BATCH_MESSAGES = 20_000
 
 
+def _wal(path: Path) -> Path | None:
+    """``path``'s ``-wal`` side file if it holds writes, else None."""
+    wal = path.with_name(path.name + "-wal")
+    return wal if wal.is_file() and wal.stat().st_size > 0 else None
+
+
+def _copy_with_wal(path: Path, wal: Path, into: Path) -> Path:
+    db = into / path.name
+    try:
+        shutil.copyfile(path, db)
+        shutil.copyfile(wal, into / wal.name)
+    except OSError as err:
+        raise RecordingError(f"{path}: cannot copy it with its {wal.name} ({err})") from err
+    return db
+
+
+@contextlib.contextmanager
+def wal_copies(files: Sequence[Path]) -> Iterator[dict[Path, Path]]:
+    """Copies (in one temporary folder) of the ``.db3`` files among ``files`` that have a
+    non-empty ``-wal``, keyed by the original path; the folder is removed on leaving.
+
+    Pass the mapping to :class:`Db3Scan` (``copies``) so a read of several passes copies
+    a bag once, not once per pass.
+    """
+    with contextlib.ExitStack() as stack:
+        copies: dict[Path, Path] = {}
+        for path in files:
+            try:
+                wal = _wal(path) if path.suffix == ".db3" else None
+            except OSError:
+                wal = None  # the scan says what is wrong with it
+            if wal is None:
+                continue
+            tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="armlab-db3-")))
+            copies[path] = _copy_with_wal(path, wal, tmp)
+        yield copies
+
+
 class Db3Scan:
     """Streams one rosbag2 sqlite3 file; subclasses receive messages via ``on_messages``."""
 
-    def __init__(self, path: Path, *, salvage: bool = False) -> None:
+    def __init__(self, path: Path, *, salvage: bool = False, copy: Path | None = None) -> None:
+        """``copy``: this bag copied with its ``-wal`` (:func:`wal_copies`); without one a
+        bag with a non-empty ``-wal`` is copied for this scan alone."""
         self.path = path
+        self.copy = copy
         self.schemas: dict[int, McapSchema] = {}
         self.channels: dict[int, McapChannel] = {}
         self.metadata: dict[str, dict[str, str]] = {}
@@ -86,13 +130,11 @@ class Db3Scan:
                 # A recorder killed before closing the bag leaves its last writes in the
                 # write-ahead log. sqlite would fold it in (and create a -shm beside it):
                 # read a copy, so the user's bag is never modified.
-                tmp = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="armlab-db3-")))
-                db = tmp / self.path.name
-                try:
-                    shutil.copyfile(self.path, db)
-                    shutil.copyfile(wal, tmp / wal.name)
-                except OSError as err:
-                    raise self._fail(f"cannot copy it with its {wal.name} ({err})") from err
+                if self.copy is not None:
+                    db = self.copy
+                else:
+                    tmp = stack.enter_context(tempfile.TemporaryDirectory(prefix="armlab-db3-"))
+                    db = _copy_with_wal(self.path, wal, Path(tmp))
                 self.notes.append(
                     f"{self.path.name}: its last writes are in {wal.name} (the recorder did not "
                     "close the bag); read with them from a copy, the bag is left as it is"

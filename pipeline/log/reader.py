@@ -41,7 +41,7 @@ from pipeline.constants import (
 )
 from pipeline.errors import RecordingError
 from pipeline.log import cdr
-from pipeline.log.db3 import Db3Scan
+from pipeline.log.db3 import Db3Scan, wal_copies
 from pipeline.log.decode import DecodeError, Group, TopicDecoder, Want, leaf_rows
 from pipeline.log.mcap import MESSAGE_PREFIX, McapChannel, McapScan, Salvage
 from pipeline.log.msgdef import MsgTypes, parse_msgdef, root_type_name
@@ -418,8 +418,10 @@ class _McapFile(McapScan):
 
 
 class _Db3File(Db3Scan):
-    def __init__(self, path: Path, collector: _Collector, *, salvage: bool) -> None:
-        super().__init__(path, salvage=salvage)
+    def __init__(
+        self, path: Path, collector: _Collector, *, salvage: bool, copy: Path | None
+    ) -> None:
+        super().__init__(path, salvage=salvage, copy=copy)
         self.collector = collector
 
     def on_messages(self, channel: McapChannel, buf: bytes, starts: NDArray[np.int64]) -> None:
@@ -665,11 +667,14 @@ def read_recording(
         raise RecordingError(f"{source}: cannot read ({err.strerror or err})") from err
     limit = STREAM_ABOVE_BYTES if options.stream_above_bytes is None else options.stream_above_bytes
     try:
-        if total > limit:
-            from pipeline.log.windowed import read_windowed
+        # a .db3 with a -wal is read from a copy: one for every pass, removed however
+        # the read ends (Ctrl-C and SIGTERM included)
+        with wal_copies(files) as copies:
+            if total > limit:
+                from pipeline.log.windowed import read_windowed
 
-            return read_windowed(source, files, options, sink)
-        return _read(source, files, options)
+                return read_windowed(source, files, options, sink, copies=copies)
+            return _read(source, files, options, copies=copies)
     except RecordingError:
         raise
     except SinkError as err:  # the caller's sink failed, not the recording
@@ -712,8 +717,17 @@ class _Scanned:
     unread_bytes: int
 
 
-def _scan(files: list[Path], collector: _Collector, *, salvage: bool) -> _Scanned:
-    """Stream every storage file into ``collector`` (stopping after a salvaged one)."""
+def _scan(
+    files: list[Path],
+    collector: _Collector,
+    *,
+    salvage: bool,
+    copies: Mapping[Path, Path] | None = None,
+) -> _Scanned:
+    """Stream every storage file into ``collector`` (stopping after a salvaged one).
+
+    ``copies``: ``.db3`` files copied with their ``-wal`` (:func:`pipeline.log.db3.wal_copies`).
+    """
     sha = hashlib.sha256()
     size = 0
     present: dict[str, str] = {}
@@ -725,7 +739,7 @@ def _scan(files: list[Path], collector: _Collector, *, salvage: bool) -> _Scanne
         collector.path = path
         scan: McapScan | Db3Scan
         if path.suffix == ".db3":
-            scan = _Db3File(path, collector, salvage=salvage)
+            scan = _Db3File(path, collector, salvage=salvage, copy=(copies or {}).get(path))
         else:
             scan = _McapFile(path, collector, salvage=salvage)
         scan.sha = sha
@@ -971,10 +985,12 @@ def _truth_at(
     return pos, vel, rows_cs
 
 
-def _read(source: Path, files: list[Path], options: ReadOptions) -> Recording:
+def _read(
+    source: Path, files: list[Path], options: ReadOptions, *, copies: Mapping[Path, Path]
+) -> Recording:
     mcap_path = files[0]
     collector = _Collector(options.topics)
-    scanned = _scan(files, collector, salvage=options.salvage)
+    scanned = _scan(files, collector, salvage=options.salvage, copies=copies)
     roles = _roles(collector, scanned.present, mcap_path, scanned.salvaged)
     js_t, js_all = roles.js_group.concat()
     cs_t, cs_a = roles.cs_group.concat()

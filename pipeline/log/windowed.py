@@ -33,7 +33,7 @@ lacks, a window pairs duplicates as identical stamp runs (the whole read: neares
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -504,15 +504,23 @@ def _end_ns(
 
 
 def read_windowed(
-    source: Path, files: list[Path], options: ReadOptions, sink: WindowSink | None
+    source: Path,
+    files: list[Path],
+    options: ReadOptions,
+    sink: WindowSink | None,
+    *,
+    copies: Mapping[Path, Path] | None = None,
 ) -> Recording:
-    """Read ``source`` in two passes (module doc); ``sink`` receives the exact windows."""
+    """Read ``source`` in two passes (module doc); ``sink`` receives the exact windows.
+
+    ``copies``: ``.db3`` files copied once with their ``-wal`` for every pass.
+    """
     from pipeline.log.reader import STREAM_ABOVE_BYTES
 
     limit = STREAM_ABOVE_BYTES if options.stream_above_bytes is None else options.stream_above_bytes
     mcap_path = files[0]
     first = _Pass1(dict(options.topics))
-    scanned = _scan(files, first, salvage=options.salvage)
+    scanned = _scan(files, first, salvage=options.salvage, copies=copies)
     roles = _roles(first, scanned.present, mcap_path, scanned.salvaged)
     js_topic, cs_topic = roles.js_dec.topic, roles.cs_dec.topic
     js_stats = first.stats[(js_topic, roles.js_group.names)]
@@ -530,7 +538,7 @@ def read_windowed(
 
     def scan_js(after: int, reach: float) -> int:
         last = _LastPaired(dict(options.topics), js_topic, roles.js_group.names, after, reach)
-        _scan(files, last, salvage=options.salvage)
+        _scan(files, last, salvage=options.salvage, copies=copies)
         return after if last.found is None else last.found
 
     cs_period = cs_stats.period_ns()
@@ -600,7 +608,7 @@ def read_windowed(
     if gt is not None:
         streams[str(gt_topic)] = gt
     second = _Pass2(dict(options.topics), streams, windows)
-    again = _scan(files, second, salvage=options.salvage)
+    again = _scan(files, second, salvage=options.salvage, copies=copies)
     if again.sha256 != scanned.sha256:
         raise RecordingError(f"{mcap_path}: the recording changed while it was being read")
     windows.pump(final=True)

@@ -12,6 +12,8 @@ Ray is an optional extra: ``pip install 'armlab-pipeline[ray]'``.
 from __future__ import annotations
 
 import contextlib
+import signal
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -58,6 +60,9 @@ def run_on_ray(
         ) from err
     started_here = not ray.is_initialized()
     if started_here:
+        # ray.init replaces the SIGTERM handler with sys.exit (no cleanup of ours would
+        # run, and the exit code would be 15); keep ours, which takes Ctrl-C's path
+        on_sigterm = signal.getsignal(signal.SIGTERM)
         try:
             ray.init(
                 address=address, include_dashboard=False, log_to_driver=False,
@@ -66,6 +71,9 @@ def run_on_ray(
         except (ConnectionError, RuntimeError, ValueError) as err:
             where = address or "a local instance"
             raise PipelineError(f"--executor ray: cannot start or join {where} ({err})") from err
+        finally:
+            if threading.current_thread() is threading.main_thread() and on_sigterm is not None:
+                signal.signal(signal.SIGTERM, on_sigterm)
     outcomes: dict[str, EpisodeOutcome] = {}
     pending: dict[Any, str] = {}
     try:

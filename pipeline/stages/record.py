@@ -31,7 +31,7 @@ import numpy as np
 
 from pipeline import __version__
 from pipeline.constants import FINAL_WINDOW_S
-from pipeline.errors import ParamsError, PipelineError
+from pipeline.errors import EXIT_INTERRUPTED, ParamsError, PipelineError, interrupt_exit
 from pipeline.fsutil import ensure_dir, remove_stale
 from pipeline.params import Episode, Params, ScenarioParams
 from pipeline.planning import PlannedPath, TimedTrajectory
@@ -644,21 +644,29 @@ def check_budget(
 
 
 class Interrupted(PipelineError):
-    """Ctrl-C (SIGINT) during a record run: what finished and what did not.
+    """Ctrl-C (SIGINT) or SIGTERM during a record run: what finished and what did not.
 
     Attributes:
         finished: outcomes of the episodes that ended (ok, diverged or failed).
         unfinished: names of the episodes that were cancelled (running or queued).
+        exit_code: 130 for Ctrl-C, 143 for SIGTERM (what shells report).
     """
 
-    exit_code = 130  # what shells report for Ctrl-C
+    exit_code = EXIT_INTERRUPTED
 
-    def __init__(self, finished: Sequence[EpisodeOutcome], unfinished: Sequence[str]) -> None:
+    def __init__(
+        self,
+        finished: Sequence[EpisodeOutcome],
+        unfinished: Sequence[str],
+        *,
+        cause: BaseException | None = None,
+    ) -> None:
         self.finished = tuple(finished)
         self.unfinished = tuple(unfinished)
+        word, self.exit_code = interrupt_exit(cause or KeyboardInterrupt())
         done = ", ".join(f"{o.name} ({o.status})" for o in self.finished) or "none"
         super().__init__(
-            f"interrupted: finished {len(self.finished)} episode(s): {done}; not recorded: "
+            f"{word}: finished {len(self.finished)} episode(s): {done}; not recorded: "
             f"{', '.join(self.unfinished) or 'none'}"
         )
 
@@ -713,8 +721,10 @@ def _worker_main(
 ) -> None:
     """A pool worker: run the episodes the parent sends until it sends None."""
     _die_with_parent(parent_pid)
-    # Ctrl-C reaches the whole process group; the parent decides what it cancels.
+    # Ctrl-C reaches the whole process group, and so does SIGTERM from `timeout`, systemd
+    # or a CI runner; the parent decides what it cancels (and kills the workers).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
     def before_write() -> None:
         if os.getppid() != parent_pid:
@@ -828,19 +838,19 @@ def _run_pool(
                 for e in queued:
                     outcomes[e.name] = _worker_died(e.name, None)
                 queued.clear()
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as err:
         cancel.set()
         _collect_until_idle(workers, outcomes, timeout_s=CANCEL_GRACE_S)
         _kill_all(workers)
         _sweep(out_dir)
-        raise _interrupted(episodes, outcomes, out_dir, started_s=started_s) from None
+        raise _interrupted(episodes, outcomes, out_dir, started_s=started_s, cause=err) from None
     finally:
         _kill_all(workers)
         _sweep(out_dir, mine=False)  # what a worker that died mid-write left
     return outcomes
 
 
-CANCEL_GRACE_S = 3.0  # a worker writing its bag when Ctrl-C comes may finish it
+CANCEL_GRACE_S = 3.0  # a worker writing its bag when Ctrl-C (SIGTERM) comes may finish it
 
 
 def _collect_until_idle(
@@ -872,6 +882,7 @@ def _interrupted(
     out_dir: Path,
     *,
     started_s: float,
+    cause: BaseException,
 ) -> Interrupted:
     """What finished: the outcomes received, plus any recording this run published whose
     summary the interrupt cut off (its folder is newer than the run)."""
@@ -892,7 +903,7 @@ def _interrupted(
             )  # fmt: skip
         else:
             unfinished.append(e.name)
-    return Interrupted(finished, unfinished)
+    return Interrupted(finished, unfinished, cause=cause)
 
 
 def _worker_died(name: str, exitcode: int | None) -> EpisodeOutcome:
@@ -1022,7 +1033,7 @@ def record(
 
     Raises:
         ParamsError: an episode would not fit in memory or time (before any runs).
-        Interrupted: Ctrl-C; nothing half-written is left under a final name.
+        Interrupted: Ctrl-C or SIGTERM; nothing half-written is left under a final name.
     """
     emit = on_event or (lambda kind, name, value: None)
     started_s = time.time()
@@ -1060,7 +1071,7 @@ def record(
             outcomes = _run_pool(episodes, plan_by_episode, out_dir=out_dir, force=force,
                                  commit=commit, jobs=jobs, emit=emit,
                                  started_s=started_s)  # fmt: skip
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as err:
         _sweep(out_dir)
-        raise _interrupted(episodes, outcomes, out_dir, started_s=started_s) from None
+        raise _interrupted(episodes, outcomes, out_dir, started_s=started_s, cause=err) from None
     return [outcomes[e.name] for e in episodes]

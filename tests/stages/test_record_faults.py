@@ -269,3 +269,108 @@ def test_ctrl_c_during_a_report_keeps_the_earlier_report_and_leaves_no_staging(t
     # under a final name changed, and the next run removes the leftover.
     run_report(recordings_dir=rec, out_dir=out)
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+# --- SIGTERM (kill, timeout, systemd, CI runners): Ctrl-C's path, exit 143 ---------------
+
+
+def _terminated(proc: subprocess.Popen[str]) -> str:
+    """Wait for the run to end after SIGTERM; return its one stderr line."""
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 143, err
+    assert "Traceback" not in err, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("to_group", [False, True], ids=["parent", "group"])
+def test_sigterm_stops_a_parallel_record_like_ctrl_c(tmp_path, cleanup, to_group):
+    out = tmp_path / "rec"
+    proc = _start(_params(tmp_path, episodes=6, hold_s=4.0), out, "--jobs", "2")
+    cleanup.append(proc)
+    # terminate while a worker is writing its bag: the partial folder must not survive
+    assert _wait_for(lambda: bool(_partials(out)), 120), proc.stderr.read() if proc.stderr else ""
+    workers = _children(proc.pid)
+    assert len(workers) == 2
+    # the whole group, as `timeout` and systemd send it; or the parent alone, as `kill` does
+    (os.killpg if to_group else os.kill)(proc.pid, signal.SIGTERM)
+    line = _terminated(proc)
+    match = re.fullmatch(r"terminated: finished (\d+) episode\(s\): (.*); not recorded: (.*)", line)
+    assert match, line
+    finished = [] if match[2] == "none" else [s.split(" ")[0] for s in match[2].split(", ")]
+    pending = [] if match[3] == "none" else match[3].split(", ")
+    assert pending, "the run was terminated early: some episodes must be left"
+    assert sorted(finished + pending) == [f"e{i}" for i in range(6)]
+    assert _visible(out) == set(finished)
+    assert not _partials(out)
+    assert not any(pid_alive(w) for w in workers), "a worker survived its parent's SIGTERM"
+    assert not (tmp_path / ".rec.lock").exists()
+
+
+def _two_reports(tmp_path: Path, *, recordings: int) -> tuple[Path, Path]:
+    from pipeline.stages.report import run_report
+    from tests.analysis.bagfactory import paper_like, write_bag
+
+    rec, out = tmp_path / "rec", tmp_path / "rep"
+    for i in range(recordings):
+        ctrl = ("pid", "ctc")[i % 2]
+        write_bag(rec, paper_like(f"paper-{ctrl}-{i}", ctrl, duration_s=3.0, motion_end_s=2.0))
+    run_report(recordings_dir=rec, out_dir=out)
+    return rec, out
+
+
+def _report(rec: Path, out: Path, env: dict[str, str] | None = None) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "pipeline", "report", "--recordings", str(rec), "--out", str(out)],
+        cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        start_new_session=True, env=env,
+    )  # fmt: skip
+
+
+@pytest.mark.slow
+def test_sigterm_during_a_report_keeps_the_earlier_report_and_leaves_no_staging(tmp_path, cleanup):
+    rec, out = _two_reports(tmp_path, recordings=4)
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    proc = _report(rec, out)
+    cleanup.append(proc)
+    # terminate once it is writing (its staging folder exists)
+    assert _wait_for(lambda: any(".rep.tmp-" in p.name for p in tmp_path.iterdir()), 60)
+    proc.send_signal(signal.SIGTERM)
+    assert _terminated(proc) == "terminated"
+    after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    if after != before:
+        # SIGTERM landed after the new outputs were moved in: every output is the new
+        # one, never a mix (the report is deterministic)
+        assert set(after) == set(before)
+        assert after[Path("metrics.json")] == before[Path("metrics.json")]
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+    assert not any(p.name.startswith(".") for p in out.rglob("*"))
+
+
+@pytest.mark.slow
+def test_sigterm_while_reading_a_db3_with_a_wal_removes_the_temporary_copy(tmp_path, cleanup):
+    from tests.log.test_salvage_db3 import _KILLED_RECORDER, db3_bag, rows
+
+    rec = tmp_path / "rec"
+    for i in range(6):  # a killed recorder's bags: each read from a copy in TMPDIR
+        db, _ = db3_bag(rec / f"run{i}", "jazzy", False)
+        keep = len(rows(db)) // 2
+        subprocess.run([sys.executable, "-c", _KILLED_RECORDER, str(db), str(keep)], check=False)
+        assert db.with_name(db.name + "-wal").stat().st_size > 0
+    bags = {p.relative_to(rec): p.read_bytes() for p in rec.rglob("*") if p.is_file()}
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    proc = _report(rec, tmp_path / "rep", env={**os.environ, "TMPDIR": str(tmp)})
+    cleanup.append(proc)
+
+    def copying() -> bool:
+        return any(p.name.startswith("armlab-db3-") for p in tmp.iterdir())
+
+    assert _wait_for(copying, 60), "no temporary copy of a bag seen"
+    proc.send_signal(signal.SIGTERM)
+    assert _terminated(proc) == "terminated"
+    assert not copying(), "the temporary copy of the bag outlived the run"
+    assert {p.relative_to(rec): p.read_bytes() for p in rec.rglob("*") if p.is_file()} == bags
+    assert not (tmp_path / "rep").exists()
