@@ -48,7 +48,9 @@ from pipeline.log.mcap import McapChannel, McapScan
 from pipeline.log.reader import (
     _JS_OPTIONAL,
     _WANT,
+    CONTROLLER_STATE_COLUMNS,
     F64,
+    SAMPLE_COLUMNS,
     ReadOptions,
     Recording,
     SinkError,
@@ -639,25 +641,8 @@ def read_windowed(
     )
 
 
-_SAMPLE_VALUES = (
-    "position_rad",
-    "velocity_rad_s",
-    "effort_nm",
-    "reference_position_rad",
-    "reference_velocity_rad_s",
-    "error_rad",
-    "commanded_effort_nm",
-    "true_position_rad",
-    "true_velocity_rad_s",
-)
-_CS_VALUES = (
-    "reference_position_rad",
-    "reference_velocity_rad_s",
-    "feedback_position_rad",
-    "error_rad",
-    "commanded_effort_nm",
-    "true_position_rad",
-    "true_velocity_rad_s",
-)
+# The value columns of the two tidy frames (after episode, stamp_ns, time_s, joint).
+_SAMPLE_VALUES = SAMPLE_COLUMNS[4:]
+_CS_VALUES = CONTROLLER_STATE_COLUMNS[4:]
 
 __all__ = ["MAX_KEPT_STEPS", "WINDOW_STEPS", "read_windowed"]
