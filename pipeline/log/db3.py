@@ -25,7 +25,6 @@ when the read ends, however it ends (an error, Ctrl-C, SIGTERM).
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import shutil
 import sqlite3
 import struct
@@ -40,7 +39,14 @@ from numpy.typing import NDArray
 from pipeline.constants import TYPE_CONTROLLER_STATE
 from pipeline.errors import RecordingError
 from pipeline.log import cdr
-from pipeline.log.mcap import MESSAGE_PREFIX, RECORD_HEADER, McapChannel, McapSchema, Salvage
+from pipeline.log.mcap import (
+    MESSAGE_PREFIX,
+    RECORD_HEADER,
+    McapChannel,
+    McapSchema,
+    Salvage,
+    StorageScan,
+)
 from pipeline.log.msgdef import parse_msgdef
 from pipeline.log.schemas import MSG_TEXTS, controller_state_candidates, full_definition
 
@@ -85,27 +91,15 @@ def wal_copies(files: Sequence[Path]) -> Iterator[dict[Path, Path]]:
         yield copies
 
 
-class Db3Scan:
+class Db3Scan(StorageScan):
     """Streams one rosbag2 sqlite3 file; subclasses receive messages via ``on_messages``."""
 
     def __init__(self, path: Path, *, salvage: bool = False, copy: Path | None = None) -> None:
         """``copy``: this bag copied with its ``-wal`` (:func:`wal_copies`); without one a
         bag with a non-empty ``-wal`` is copied for this scan alone."""
-        self.path = path
+        super().__init__(path, salvage=salvage)
         self.copy = copy
-        self.schemas: dict[int, McapSchema] = {}
-        self.channels: dict[int, McapChannel] = {}
-        self.metadata: dict[str, dict[str, str]] = {}
-        self.topic_counts: dict[str, int] = {}
-        self.sha = hashlib.sha256()
-        self.size = 0
-        self.salvage = salvage
-        self.salvaged: Salvage | None = None
-        self.notes: list[str] = []
         self._tables = False
-
-    def on_messages(self, channel: McapChannel, buf: bytes, starts: NDArray[np.int64]) -> None:
-        """As :meth:`pipeline.log.mcap.McapScan.on_messages`."""
 
     def _fail(self, problem: str) -> RecordingError:
         return RecordingError(f"{self.path}: {problem}")

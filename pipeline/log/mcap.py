@@ -407,14 +407,18 @@ class Salvage:
     lost_after_ns: int | None = None
 
 
-class McapScan:
-    """Streams one MCAP file, validating it: every record, chunk CRC, data and summary CRC.
+class StorageScan:
+    """What a scan of one storage file (MCAP or sqlite3) collects, and how it hands on
+    messages: subclasses receive them through :meth:`on_messages`.
 
-    One chunk is in memory at a time. Subclasses receive the messages through
-    :meth:`on_messages` (per chunk, the message record starts of each channel), with
-    :attr:`schemas` and :attr:`channels` known by then. With ``salvage``, damage after the
-    first intact chunk ends the scan instead of failing it: :attr:`salvaged` then says where
-    and why, and everything before it has been delivered.
+    Attributes:
+        schemas, channels: by id, as the file declares them.
+        metadata: metadata records by name.
+        topic_counts: messages per topic.
+        sha: SHA-256 of the file's bytes, updated as they are read.
+        size: bytes read.
+        salvaged: where a ``salvage`` scan stopped (None: intact).
+        notes: non-fatal oddities for the report.
     """
 
     def __init__(self, path: Path, *, salvage: bool = False) -> None:
@@ -428,6 +432,24 @@ class McapScan:
         self.salvage = salvage
         self.salvaged: Salvage | None = None
         self.notes: list[str] = []
+
+    def on_messages(self, channel: McapChannel, buf: bytes, starts: NDArray[np.int64]) -> None:
+        """Messages of ``channel`` in ``buf``: record bodies start at ``starts`` (the channel
+        id), payloads at ``starts + MESSAGE_PREFIX``, body lengths at ``starts - 8``."""
+
+
+class McapScan(StorageScan):
+    """Streams one MCAP file, validating it: every record, chunk CRC, data and summary CRC.
+
+    One chunk is in memory at a time. Subclasses receive the messages through
+    :meth:`on_messages` (per chunk, the message record starts of each channel), with
+    :attr:`schemas` and :attr:`channels` known by then. With ``salvage``, damage after the
+    first intact chunk ends the scan instead of failing it: :attr:`salvaged` then says where
+    and why, and everything before it has been delivered.
+    """
+
+    def __init__(self, path: Path, *, salvage: bool = False) -> None:
+        super().__init__(path, salvage=salvage)
         self.chunks_read = 0
         self._damage_at = 0
         self._batch: list[tuple[bytes, dict[int, NDArray[np.int64]]]] = []
@@ -722,10 +744,6 @@ class McapScan:
         self._decode_positions(
             buf, pos, {cid: np.asarray(v, dtype=np.int64) for cid, v in positions.items()}
         )
-
-    def on_messages(self, channel: McapChannel, buf: bytes, starts: NDArray[np.int64]) -> None:
-        """Messages of ``channel`` in ``buf``: record bodies start at ``starts`` (the channel
-        id), payloads at ``starts + MESSAGE_PREFIX``, body lengths at ``starts - 8``."""
 
     def _decode_positions(
         self, buf: bytes, pos: int, positions: dict[int, NDArray[np.int64]]
