@@ -21,6 +21,7 @@ import numpy as np
 import polars as pl
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from numpy.typing import NDArray
 
 from pipeline.analysis import catalog
 from pipeline.analysis.campaign import (
@@ -60,6 +61,13 @@ class CampaignSection:
     table_path: str
     lines: tuple[str, ...]
     files: tuple[str, ...]
+
+
+def _values(rows: pl.DataFrame, metric: catalog.Metric) -> NDArray[np.float64]:
+    """The metric's recorded values in ``rows`` (nulls dropped; only positive ones on a
+    log scale)."""
+    vals = np.asarray(rows.get_column(metric.name).drop_nulls().to_numpy(), dtype=np.float64)
+    return vals[vals > 0] if metric.log_scale else vals
 
 
 def _joints(table: pl.DataFrame) -> list[str]:
@@ -139,14 +147,10 @@ def _distribution_figure(
         sub = ok.filter(pl.col("joint") == joint)
         for ci, cond in enumerate(conditions):
             for k, ctrl in enumerate(controllers):
-                vals = (
-                    sub.filter((pl.col("condition") == cond) & (pl.col("controller") == ctrl))
-                    .get_column(metric.name)
-                    .drop_nulls()
-                    .to_numpy()
+                vals = _values(
+                    sub.filter((pl.col("condition") == cond) & (pl.col("controller") == ctrl)),
+                    metric,
                 )
-                if metric.log_scale:
-                    vals = vals[vals > 0]
                 if vals.size == 0:
                     continue
                 x = ci + (k - (len(controllers) - 1) / 2) * width
@@ -187,13 +191,10 @@ def _ecdf_figure(
     for ax, joint in zip(axes, joints, strict=True):
         for ctrl in controllers:
             vals = np.sort(
-                ok.filter((pl.col("joint") == joint) & (pl.col("controller") == ctrl))
-                .get_column(metric.name)
-                .drop_nulls()
-                .to_numpy()
+                _values(
+                    ok.filter((pl.col("joint") == joint) & (pl.col("controller") == ctrl)), metric
+                )
             )
-            if metric.log_scale:
-                vals = vals[vals > 0]
             if vals.size == 0:
                 continue
             ax.step(vals, np.arange(1, vals.size + 1) / vals.size, where="post",
