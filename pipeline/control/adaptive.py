@@ -139,6 +139,8 @@ class AdaptiveController:
         self._gamma: F64 = per_joint_gamma * half**2
         self._theta: F64 = self._theta0.copy()
         self._y: F64 = np.zeros((n, self._theta0.size))
+        self._rows = np.arange(n)
+        self._armature_cols = PARAMS_PER_LINK * n + self._rows
         self._steps = 0
         self._history: list[F64] = []
 
@@ -182,11 +184,11 @@ class AdaptiveController:
         """``Y(q, qd, qr_d, qr_dd)`` with ``Y theta = M qr_dd + C(q, qd) qr_d + g`` (a view)."""
         model, data, zero, n = self._model, self._data, self._zero, self._n
         y = self._y
-        links = y[:, : PARAMS_PER_LINK * n]
-        links[:] = pin.computeJointTorqueRegressor(model, data, q, zero, qr_dd)
-        links += 0.25 * pin.computeJointTorqueRegressor(model, data, q, qd + qr_d, zero)
-        links -= 0.25 * pin.computeJointTorqueRegressor(model, data, q, qd - qr_d, zero)
-        y[:, PARAMS_PER_LINK * n :] = np.diag(qr_dd)
+        inertial = pin.computeJointTorqueRegressor(model, data, q, zero, qr_dd)
+        plus = pin.computeJointTorqueRegressor(model, data, q, qd + qr_d, zero)
+        minus = pin.computeJointTorqueRegressor(model, data, q, qd - qr_d, zero)
+        y[:, : PARAMS_PER_LINK * n] = inertial + 0.25 * (plus - minus)
+        y[self._rows, self._armature_cols] = qr_dd
         return y
 
     def compute(self, q: F64, qd: F64, q_ref: F64, qd_ref: F64, qdd_ref: F64, dt_s: float) -> F64:
@@ -195,7 +197,8 @@ class AdaptiveController:
         tau: F64 = y @ self._theta + self._kd * s
         theta = self._theta
         theta += dt_s * self._gamma * (y.T @ s)
-        np.clip(theta, self._lower, self._upper, out=theta)
+        np.minimum(theta, self._upper, out=theta)  # the projection (diagonal Gamma)
+        np.maximum(theta, self._lower, out=theta)
         self._steps += 1
         if self._steps % HISTORY_EVERY == 0:
             self._history.append(theta.copy())
