@@ -18,8 +18,8 @@ sample at ``t + dt`` is its Taylor extrapolation with the jerk from the last two
 acceleration samples: exact when the acceleration is linear over two periods,
 else off by about ``snap dt^2`` (the paper's 1 s quintic at 1 kHz: at most 2e-4
 N m on the UR5, against up to 3e-2 N m between the samples at ``t`` and ``t + dt``).
-``ff_at_next_sample: false`` evaluates both feed-forward terms at ``t`` instead. The PID part and its
-gains are ``pid``'s (same bandwidth design).
+``ff_at_next_sample: false`` evaluates both feed-forward terms at ``t`` instead.
+The PID part and its gains are ``pid``'s (same bandwidth design).
 """
 
 from __future__ import annotations
