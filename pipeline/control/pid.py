@@ -16,8 +16,8 @@ No model terms: gravity and inertia are left to the feedback and the integrator.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -78,12 +78,22 @@ def default_gains(
 
 
 class PidController:
-    """Independent joint PID on effort (ros2_control JTC + control_toolbox::Pid)."""
+    """Independent joint PID on effort (ros2_control JTC + control_toolbox::Pid).
+
+    Variants (``pid_ff``) subclass it with their own ``NAME``, ``GAINS`` and
+    ``DEFAULT_GAINS`` and add their feed-forward around ``_pid``.
+    """
+
+    NAME: ClassVar[str] = NAME
+    GAINS: ClassVar[tuple[GainSpec, ...]] = GAINS
+    DEFAULT_GAINS: ClassVar[Callable[..., dict[str, Any]]] = staticmethod(default_gains)
 
     def __init__(
         self, spec: RobotSpec, gains: Mapping[str, Any] | None = None, *, where: str = "gains"
     ) -> None:
-        self._tuning, g = resolve_tuned_gains(NAME, spec, GAINS, default_gains, gains, where=where)
+        self._tuning, g = resolve_tuned_gains(
+            self.NAME, spec, self.GAINS, type(self).DEFAULT_GAINS, gains, where=where
+        )
         if (g["i_clamp_min"] > g["i_clamp_max"]).any():
             raise ParamsError(
                 f"{where}.i_clamp_min: must be <= i_clamp_max, got {g['i_clamp_min'].tolist()} "
@@ -104,7 +114,7 @@ class PidController:
 
     @property
     def name(self) -> str:
-        return NAME
+        return self.NAME
 
     def settings(self) -> dict[str, Any]:
         return {**self._tuning.settings(), **settings_of(self._gains)}
@@ -113,6 +123,13 @@ class PidController:
         self._i_term[:] = 0.0
 
     def compute(self, q: F64, qd: F64, q_ref: F64, qd_ref: F64, qdd_ref: F64, dt_s: float) -> F64:
+        tau = self._pid(q, qd, q_ref, qd_ref, dt_s)
+        if self._use_ff:
+            tau += self._ff * qd_ref
+        return tau
+
+    def _pid(self, q: F64, qd: F64, q_ref: F64, qd_ref: F64, dt_s: float) -> F64:
+        """control_toolbox::Pid's command for every joint (no feed-forward)."""
         e = q_ref - q
         i_term = self._i_term
         if dt_s != self._dt_s:  # the period is fixed in an episode: scale ki once
@@ -126,6 +143,4 @@ class PidController:
         else:
             i_out = np.maximum(np.minimum(i_term, self._i_max), self._i_min)
         tau: F64 = self._kp * e + self._kd * (qd_ref - qd) + i_out
-        if self._use_ff:
-            tau += self._ff * qd_ref
         return tau

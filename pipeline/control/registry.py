@@ -7,7 +7,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from pipeline.control import ctc, ctc_pid, pd_gravity, pid
+from pipeline.control import adaptive, ctc, ctc_pid, passivity, pd_gravity, pid, pid_ff, pid_humble
 from pipeline.control.base import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, Controller
 from pipeline.errors import ParamsError
 from pipeline.robots.spec import RobotSpec
@@ -36,6 +36,10 @@ CONTROLLERS: dict[str, ControllerEntry] = {
     ctc.NAME: ControllerEntry(ctc.ComputedTorqueController, ctc.default_gains),
     ctc_pid.NAME: ControllerEntry(ctc_pid.ComputedTorquePidController, ctc_pid.default_gains),
     pd_gravity.NAME: ControllerEntry(pd_gravity.PdGravityController, pd_gravity.default_gains),
+    pid_ff.NAME: ControllerEntry(pid_ff.PidFeedForwardController, pid_ff.default_gains),
+    pid_humble.NAME: ControllerEntry(pid_humble.PidHumbleController, pid_humble.default_gains),
+    passivity.NAME: ControllerEntry(passivity.PassivityController, passivity.default_gains),
+    adaptive.NAME: ControllerEntry(adaptive.AdaptiveController, adaptive.default_gains),
 }
 
 

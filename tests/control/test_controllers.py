@@ -39,8 +39,10 @@ def _mujoco_mass_and_bias(spec, q, qd=None):
 # --- registry ---------------------------------------------------------------------
 
 
-def test_registry_offers_pid_ctc_ctc_pid_and_pd_gravity():
-    assert controller_names() == ("ctc", "ctc_pid", "pd_gravity", "pid")
+def test_registry_offers_the_built_in_laws():
+    assert controller_names() == (
+        "adaptive", "ctc", "ctc_pid", "passivity", "pd_gravity", "pid", "pid_ff", "pid_humble"
+    )  # fmt: skip
 
 
 @pytest.mark.parametrize("name", ["pid", "ctc", "ctc_pid", "pd_gravity"])
@@ -54,12 +56,12 @@ def test_unknown_controller_lists_the_valid_names(ur5):
     message = str(err.value)
     assert isinstance(err.value, PipelineError)
     assert "'ctcc'" in message and "did you mean 'ctc'" in message
-    assert "ctc, ctc_pid, pd_gravity, pid" in message
+    assert "adaptive, ctc, ctc_pid, passivity, pd_gravity, pid, pid_ff, pid_humble" in message
     assert "\n" not in message
 
 
 def test_unknown_controller_for_default_gains_is_refused_too(ur5):
-    with pytest.raises(UnknownControllerError, match="valid: ctc, ctc_pid, pd_gravity, pid"):
+    with pytest.raises(UnknownControllerError, match="valid: adaptive, ctc, ctc_pid, passivity"):
         default_gains(ur5, "lqr")
 
 

@@ -56,6 +56,9 @@ def test_every_controller_starts_the_motion_settled(ur5, name):
     result = _run(ur5, name, duration_s=1.0)
     k0 = result.extra["motion_start_row"]
     assert result.extra["motion_start_s"] == pytest.approx(PREROLL_S)
+    if name == "pid_humble":  # Humble's defaults: i_clamp = 0, no integral, it sags by g / kp
+        assert np.abs(result.q_ref[k0] - result.q_true[k0]).max() > 1e-3
+        return
     assert np.abs(result.q_ref[k0] - result.q_true[k0]).max() < 1e-4
     # and it holds gravity there: the shoulder carries ~53 N m at the start pose
     assert abs(result.tau_nm[k0, 1]) > 40.0
