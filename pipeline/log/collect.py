@@ -8,7 +8,7 @@ Humble's desired/actual, detected from the schema), the planned trajectory and t
 description. A role takes the topic named by a remap (``topics={"controller_state":
 "/arm_controller/controller_state"}``), else our topic name, else the one topic of its type.
 
-Shared by the whole read (:mod:`pipeline.log.reader`) and the windowed one
+Shared by the whole read (:mod:`pipeline.log.whole`) and the windowed one
 (:mod:`pipeline.log.windowed`), whose passes are :class:`Collector` subclasses.
 """
 

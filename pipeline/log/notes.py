@@ -1,7 +1,7 @@
 """The notes a read attaches to a recording (non-fatal oddities: salvage, dropped samples,
 missing arrays, the joints analysed) and its one "nothing pairs" error.
 
-Shared by the whole read (:mod:`pipeline.log.reader`) and the windowed one
+Shared by the whole read (:mod:`pipeline.log.whole`) and the windowed one
 (:mod:`pipeline.log.windowed`), so both say the same.
 """
 

@@ -1,6 +1,6 @@
 """Pairing a recording's topics by stamp, and the tidy frames the pairs make.
 
-The whole read (:mod:`pipeline.log.reader`) pairs a recording's rows at once; the windowed
+The whole read (:mod:`pipeline.log.whole`) pairs a recording's rows at once; the windowed
 read (:mod:`pipeline.log.windowed`) pairs a window's rows with the whole recording's
 period, so both give the same pairs.
 """

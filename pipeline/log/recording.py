@@ -1,7 +1,7 @@
 """The recording as read: :class:`Recording` (one episode's frames and facts), the read's
 options and the window sink a long recording's read feeds.
 
-Shared by the whole read (:mod:`pipeline.log.reader`) and the windowed one
+Shared by the whole read (:mod:`pipeline.log.whole`) and the windowed one
 (:mod:`pipeline.log.windowed`).
 """
 
