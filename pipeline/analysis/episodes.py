@@ -17,7 +17,8 @@ import polars as pl
 
 from pipeline.analysis.protocol import ProtocolView
 from pipeline.errors import SpecError
-from pipeline.log.reader import Recording, urdf_effort_limits
+from pipeline.log.reader import Recording
+from pipeline.model.urdf_xml import urdf_effort_limits
 from pipeline.robots import RobotSpec, builtin_robot_names, load_spec, parse_spec
 
 EPISODE_COLUMNS = (
@@ -72,7 +73,7 @@ def motion_completed(rec: Recording, end_s: float | None) -> bool:
     unless the recording was salvaged: its end is where the damage was, not the episode's."""
     if rec.status != "ok":
         return False
-    motion_end = rec.motion_end_s
+    motion_end = rec.trajectory_duration_s
     if motion_end is None:
         return not rec.salvaged
     return end_s is not None and end_s >= motion_end - _period_s(rec) / 2
@@ -121,7 +122,7 @@ def episode_table(
                 "reason": rec.reason,
                 "salvaged": rec.salvaged,
                 "salvage_lost_pct": rec.salvage_lost_pct,
-                "motion_end_s": rec.motion_end_s,
+                "motion_end_s": rec.trajectory_duration_s,
                 "end_s": end_s,
                 "samples": samples,
                 "source": str(rec.source),

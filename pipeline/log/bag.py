@@ -6,11 +6,12 @@ PlotJuggler, ``rosbags`` and ``mcap_ros2`` open it)::
     <bag_dir>/metadata.yaml       rosbag2 metadata (Jazzy: version 8 + custom_data; Humble: 5)
     <bag_dir>/<name>_0.mcap       profile "ros2", ros2msg schemas, CDR messages, zstd chunks
 
-A topic is a schema plus its data: :data:`TOPICS` names it, its type and QoS; the message
-definitions of the chosen ROS distro (:mod:`pipeline.log.schemas`) give the layout; and
-:func:`encode_episode` fills that layout's leaves (``header.stamp.sec``, ``position``, ...)
-with whole columns of the episode at once (:class:`pipeline.log.cdr.Template`). The MCAP
-records are written by :mod:`pipeline.log.mcap`, the directory by :mod:`pipeline.log.rosbag2`.
+A topic is a schema plus its data: its row in :data:`pipeline.log.topics.TOPICS` names it,
+its type and QoS; the message definitions of the chosen ROS distro
+(:mod:`pipeline.log.schemas`) give the layout; and :func:`encode_episode` fills that
+layout's leaves (``header.stamp.sec``, ``position``, ...) with whole columns of the episode
+at once (:class:`pipeline.log.cdr.Template`). The MCAP records are written by
+:mod:`pipeline.log.mcap`, the directory by :mod:`pipeline.log.rosbag2`.
 """
 
 from __future__ import annotations
@@ -35,26 +36,19 @@ from pipeline.constants import (
     TOPIC_ROBOT_DESCRIPTION,
     TOPIC_TF,
     TYPE_CONTROLLER_STATE,
-    TYPE_JOINT_STATE,
-    TYPE_JOINT_TRAJECTORY,
-    TYPE_STRING,
-    TYPE_TF,
 )
 from pipeline.errors import RecordingError
 from pipeline.log import cdr, rosbag2
 from pipeline.log.mcap import CHUNK_BYTES, ChannelSpec, MessageBlock, write_mcap
 from pipeline.log.schemas import (
     DEFAULT_ROS_DISTRO,
-    QOS_LATCHED,
-    QOS_STREAM,
-    QOS_TF,
     TYPE_HASHES,
-    Qos,
     RosDistro,
     check_distro,
     full_definition,
     message_types,
 )
+from pipeline.log.topics import TOPICS
 from pipeline.model import transforms
 from pipeline.model.frames import tf_edges
 from pipeline.robots.spec import RobotSpec
@@ -65,24 +59,6 @@ __all__ = ["CHUNK_BYTES", "BagSummary", "MessageBlock", "encode_episode", "write
 REQUIRED_METADATA_KEYS = ("episode", "scenario", "controller", "robot", "seed", "settings")
 
 
-@dataclass(frozen=True)
-class Topic:
-    """A recorded topic: name, ROS type and the QoS its publisher offered."""
-
-    name: str
-    type: str
-    qos: Qos
-
-
-# Order = channel ids 1.. and the order of messages that share a log time.
-TOPICS: tuple[Topic, ...] = (
-    Topic(TOPIC_ROBOT_DESCRIPTION, TYPE_STRING, QOS_LATCHED),
-    Topic(TOPIC_PLANNED_TRAJECTORY, TYPE_JOINT_TRAJECTORY, QOS_LATCHED),
-    Topic(TOPIC_JOINT_STATES, TYPE_JOINT_STATE, QOS_STREAM),
-    Topic(TOPIC_CONTROLLER_STATE, TYPE_CONTROLLER_STATE, QOS_STREAM),
-    Topic(TOPIC_TF, TYPE_TF, QOS_TF),
-    Topic(TOPIC_GROUND_TRUTH, TYPE_JOINT_STATE, QOS_STREAM),
-)
 _TOPIC = {t.name: t for t in TOPICS}
 
 

@@ -1,3 +1,4 @@
+# long: one message layout for writing and reading (scalars, strings, arrays, nesting)
 """CDR (XCDR1) for any parsed ROS 2 message type: one layout, written and read.
 
 ROS 2 serializes messages as plain CDR: a 4-byte encapsulation header (``00 01 00 00`` for

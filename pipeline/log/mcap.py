@@ -1,3 +1,4 @@
+# long: one container format: records, CRCs, writer and validating streaming scan
 """The MCAP container format: opcodes, records, CRCs, and a fast writer of ROS 2 files.
 
 We write the records ourselves instead of going through ``mcap.writer.Writer``: its

@@ -1,7 +1,8 @@
+# long: one two-pass read whose passes, streams and windows share private state
 """Read a long recording in two streaming passes, in windows: memory does not grow with it.
 
 :func:`pipeline.log.reader.read_recording` sends recordings above
-:data:`pipeline.log.reader.STREAM_ABOVE_BYTES` here.
+:data:`pipeline.log.recording.STREAM_ABOVE_BYTES` here.
 
 - **Pass 1** keeps nothing decoded: it finds the channels and picks the roles' topics and
   joint lists as the whole read does, reads the metadata (ours sits near the end of the
@@ -13,8 +14,8 @@
   plus a period (a watermark), so pairing ``/joint_states`` with ``/controller_state`` and
   that with ``/ground_truth/joint_states`` (nearest stamp within half a period) gives the
   pairs of the whole read, also across window boundaries. Each window's tidy frames (the
-  rows the whole read has in that interval) go to a :class:`~pipeline.log.reader.WindowSink`;
-  every k-th control step is kept for the returned :class:`~pipeline.log.reader.Recording`.
+  rows the whole read has in that interval) go to a :class:`~pipeline.log.recording.WindowSink`;
+  every k-th control step is kept for the returned :class:`~pipeline.log.recording.Recording`.
 
 Memory: one window, one batch of chunks and what the sink keeps, as long as the file holds
 the topics interleaved in time (as recorders write them); a topic stored long after the
@@ -42,35 +43,37 @@ import polars as pl
 from numpy.typing import NDArray
 
 from pipeline.errors import RecordingError
+from pipeline.log.collect import (
+    WANT,
+    Collector,
+    Roles,
+    pick_roles,
+    planned_trajectory,
+    scan_storage,
+)
 from pipeline.log.db3 import Db3Scan
 from pipeline.log.decode import DecodeError, TopicDecoder
+from pipeline.log.labels import read_labels
 from pipeline.log.mcap import McapChannel, McapScan
-from pipeline.log.reader import (
-    _JS_OPTIONAL,
-    _WANT,
+from pipeline.log.notes import (
+    JS_OPTIONAL,
+    dropped_note,
+    empty_array_notes,
+    no_pairs,
+    read_notes,
+    truth_note,
+)
+from pipeline.log.pairing import error_feedback, match_stamps, tidy, truth_at
+from pipeline.log.recording import (
     CONTROLLER_STATE_COLUMNS,
     F64,
     SAMPLE_COLUMNS,
+    STREAM_ABOVE_BYTES,
     ReadOptions,
     Recording,
     SinkError,
     WindowSink,
-    _Collector,
-    _dropped_note,
-    _empty_array_notes,
-    _episode_name,
-    _error_feedback,
-    _labels,
-    _match_stamps,
-    _no_pairs,
-    _planned,
-    _read_notes,
-    _Roles,
-    _roles,
-    _scan,
-    _tidy,
-    _truth_at,
-    _truth_note,
+    episode_name,
 )
 
 # A decimated recording keeps at most about this many control steps for figures and series.
@@ -167,7 +170,7 @@ class _StampStats:
         return at(n // 2) if n % 2 else (at(n // 2 - 1) + at(n // 2)) / 2
 
 
-class _Pass1(_Collector):
+class _Pass1(Collector):
     """Decodes the candidates as the whole read does, keeping only :class:`_StampStats`."""
 
     def __init__(self, topics: dict[str, str]) -> None:
@@ -247,7 +250,7 @@ class _Stream:
 class _Facts:
     """What pass 1 found that pass 2 and the recording need."""
 
-    roles: _Roles
+    roles: Roles
     js_period_ns: float
     cs_period_ns: float
     t0_ns: int
@@ -270,7 +273,7 @@ class _Windows:
         self.cs_rows = 0
         self.dropped = 0
         self.no_truth = 0
-        self.js_empty = {k: True for k in _JS_OPTIONAL}
+        self.js_empty = {k: True for k in JS_OPTIONAL}
         self.end_ns: int | None = None  # the last paired stamp so far
         self.kept: list[tuple[pl.DataFrame, pl.DataFrame]] = []
         self.last: list[pl.DataFrame | None] = [None, None]  # unkept last steps
@@ -315,13 +318,13 @@ class _Windows:
         if js_t.size and js_t.shape == cs_t[wa:wb].shape and np.array_equal(js_t, cs_t[wa:wb]):
             rows_js, rows_cs = np.arange(js_t.size), np.arange(wa, wb)
         else:
-            rows_js, rows_cs = _match_stamps(js_t, cs_t, period_ns=f.js_period_ns)
-        error, feedback = _error_feedback(cs_a)
+            rows_js, rows_cs = match_stamps(js_t, cs_t, period_ns=f.js_period_ns)
+        error, feedback = error_feedback(cs_a)
         gt = None
         if self.gt is not None:
             ga, gb = self.gt.span(lo - n, hi + n)
             gt = self.gt.rows(ga, gb)
-        truth_pos, truth_vel, with_truth = _truth_at(
+        truth_pos, truth_vel, with_truth = truth_at(
             cs_t,
             gt,
             f.roles.gt_perm if gt is not None else [],
@@ -382,7 +385,7 @@ class _Windows:
             self.gt.drop_below(hi - n)
 
     def _tidy(self, stamps: I64, columns: dict[str, F64]) -> pl.DataFrame:
-        return _tidy(
+        return tidy(
             stamps, columns, names=self.f.roles.names, t0_ns=self.f.t0_ns, episode=self.f.episode
         )
 
@@ -410,7 +413,7 @@ class _Windows:
         return out[0], out[1]
 
 
-class _Chosen(_Collector):
+class _Chosen(Collector):
     """Decodes a chosen control-rate topic's messages (no other)."""
 
     def decode(
@@ -420,7 +423,7 @@ class _Chosen(_Collector):
         dec = self.decoders.get(channel.topic)
         if dec is None:
             dec = self.decoders[channel.topic] = TopicDecoder(
-                channel.topic, type_name, types, _WANT[type_name]
+                channel.topic, type_name, types, WANT[type_name]
             )
         try:
             dec.add(buf, starts)
@@ -517,13 +520,11 @@ def read_windowed(
 
     ``copies``: ``.db3`` files copied once with their ``-wal`` for every pass.
     """
-    from pipeline.log.reader import STREAM_ABOVE_BYTES
-
     limit = STREAM_ABOVE_BYTES if options.stream_above_bytes is None else options.stream_above_bytes
     mcap_path = files[0]
     first = _Pass1(dict(options.topics))
-    scanned = _scan(files, first, salvage=options.salvage, copies=copies)
-    roles = _roles(first, scanned.present, mcap_path, scanned.salvaged)
+    scanned = scan_storage(files, first, salvage=options.salvage, copies=copies)
+    roles = pick_roles(first, scanned.present, mcap_path, scanned.salvaged)
     js_topic, cs_topic = roles.js_dec.topic, roles.cs_dec.topic
     js_stats = first.stats[(js_topic, roles.js_group.names)]
     cs_stats = first.stats[(cs_topic, roles.names)]
@@ -533,14 +534,14 @@ def read_windowed(
     gt_stats = first.stats[(str(gt_topic), roles.truth.names)] if roles.truth else None
     if gt_stats is not None:
         _refuse_unordered(gt_stats, str(gt_topic), limit)
-    raw_meta, settings, urdf, label_notes, ours = _labels(
+    raw_meta, settings, urdf, label_notes, ours = read_labels(
         first, source, options, roles.chosen, roles.names
     )
     js_period = js_stats.period_ns()
 
     def scan_js(after: int, reach: float) -> int:
         last = _LastPaired(dict(options.topics), js_topic, roles.js_group.names, after, reach)
-        _scan(files, last, salvage=options.salvage, copies=copies)
+        scan_storage(files, last, salvage=options.salvage, copies=copies)
         return after if last.found is None else last.found
 
     cs_period = cs_stats.period_ns()
@@ -551,11 +552,11 @@ def read_windowed(
         cs_period_ns=cs_period,
         t0_ns=min(js_stats.first, cs_stats.first),
         end_ns=_end_ns(cs_stats, js_stats, js_period, scan_js),
-        episode=_episode_name(raw_meta, source),
+        episode=episode_name(raw_meta, source),
         decimation=max(1, math.ceil(steps / MAX_KEPT_STEPS)),
         window_steps=options.window_steps if options.window_steps > 0 else WINDOW_STEPS,
     )
-    js_keys = tuple(_WANT[roles.js_dec.type_name].arrays)
+    js_keys = tuple(WANT[roles.js_dec.type_name].arrays)
     js = _Stream(
         roles.js_group.names,
         js_stats.first,
@@ -564,7 +565,7 @@ def read_windowed(
         js_stats.gaps,
         keys=js_keys,
     )
-    cs_keys = tuple(_WANT[roles.cs_dec.type_name].arrays)
+    cs_keys = tuple(WANT[roles.cs_dec.type_name].arrays)
     cs = _Stream(roles.names, cs_stats.first, cs_stats.last, gaps=cs_stats.gaps, keys=cs_keys)
     gt = (
         _Stream(roles.truth.names, gt_stats.first, gt_stats.last, gaps=gt_stats.gaps, keys=js_keys)
@@ -572,7 +573,7 @@ def read_windowed(
         else None
     )
     windows = _Windows(facts, js, cs, gt)
-    header_notes, lost_pct = _read_notes(scanned, roles)
+    header_notes, lost_pct = read_notes(scanned, roles)
     empty = np.zeros(0, dtype=np.int64)
     no_rows = np.zeros((0, len(roles.names)))
     header = Recording(
@@ -585,7 +586,7 @@ def read_windowed(
         joint_names=roles.names,
         samples=windows._tidy(empty, dict.fromkeys(_SAMPLE_VALUES, no_rows)),
         controller_states=windows._tidy(empty, dict.fromkeys(_CS_VALUES, no_rows)),
-        planned=_planned(first, roles.chosen["planned_trajectory"]),
+        planned=planned_trajectory(first, roles.chosen["planned_trajectory"]),
         robot_description=urdf,
         topic_counts=dict(first.topic_counts),
         decoded_messages=js_stats.count + cs_stats.count + (gt_stats.count if gt_stats else 0),
@@ -610,19 +611,19 @@ def read_windowed(
     if gt is not None:
         streams[str(gt_topic)] = gt
     second = _Pass2(dict(options.topics), streams, windows)
-    again = _scan(files, second, salvage=options.salvage, copies=copies)
+    again = scan_storage(files, second, salvage=options.salvage, copies=copies)
     if again.sha256 != scanned.sha256:
         raise RecordingError(f"{mcap_path}: the recording changed while it was being read")
     windows.pump(final=True)
     if windows.pairs == 0:
-        raise _no_pairs(mcap_path)
-    notes = [*header_notes, *_dropped_note(windows.dropped)]
-    notes += _empty_array_notes(
-        {k for k, empty_all in windows.js_empty.items() if empty_all}, js_topic, _JS_OPTIONAL
+        raise no_pairs(mcap_path)
+    notes = [*header_notes, *dropped_note(windows.dropped)]
+    notes += empty_array_notes(
+        {k for k, empty_all in windows.js_empty.items() if empty_all}, js_topic, JS_OPTIONAL
     )
     notes += label_notes
     if gt is not None:
-        notes += _truth_note(windows.no_truth, cs_topic)
+        notes += truth_note(windows.no_truth, cs_topic)
     end_ns = facts.end_ns if windows.end_ns is None else windows.end_ns
     if end_ns != facts.end_ns:  # not expected: pass 1 (with _end_ns) found the same stamp
         notes.append(

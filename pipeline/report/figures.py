@@ -100,7 +100,7 @@ def save_figure(fig: Figure, out_dir: Path, name: str) -> str:
 
 def _motion_end(ax: Axes, recs: list[Recording], *, label: bool = True) -> None:
     """A dotted line at each motion end, labelled at the top of the axes."""
-    ends = sorted({r.motion_end_s for r in recs if r.motion_end_s is not None})
+    ends = sorted({r.trajectory_duration_s for r in recs if r.trajectory_duration_s is not None})
     for end in ends:
         ax.axvline(end, color="0.45", lw=0.9, ls=":", zorder=0)
         if label:

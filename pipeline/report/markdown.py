@@ -155,7 +155,7 @@ def _incomplete(data: ReportData, rec: Recording) -> str:
     """Why final error, settling time and overshoot are n/a for an episode that did not
     complete its motion."""
     end = data.episodes.filter(pl.col("episode") == rec.episode).get_column("end_s")[0]
-    motion_end = rec.motion_end_s
+    motion_end = rec.trajectory_duration_s
     if motion_end is not None and (end is None or end < motion_end):
         return ENDED_EARLY
     if rec.salvaged and rec.status == "ok":
@@ -171,7 +171,7 @@ def _missing(data: ReportData, rec: Recording, metric: str) -> str:
     if m.frame == "joint_states":
         return NOT_RECORDED
     if metric == "settling_time":
-        return "n/a (motion end unknown)" if rec.motion_end_s is None else "never settles"
+        return "n/a (motion end unknown)" if rec.trajectory_duration_s is None else "never settles"
     return NA
 
 

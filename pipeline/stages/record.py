@@ -101,6 +101,7 @@ RECORD_CODE = (
     "log/msgdef.py",
     "log/rosbag2.py",
     "log/schemas.py",
+    "log/topics.py",
     "stages/__init__.py",
     "stages/campaign.py",
     "stages/campaign_run.py",

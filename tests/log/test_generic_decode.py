@@ -9,9 +9,9 @@ import numpy as np
 from rosbags.typesys import Stores, get_typestore
 
 from pipeline.log import cdr
+from pipeline.log.collect import WANT
 from pipeline.log.decode import TopicDecoder
 from pipeline.log.mcap import MESSAGE_PREFIX, RECORD_HEADER
-from pipeline.log.reader import _WANT
 from pipeline.log.schemas import message_types
 
 JS = "sensor_msgs/msg/JointState"
@@ -50,7 +50,7 @@ def test_messages_of_every_shape_decode_like_rosbags(tmp_path: Path) -> None:
         msgs.append(msg)
         payloads.append(bytes(store.serialize_cdr(msg, JS)))
     buf, starts = records(payloads)
-    dec = TopicDecoder("/joint_states", JS, message_types(JS), _WANT[JS])
+    dec = TopicDecoder("/joint_states", JS, message_types(JS), WANT[JS])
     dec.add(buf, starts)
     by_names = {g.names: g for g in dec.groups}
     assert set(by_names) == {("b", "a", "c"), ("gripper",)}

@@ -132,7 +132,7 @@ def test_recording_carries_metadata_planned_trajectory_and_hash(tmp_path: Path) 
     rec = read_recording(path)
     assert (rec.controller, rec.scenario, rec.robot) == ("pid", "paper", "ur5")
     assert rec.sha256 == hashlib.sha256(mcap_file(path).read_bytes()).hexdigest()
-    assert rec.motion_end_s == 1.0
+    assert rec.trajectory_duration_s == 1.0
     assert rec.planned is not None and rec.planned.positions.shape == (5, 6)
     np.testing.assert_allclose(rec.planned.times_s[-1], 1.0)
     assert rec.topic_counts["/joint_states"] == len(ep.stamp_ns)
@@ -148,7 +148,7 @@ def test_motion_end_falls_back_to_last_planned_point(tmp_path: Path) -> None:
     del settings["planner"]["trajectory_duration_s"]
     ep.settings = settings
     rec = read_recording(write_bag(tmp_path, ep))
-    assert rec.motion_end_s == pytest.approx(0.8)
+    assert rec.trajectory_duration_s == pytest.approx(0.8)
 
 
 def test_unparseable_settings_are_noted_not_fatal(tmp_path: Path) -> None:
@@ -158,7 +158,7 @@ def test_unparseable_settings_are_noted_not_fatal(tmp_path: Path) -> None:
     (note,) = rec.notes
     assert "settings is not valid JSON" in note and "armlab.episode" in note
     assert rec.controller == "pid" and rec.status == "ok"
-    assert rec.motion_end_s == pytest.approx(0.2)  # from the planned trajectory
+    assert rec.trajectory_duration_s == pytest.approx(0.2)  # from the planned trajectory
 
 
 def test_find_recordings_lists_bag_folders_and_bare_files_not_hidden_ones(tmp_path: Path) -> None:

@@ -1,0 +1,388 @@
+"""Collecting a recording's messages: stream its storage files, decode the candidates of
+each role (:data:`pipeline.log.topics.ROLES`) and pick the topic and joint lists that serve
+each one.
+
+Topics are found by role: the joint states (``sensor_msgs/msg/JointState``), the controller
+state (``control_msgs/msg/JointTrajectoryControllerState``, Jazzy's reference/feedback or
+Humble's desired/actual, detected from the schema), the planned trajectory and the robot
+description. A role takes the topic named by a remap (``topics={"controller_state":
+"/arm_controller/controller_state"}``), else our topic name, else the one topic of its type.
+
+Shared by the whole read (:mod:`pipeline.log.whole`) and the windowed one
+(:mod:`pipeline.log.windowed`), whose passes are :class:`Collector` subclasses.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import struct
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.constants import TOPIC_GROUND_TRUTH, TYPE_CONTROLLER_STATE, TYPE_JOINT_STATE
+from pipeline.errors import RecordingError
+from pipeline.log import cdr
+from pipeline.log.db3 import Db3Scan
+from pipeline.log.decode import DecodeError, Group, TopicDecoder, Want, leaf_rows
+from pipeline.log.mcap import MESSAGE_PREFIX, McapChannel, McapScan, Salvage
+from pipeline.log.msgdef import MsgTypes, parse_msgdef, root_type_name
+from pipeline.log.recording import PlannedTrajectory, SinkError
+from pipeline.log.topics import OUR_TOPICS, ROLES
+
+__all__ = [
+    "WANT",
+    "Collector",
+    "Roles",
+    "Scanned",
+    "pick_roles",
+    "planned_trajectory",
+    "robot_description",
+    "scan_storage",
+]
+
+# What to decode of each control-rate message type (the other roles' first message is kept
+# raw and decoded on demand).
+WANT: dict[str, Want] = {
+    TYPE_JOINT_STATE: Want(
+        names=("name",),
+        arrays={
+            "position": ("position",),
+            "velocity": ("velocity",),
+            "effort": ("effort",),
+        },
+        required=(("position",),),
+    ),
+    TYPE_CONTROLLER_STATE: Want(
+        names=("joint_names",),
+        arrays={
+            "reference_position": ("reference.positions", "desired.positions"),
+            "reference_velocity": ("reference.velocities", "desired.velocities"),
+            "feedback_position": ("feedback.positions", "actual.positions"),
+            "error": ("error.positions",),
+            "commanded_effort": ("output.effort",),
+        },
+        required=(
+            ("reference.positions", "desired.positions"),
+            ("error.positions", "feedback.positions", "actual.positions"),
+        ),
+    ),
+}
+
+
+class Collector:
+    """Receives the messages of every storage file of a recording and decodes the roles'
+    candidates (every channel of a control-rate type; first message of the others)."""
+
+    def __init__(self, topics: Mapping[str, str]) -> None:
+        self.topics = dict(topics)
+        self.types: dict[str, tuple[str, MsgTypes]] = {}  # topic -> (root type, types)
+        self.decoders: dict[str, TopicDecoder] = {}
+        self.singles: dict[str, bytes] = {}
+        self.topic_counts: dict[str, int] = {}
+        self.metadata: dict[str, dict[str, str]] = {}
+        self.path = Path()
+
+    def fail(self, problem: str) -> RecordingError:
+        return RecordingError(f"{self.path}: {problem}")
+
+    def type_of(self, scan: McapScan | Db3Scan, channel: McapChannel) -> tuple[str, MsgTypes]:
+        if channel.topic in self.types:
+            return self.types[channel.topic]
+        schema = scan.schemas.get(channel.schema_id)
+        if schema is None:
+            raise self.fail(f"channel {channel.topic} refers to a missing schema")
+        if channel.encoding != "cdr" or schema.encoding != "ros2msg":
+            raise self.fail(
+                f"{channel.topic} is encoded as {channel.encoding}/{schema.encoding}; "
+                "expected cdr/ros2msg (a ROS 2 recording)"
+            )
+        try:
+            parsed = (
+                root_type_name(schema.name),
+                parse_msgdef(schema.name, schema.data.decode("utf-8")),
+            )
+        except (ValueError, UnicodeDecodeError) as err:
+            raise self.fail(
+                f"schema {schema.name} of {channel.topic} cannot be parsed ({err})"
+            ) from err
+        self.types[channel.topic] = parsed
+        return parsed
+
+    def _wanted(self, topic: str, type_name: str) -> bool:
+        remapped = set(self.topics.values())
+        for role_name, role in ROLES.items():
+            if type_name != role.type:
+                continue
+            if role_name in self.topics:
+                if topic == self.topics[role_name]:
+                    return True
+            elif topic not in remapped and (
+                topic == role.name or (role.by_type and topic not in OUR_TOPICS)
+            ):
+                return True
+        return False
+
+    def on_messages(
+        self,
+        scan: McapScan | Db3Scan,
+        channel: McapChannel,
+        buf: bytes,
+        starts: NDArray[np.int64],
+    ) -> None:
+        schema = scan.schemas.get(channel.schema_id)
+        if schema is None or not self._wanted(channel.topic, root_type_name(schema.name)):
+            return
+        type_name, types = self.type_of(scan, channel)
+        want = WANT.get(type_name)
+        if want is None:
+            if channel.topic not in self.singles:
+                s = int(starts[0])
+                (length,) = struct.unpack_from("<Q", buf, s - 8)
+                self.singles[channel.topic] = bytes(buf[s + MESSAGE_PREFIX : s + length])
+            return
+        dec = self.decoders.get(channel.topic)
+        if dec is None:
+            dec = self.decoders[channel.topic] = TopicDecoder(channel.topic, type_name, types, want)
+        try:
+            dec.add(buf, starts)
+        except DecodeError as err:
+            raise self.fail(str(err)) from err
+
+
+def _deliver(
+    scan: McapScan | Db3Scan,
+    collector: Collector,
+    channel: McapChannel,
+    buf: bytes,
+    starts: NDArray[np.int64],
+) -> None:
+    try:
+        collector.on_messages(scan, channel, buf, starts)
+    except (RecordingError, SinkError):
+        raise
+    except Exception as err:  # a decoder bug or an input it did not foresee
+        raise RecordingError(
+            f"{scan.path}: cannot decode {channel.topic}: {type(err).__name__}: {err}"
+        ) from err
+
+
+class _McapFile(McapScan):
+    def __init__(self, path: Path, collector: Collector, *, salvage: bool) -> None:
+        super().__init__(path, salvage=salvage)
+        self.collector = collector
+
+    def on_messages(self, channel: McapChannel, buf: bytes, starts: NDArray[np.int64]) -> None:
+        _deliver(self, self.collector, channel, buf, starts)
+
+
+class _Db3File(Db3Scan):
+    def __init__(
+        self, path: Path, collector: Collector, *, salvage: bool, copy: Path | None
+    ) -> None:
+        super().__init__(path, salvage=salvage, copy=copy)
+        self.collector = collector
+
+    def on_messages(self, channel: McapChannel, buf: bytes, starts: NDArray[np.int64]) -> None:
+        _deliver(self, self.collector, channel, buf, starts)
+
+
+def _pick(role_name: str, collector: Collector, present: Mapping[str, str]) -> str | None:
+    """The topic serving ``role_name``: the remap, our name, or the one of its type."""
+    role = ROLES[role_name]
+    if role_name in collector.topics:
+        topic = collector.topics[role_name]
+        if topic not in present:
+            shown = ", ".join(sorted(present)) or "none"
+            raise collector.fail(
+                f"--topic {role_name}={topic}: no such topic (topics present: {shown})"
+            )
+        if present[topic] != role.type:
+            raise collector.fail(
+                f"--topic {role_name}={topic}: {topic} is {present[topic]}, expected {role.type}"
+            )
+        return topic
+    if present.get(role.name) == role.type:
+        return role.name
+    remapped = set(collector.topics.values()) | OUR_TOPICS
+    candidates = sorted(t for t, ty in present.items() if ty == role.type and t not in remapped)
+    if not role.by_type or not candidates:
+        return None
+    if len(candidates) > 1:
+        raise collector.fail(
+            f"several {role.type} topics ({', '.join(candidates)}): pick one with "
+            f"--topic {role_name}=/name"
+        )
+    return candidates[0]
+
+
+def planned_trajectory(collector: Collector, topic: str | None) -> PlannedTrajectory | None:
+    data = collector.singles.get(topic or "")
+    if topic is None or data is None:
+        return None
+    name, types = collector.types[topic]
+    try:
+        lay = cdr.walk(types, name, data)
+    except (ValueError, struct.error) as err:
+        raise collector.fail(f"corrupt: {topic} cannot be decoded ({err})") from err
+    names = lay.texts.get("joint_names", ())
+    joints = tuple(names) if isinstance(names, tuple) else ()
+    points: list[str] = []
+    while f"points[{len(points)}].time_from_start.sec" in lay.leaves:
+        points.append(f"points[{len(points)}].")
+    sec = leaf_rows(lay, data, [p + "time_from_start.sec" for p in points], 1)[:, 0]
+    nsec = leaf_rows(lay, data, [p + "time_from_start.nanosec" for p in points], 1)[:, 0]
+    return PlannedTrajectory(
+        joint_names=joints,
+        times_s=sec + nsec * 1e-9,
+        positions=leaf_rows(lay, data, [p + "positions" for p in points], len(joints)),
+        velocities=leaf_rows(lay, data, [p + "velocities" for p in points], len(joints)),
+    )
+
+
+def robot_description(collector: Collector, topic: str | None) -> str | None:
+    data = collector.singles.get(topic or "")
+    if topic is None or data is None:
+        return None
+    name, types = collector.types[topic]
+    try:
+        value = cdr.walk(types, name, data).texts.get("data")
+    except (ValueError, struct.error) as err:
+        raise collector.fail(f"corrupt: {topic} cannot be decoded ({err})") from err
+    return value if isinstance(value, str) else None
+
+
+@dataclass
+class Scanned:
+    """What scanning a recording's storage files gave besides the collector's messages."""
+
+    size: int
+    sha256: str
+    present: dict[str, str]  # topic -> root type
+    salvaged: list[tuple[Path, Salvage]]
+    notes: list[str]  # the storage readers' notes
+    unread: list[Path]  # split files after a salvaged one
+    unread_bytes: int
+
+
+def scan_storage(
+    files: list[Path],
+    collector: Collector,
+    *,
+    salvage: bool,
+    copies: Mapping[Path, Path] | None = None,
+) -> Scanned:
+    """Stream every storage file into ``collector`` (stopping after a salvaged one).
+
+    ``copies``: ``.db3`` files copied with their ``-wal`` (:func:`pipeline.log.db3.wal_copies`).
+    """
+    sha = hashlib.sha256()
+    size = 0
+    present: dict[str, str] = {}
+    salvaged: list[tuple[Path, Salvage]] = []
+    notes: list[str] = []
+    unread: list[Path] = []
+    unread_bytes = 0
+    for path in files:
+        collector.path = path
+        scan: McapScan | Db3Scan
+        if path.suffix == ".db3":
+            scan = _Db3File(path, collector, salvage=salvage, copy=(copies or {}).get(path))
+        else:
+            scan = _McapFile(path, collector, salvage=salvage)
+        scan.sha = sha
+        scan.run()
+        size += scan.size
+        for c in scan.channels.values():
+            schema = scan.schemas.get(c.schema_id)
+            present[c.topic] = root_type_name(schema.name) if schema else "?"
+        for topic, count in scan.topic_counts.items():
+            collector.topic_counts[topic] = collector.topic_counts.get(topic, 0) + count
+        collector.metadata.update(scan.metadata)
+        notes += scan.notes
+        if scan.salvaged is not None:
+            salvaged.append((path, scan.salvaged))
+            # later split files continue after the damage: not contiguous, not read
+            unread = [p for p in files[files.index(path) + 1 :] if p.is_file()]
+            unread_bytes = sum(p.stat().st_size for p in unread)
+            break
+    collector.path = files[0]
+    return Scanned(size, sha.hexdigest(), present, salvaged, notes, unread, unread_bytes)
+
+
+@dataclass
+class Roles:
+    """The chosen topics and joint lists of a recording."""
+
+    chosen: dict[str, str | None]
+    js_dec: TopicDecoder
+    cs_dec: TopicDecoder
+    js_group: Group
+    cs_group: Group
+    truth: Group | None
+    names: tuple[str, ...]
+
+    @property
+    def js_cols(self) -> list[int] | None:
+        """Columns of the joint-state arrays in controller order (None: already)."""
+        cols = [self.js_group.names.index(n) for n in self.names]
+        return None if cols == list(range(len(self.js_group.names))) else cols
+
+    @property
+    def gt_perm(self) -> list[int]:
+        assert self.truth is not None
+        return [self.truth.names.index(n) for n in self.names]
+
+
+def pick_roles(
+    collector: Collector,
+    present: dict[str, str],
+    mcap_path: Path,
+    salvaged: Sequence[tuple[Path, Salvage]] = (),
+) -> Roles:
+    """Pick each role's topic and the joint lists to analyse (from the groups' counts)."""
+    chosen = {name: _pick(name, collector, present) for name in ROLES}
+    for name in ("joint_states", "controller_state"):
+        picked = chosen[name]
+        if picked is None or picked not in collector.decoders:
+            for path, s in salvaged:  # the damage took every message of the role with it
+                at = f" at byte {s.at_byte}" if s.at_byte >= 0 else ""
+                raise RecordingError(
+                    f"{path}: damaged{at} ({s.problem}); nothing of "
+                    f"{picked or name} before the damage to salvage"
+                )
+            role = ROLES[name]
+            what = f"no messages on {picked}" if picked else f"no {role.type} topic"
+            shown = ", ".join(f"{t} ({ty})" for t, ty in sorted(present.items())) or "none"
+            raise RecordingError(
+                f"{mcap_path}: {what} for {name} (default {role.name}; topics "
+                f"present: {shown}); remap with --topic {name}=/name"
+            )
+    cs_dec = collector.decoders[str(chosen["controller_state"])]
+    js_dec = collector.decoders[str(chosen["joint_states"])]
+    cs_group = cs_dec.largest()
+    assert cs_group is not None
+    cs_names = cs_group.names
+    # The joint-state publisher (of several, e.g. arm + gripper) that carries every joint
+    # of the controller, the most frequent one if several do.
+    covering = [g for g in js_dec.groups if set(cs_names) <= set(g.names)]
+    if not covering:
+        shown = "; ".join(", ".join(g.names) for g in js_dec.groups)
+        raise RecordingError(
+            f"{mcap_path}: no {js_dec.topic} message carries all joints of "
+            f"{cs_dec.topic} ({', '.join(cs_names)}); joint lists seen: {shown}"
+        )
+    js_group = max(covering, key=lambda g: g.count)
+    truth_dec = collector.decoders.get(chosen["ground_truth"] or "")
+    truth = truth_dec.largest() if truth_dec is not None else None
+    if truth is not None and truth.count and not set(cs_names) <= set(truth.names):
+        raise RecordingError(
+            f"{mcap_path}: joints differ between {TOPIC_GROUND_TRUTH} "
+            f"({', '.join(truth.names)}) and {cs_dec.topic} ({', '.join(cs_names)})"
+        )
+    if truth is not None and not truth.count:
+        truth = None
+    return Roles(chosen, js_dec, cs_dec, js_group, cs_group, truth, cs_names)

@@ -1,0 +1,88 @@
+"""A recording's labels: our ``armlab.episode`` metadata (else labels from the options or
+the bag's name), its settings, its URDF and the notes about them.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from pipeline.constants import METADATA_EPISODE, TOPIC_ROBOT_DESCRIPTION
+from pipeline.log.collect import Collector, robot_description
+from pipeline.log.recording import ReadOptions
+from pipeline.model.urdf_xml import urdf_effort_limits, urdf_robot_name
+
+__all__ = ["read_labels"]
+
+
+def read_labels(
+    collector: Collector,
+    source: Path,
+    options: ReadOptions,
+    chosen: dict[str, str | None],
+    names: Sequence[str],
+) -> tuple[dict[str, str], dict[str, Any], str | None, list[str], bool]:
+    """Metadata (ours, else labels), settings, the URDF, the notes about them and whether
+    the bag carries our metadata."""
+    notes: list[str] = []
+    raw_meta = dict(collector.metadata.get(METADATA_EPISODE, {}))
+    ours = METADATA_EPISODE in collector.metadata
+    labels = {"controller": options.controller, "scenario": options.scenario}
+    if not ours:
+        raw_meta = {
+            "episode": source.name.removesuffix(".mcap"),
+            "controller": source.name.removesuffix(".mcap"),
+            "scenario": "external",
+        }
+    raw_meta |= {k: v for k, v in labels.items() if v}
+    urdf = robot_description(collector, chosen["robot_description"])
+    if not ours and urdf is not None:
+        robot = urdf_robot_name(urdf)
+        if robot:
+            raw_meta["robot"] = robot
+    if not ours:
+        notes.append(_limits_note(urdf, names, chosen["robot_description"]))
+    settings: dict[str, Any] = {}
+    if "settings" in raw_meta:
+        try:
+            parsed = json.loads(raw_meta["settings"])
+            if isinstance(parsed, dict):
+                settings = parsed
+            else:
+                notes.append(
+                    f"'{METADATA_EPISODE}' settings is not a JSON object: settings are n/a"
+                )
+        except json.JSONDecodeError as err:
+            notes.append(
+                f"'{METADATA_EPISODE}' settings is not valid JSON ({err.msg} at char {err.pos}): "
+                "settings are n/a"
+            )
+    elif not ours:
+        notes.append(
+            f"no '{METADATA_EPISODE}' metadata record (not recorded by armlab): episode "
+            f"'{raw_meta['episode']}', controller '{raw_meta['controller']}' and scenario "
+            f"'{raw_meta['scenario']}' from "
+            + ("the command line" if any(labels.values()) else "the bag's name")
+            + "; settings (gains, plant, planner, motion start) are n/a"
+        )
+    return raw_meta, settings, urdf, notes, ours
+
+
+def _limits_note(urdf: str | None, joints: Sequence[str], topic: str | None) -> str:
+    """Where a bag without our metadata gets its effort limits (saturation) from."""
+    topic = topic or TOPIC_ROBOT_DESCRIPTION
+    if urdf is None:
+        return (
+            f"no robot description ({topic}): effort limits unknown, saturation at the limit is "
+            "n/a (built-in robots of the same name are not assumed)"
+        )
+    limits = urdf_effort_limits(urdf)
+    shown = ", ".join(f"{j} {limits[j]:g}" for j in joints if j in limits)
+    missing = [j for j in joints if j not in limits]
+    return (
+        f"effort limits from the bag's {topic} URDF"
+        + (f" [N m]: {shown}" if shown else ": none declared")
+        + (f"; none for {', '.join(missing)} (saturation at the limit n/a)" if missing else "")
+    )

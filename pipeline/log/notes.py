@@ -1,0 +1,121 @@
+"""The notes a read attaches to a recording (non-fatal oddities: salvage, dropped samples,
+missing arrays, the joints analysed) and its one "nothing pairs" error.
+
+Shared by the whole read (:mod:`pipeline.log.whole`) and the windowed one
+(:mod:`pipeline.log.windowed`), so both say the same.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.constants import TOPIC_CONTROLLER_STATE, TOPIC_GROUND_TRUTH, TOPIC_JOINT_STATES
+from pipeline.errors import RecordingError
+from pipeline.log.collect import Roles, Scanned
+from pipeline.log.mcap import Salvage
+from pipeline.log.recording import F64
+
+__all__ = [
+    "JS_OPTIONAL",
+    "dropped_note",
+    "empty_array_notes",
+    "missing_array_notes",
+    "no_pairs",
+    "read_notes",
+    "salvage_note",
+    "truth_note",
+]
+
+# Optional /joint_states arrays whose absence the report notes.
+JS_OPTIONAL = {"velocity": "velocity", "effort": "effort"}
+
+
+def salvage_note(
+    path: Path, s: Salvage, size: int, unread: Sequence[Path], unread_bytes: int
+) -> tuple[str, float | None]:
+    """The note on a salvaged file and the share of the recording lost [%] (None: unknown)."""
+    later = (
+        f"; the {len(unread)} later split file(s) ({', '.join(p.name for p in unread)}) "
+        "were not read"
+        if unread
+        else ""
+    )
+    if s.read_messages is None:  # MCAP: bytes
+        lost_bytes = s.lost_bytes + unread_bytes
+        share = 100 * lost_bytes / max(size + unread_bytes, 1)
+        return (
+            f"salvaged: {path.name} is damaged at byte {s.at_byte} ({s.problem}); "
+            f"{s.lost_bytes} bytes after it ({share:.1f} % of the recording) were not read" + later,
+            share,
+        )
+    pct: float | None = None
+    if s.lost_messages is None:
+        lost_text = "an unknown number of message rows after it were lost"
+        if s.lost_bytes:  # truncated: the share of the bytes its header states
+            pct = 100 * s.lost_bytes / (size + s.lost_bytes)
+            lost_text += (
+                f" with the file's last {s.lost_bytes} bytes ({pct:.1f} % of the recording's bytes)"
+            )
+    else:
+        pct = 100 * s.lost_messages / max(s.read_messages + s.lost_messages, 1)
+        lost_text = (
+            f"{s.lost_messages} of {s.read_messages + s.lost_messages} message rows "
+            f"({pct:.1f} %) after it were lost"
+        )
+    return (
+        f"salvaged: {path.name} is damaged ({s.problem}); {s.read_messages} message rows read "
+        f"up to stamp {s.lost_after_ns} ns, {lost_text}" + later,
+        None if unread else pct,
+    )
+
+
+def no_pairs(mcap_path: Path) -> RecordingError:
+    return RecordingError(
+        f"{mcap_path}: no {TOPIC_CONTROLLER_STATE} message shares a time stamp with "
+        f"{TOPIC_JOINT_STATES}"
+    )
+
+
+def read_notes(scanned: Scanned, roles: Roles) -> tuple[list[str], float | None]:
+    """The notes every read starts with (the storage's, salvage, the joints analysed) and
+    the share of the recording a salvage lost [%]."""
+    notes: list[str] = list(scanned.notes)
+    lost_pct: float | None = None
+    for path, s in scanned.salvaged:
+        note, lost_pct = salvage_note(path, s, scanned.size, scanned.unread, scanned.unread_bytes)
+        notes.append(note)
+    if len(roles.js_dec.groups) > 1 or len(roles.js_group.names) > len(roles.names):
+        notes.append(
+            f"{roles.js_dec.topic}: analysing {', '.join(roles.names)} (the joints of "
+            f"{roles.cs_dec.topic}) from {len(roles.js_dec.groups)} joint list(s)"
+        )
+    return notes, lost_pct
+
+
+def dropped_note(dropped: int) -> list[str]:
+    return [f"{dropped} joint-state samples without a controller state were dropped"] * bool(
+        dropped
+    )
+
+
+def truth_note(unmatched: int, cs_topic: str) -> list[str]:
+    return [
+        f"{unmatched} {cs_topic} samples have no {TOPIC_GROUND_TRUTH} sample at their time"
+    ] * bool(unmatched)
+
+
+def missing_array_notes(arrays: dict[str, F64], topic: str, fields: dict[str, str]) -> list[str]:
+    """Notes for optional arrays that are empty (or NaN) in every message of ``topic``."""
+    empty = {k for k in fields if (v := arrays.get(k)) is not None and v.size and np.isnan(v).all()}
+    return empty_array_notes(empty, topic, fields)
+
+
+def empty_array_notes(empty: set[str], topic: str, fields: dict[str, str]) -> list[str]:
+    return [
+        f"{topic} carries no {what} values (empty arrays): {what} metrics are n/a"
+        for key, what in fields.items()
+        if key in empty
+    ]
