@@ -146,10 +146,12 @@ class PaperComparison:
 
     @property
     def baseline_episodes(self) -> list[str]:
+        """The paired baseline runs, in pair order, each once."""
         return list(dict.fromkeys(b for b, _ in self.pairs))
 
     @property
     def candidate_episodes(self) -> list[str]:
+        """The paired candidate runs, in pair order, each once."""
         return list(dict.fromkeys(c for _, c in self.pairs))
 
     def at(self, metric: str, k: int) -> JointComparison:
