@@ -77,6 +77,9 @@ class Metric:
         log_scale: figures draw it on a log axis (values span orders of magnitude).
         in_tables: shown as its own per-episode Markdown table.
         detail: how it is taken, in a table heading's parentheses ("" for none).
+        definition: what it is, as every report's Definitions section and docs/report.md
+            say it (``term: meaning``); "" for a companion metric its metric's definition
+            covers (``peak_velocity_time``).
     """
 
     name: str
@@ -93,6 +96,7 @@ class Metric:
     log_scale: bool = False
     in_tables: bool = True
     detail: str = ""
+    definition: str = ""
 
     def __post_init__(self) -> None:
         if self.needs_completed_motion and self.frame != "controller_state":
@@ -239,38 +243,60 @@ def _saturation_fraction() -> dict[str, pl.Expr]:
 
 _CS = TOPIC_CONTROLLER_STATE
 _JS = TOPIC_JOINT_STATES
+_CS_CODE, _JS_CODE = f"`{_CS}`", f"`{_JS}`"
 
 METRICS: tuple[Metric, ...] = (
     Metric(
         "max_abs_error", "rad", "Max |error|", ".3e", "controller_state", _CS,
         _max_abs_error, _max_abs_error_finish,
         compared=True, log_scale=True,
+        definition="max |error|: largest |e| over the episode",
     ),
     Metric(
         "rms_error", "rad", "RMS error", ".3e", "controller_state", _CS,
         lambda: _squares("error_rad"), _root_mean,
         compared=True, log_scale=True,
+        definition="RMS error: sqrt(mean e²) over the episode",
     ),
     Metric(
         "final_error", "rad", "Error at the target", ".3e", "controller_state", _CS,
         _final_error, _mean, needs_completed_motion=True, compared=True, log_scale=True,
         detail=f"mean |e| over the final window, ≤ {FINAL_WINDOW_S} s",
+        definition=(
+            f"error at the target: mean |e| over the last min({FINAL_WINDOW_S} s, hold / 2) "
+            "of the episode, hold = episode end − motion end (motion end = the planned "
+            "trajectory's duration); the last sample alone when there is no hold"
+        ),
     ),
     Metric(
         "settling_time", "s", "Settling time", ".3f", "controller_state", _CS,
         _settling_time, _settling_time_finish,
         needs_completed_motion=True,
         detail=f"|e| ≤ {SETTLING_TOLERANCE_RAD:g} rad after the motion end",
+        definition=(
+            f"settling time: from the motion end until |e| stays within "
+            f"{SETTLING_TOLERANCE_RAD:g} rad for the rest of the episode; 'never settles' "
+            "when the last sample is outside"
+        ),
     ),
     Metric(
         "overshoot", "rad", "Overshoot past the goal", ".2e", "controller_state", _CS,
         _overshoot, _overshoot_finish, needs_completed_motion=True, log_scale=True,
+        definition=(
+            "overshoot: how far the position (true where recorded, else "
+            "`feedback.positions`) passes the goal in the direction of travel (n/a for a "
+            "joint that does not move)"
+        ),
     ),
     Metric(
         "peak_velocity", "rad/s", "Peak velocity", "+.3f", "joint_states", _JS,
         lambda: _at_peak("velocity_rad_s"), _first_at_peak("velocity_rad_s"),
         lower_is_better=False,
         detail="signed value at the largest |velocity|",
+        definition=(
+            "peak velocity: the velocity of largest magnitude, with its sign (true where "
+            f"recorded, else {_JS_CODE})"
+        ),
     ),
     Metric(
         "peak_velocity_time", "s", "Time of the peak velocity", ".2f", "joint_states", _JS,
@@ -279,11 +305,17 @@ METRICS: tuple[Metric, ...] = (
     Metric(
         "rms_effort", "N m", "RMS applied effort", ".3g", "joint_states", _JS,
         lambda: _squares("effort_nm"), _root_mean,
+        definition=f"RMS effort: sqrt(mean applied effort²) ({_JS_CODE} `effort`)",
     ),
     Metric(
         "saturation_fraction", "1", "Fraction of time in torque saturation", ".3f",
         "joint_states", f"{TOPIC_JOINT_STATES} + {TOPIC_CONTROLLER_STATE}",
         _saturation_fraction, _mean,
+        definition=(
+            f"saturation: share of {_JS_CODE} samples where |applied effort| is at the "
+            f"joint's effort limit or |commanded| ({_CS_CODE} `output.effort`) exceeds "
+            "|applied|"
+        ),
     ),
 )  # fmt: skip
 

@@ -8,37 +8,12 @@ rows of both frames in one contiguous time interval; the prepared columns are ro
 then :func:`finish_metrics` over the partial rows of all slices in time order.
 :func:`joint_metrics` is the one-slice case.
 
-Definitions (also in docs/report.md and in every report):
-
-- error e(t) = reference - position [rad] from the frames :mod:`pipeline.analysis.protocol`
-  prepares: the plant's true position where the recording has it, else the measured one
-  as the controller recorded it on ``/controller_state``; times from the motion start.
-  Every error-based metric (max, RMS, final, settling,
-  overshoot) uses every ``/controller_state`` message, at its full rate, even when
-  ``/joint_states`` is decimated; velocity and effort metrics use ``/joint_states``.
-- max_abs_error = max |e| over the whole episode; rms_error = sqrt(mean e^2).
-- final_error ("error at the target") = mean |e| over the last
-  ``min(FINAL_WINDOW_S, hold/2)`` of the episode, hold = end - motion end
-  (the last sample alone when there is no hold; the last FINAL_WINDOW_S when
-  the motion end is unknown).
-- settling_time = time from the motion end until |e| stays within
-  ``SETTLING_TOLERANCE_RAD`` for the rest of the episode (the first sample after
-  the last violation; 0 when |e| never leaves the band after the motion end);
-  null when it never settles or the motion end is unknown.
-- overshoot = how far the position passes the goal in the direction
-  of travel (max over the episode, clipped at 0) [rad]; null for a joint that
-  does not move.
-- final_error, settling_time and overshoot are null for an episode that did not
-  complete its motion (status not "ok", or the recording ends before the motion
-  end): its last samples are not "at the target". Max and RMS use what exists.
-- peak_velocity = the velocity (true where recorded) with the largest magnitude, with its sign.
-- rms_effort = sqrt(mean applied effort^2) [N m].
-- saturation_fraction = share of samples where |applied effort| is at the
-  joint's effort limit (within 1e-6 relative) or |commanded| exceeds |applied|.
-- Values not recorded (empty arrays, NaN) are nulls and take no part; a metric
-  of nothing recorded is null.
-- reduction % = (baseline - candidate) / baseline x 100; null when |baseline| is
-  below :data:`ERROR_FLOOR_RAD` (numerical noise) or missing.
+What each metric is: its ``definition`` in :data:`pipeline.analysis.catalog.METRICS` (every
+report's Definitions section and docs/report.md print that text). The rules common to all:
+e = reference - position from the frames :mod:`pipeline.analysis.protocol` prepares (true
+where recorded), times from the motion start; values not recorded (empty arrays, NaN) are
+nulls and a metric of nothing recorded is null; reduction % = (baseline - candidate) /
+baseline x 100, null when |baseline| is below :data:`ERROR_FLOOR_RAD` or missing.
 """
 
 from __future__ import annotations

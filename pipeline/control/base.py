@@ -121,11 +121,13 @@ def resolve_gains(
                 raise ParamsError(f"{where}.{g.key}: expected true or false, got {value!r}")
             out[g.key] = bool(value)
             continue
-        out[g.key] = _per_joint(controller, spec, g, value, where)
+        out[g.key] = _validated_gain_array(controller, spec, g, value, where)
     return out
 
 
-def _per_joint(controller: str, spec: RobotSpec, g: GainSpec, value: Any, where: str) -> F64:
+def _validated_gain_array(
+    controller: str, spec: RobotSpec, g: GainSpec, value: Any, where: str
+) -> F64:
     expected = f"a number or a list of {spec.dof} numbers (one per joint of {spec.name})"
     if _is_number(value):
         arr = np.full(spec.dof, float(value))

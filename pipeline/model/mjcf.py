@@ -69,7 +69,7 @@ def _v(xs: Sequence[float] | np.ndarray) -> str:
     return " ".join(repr(float(x)) for x in xs)
 
 
-def _per_joint(values: tuple[float, ...], dof: int, what: str) -> list[float]:
+def _expand_to_dof(values: tuple[float, ...], dof: int, what: str) -> list[float]:
     if not values:
         return [0.0] * dof
     if len(values) == 1:
@@ -107,12 +107,12 @@ def build_mjcf(
     """
     plant = plant or PlantOptions()
     links = chain(spec)
-    damping = _per_joint(plant.damping, spec.dof, "damping")
-    friction = _per_joint(plant.frictionloss, spec.dof, "frictionloss")
+    damping = _expand_to_dof(plant.damping, spec.dof, "damping")
+    friction = _expand_to_dof(plant.frictionloss, spec.dof, "frictionloss")
     armature = [
         j.armature + extra
         for j, extra in zip(
-            spec.joints, _per_joint(plant.armature, spec.dof, "armature"), strict=True
+            spec.joints, _expand_to_dof(plant.armature, spec.dof, "armature"), strict=True
         )
     ]
     out = [

@@ -33,8 +33,9 @@ from pipeline.analysis.campaign import (
     swept_axes,
     win_loss,
 )
+from pipeline.report import md
 from pipeline.report.colors import controller_colors, mpl
-from pipeline.report.figures import FigureFile, save_figure
+from pipeline.report.figures import FigureFile, save_figure, subplot_grid
 
 # Conditions drawn in a figure / listed in a Markdown table (all are in the CSV files).
 MAX_CONDITIONS_SHOWN = 12
@@ -78,11 +79,6 @@ def _conditions(table: pl.DataFrame) -> list[str]:
     return sorted(set(table.get_column("condition").to_list()))
 
 
-def _grid(n: int) -> tuple[int, int]:
-    cols = 3 if n > 4 else 2 if n > 1 else 1
-    return (n + cols - 1) // cols, cols
-
-
 def _short(condition: str) -> str:
     """A condition as a tick label: swept values without their params path
     (``plant.payload_kg=0.5,gains.kp=9`` -> ``payload_kg=0.5, kp=9``)."""
@@ -96,7 +92,7 @@ def _short(condition: str) -> str:
 
 
 def _axes(n: int, *, width: float = 4.2, height: float = 3.0) -> tuple[Figure, list[Axes]]:
-    rows, cols = _grid(n)
+    rows, cols = subplot_grid(n)
     fig = Figure(figsize=(width * cols, height * rows + 0.6))
     grid = fig.subplots(rows, cols, squeeze=False)
     axes = [grid[k // cols][k % cols] for k in range(rows * cols)]
@@ -248,13 +244,6 @@ def _parameter_figure(
     return fig
 
 
-def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    lines = ["| " + " | ".join(h.replace("|", "\\|") for h in header) + " |"]
-    lines.append("|" + "|".join(" --- " for _ in header) + "|")
-    lines += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows]
-    return "\n".join(lines)
-
-
 def _verdict_cell(row: dict[str, object]) -> str:
     effect, p, verdict = row["effect_pct"], row["p_value"], row["verdict"]
     if verdict == "n/a" or not isinstance(effect, float) or not isinstance(p, float):
@@ -333,7 +322,7 @@ def campaign_section(
                 ],
             ]
         )
-    lines += [_table(["condition", *controllers], rows), ""]
+    lines += [md.table(["condition", *controllers], rows), ""]
     if len(conditions) > len(shown):
         lines += [f"({len(conditions) - len(shown)} more conditions in the table.)", ""]
 
@@ -381,7 +370,7 @@ def campaign_section(
                 lines += [
                     f"#### {m.title}: `{cand}` vs `{baseline}`",
                     "",
-                    _table(["joint", *[c or "(all)" for c in shown]], rows),
+                    md.table(["joint", *[c or "(all)" for c in shown]], rows),
                     "",
                 ]
     else:
@@ -463,7 +452,7 @@ def campaign_section(
             "and controller the median and the worst by max |error| over joints (every "
             "episode where there are only a few). Worst joint shown.",
             "",
-            _table(
+            md.table(
                 [
                     "episode",
                     "condition",

@@ -75,7 +75,8 @@ def _rgb(color: tuple[int, int, int]) -> tuple[float, float, float]:
     return (color[0] / 255, color[1] / 255, color[2] / 255)
 
 
-def _grid(n: int) -> tuple[int, int]:
+def subplot_grid(n: int) -> tuple[int, int]:
+    """(rows, columns) of a grid of ``n`` subplots: up to 3 columns."""
     cols = 3 if n > 4 else 2 if n > 1 else 1
     return (n + cols - 1) // cols, cols
 
@@ -157,7 +158,7 @@ def _log_error(recs: list[Recording], joint_index: int | None = None) -> bool:
     return len(positive) > 1 and max(positive) / min(positive) > LOG_ERROR_RATIO
 
 
-def _per_joint(
+def _joint_grid_figure(
     data: ReportData,
     recs: list[Recording],
     column: str,
@@ -168,7 +169,7 @@ def _per_joint(
     controller_state: bool = False,
 ) -> Figure:
     joints = recs[0].joint_names
-    rows, cols = _grid(len(joints))
+    rows, cols = subplot_grid(len(joints))
     fig = Figure(figsize=(4.2 * cols, 2.6 * rows + 0.4))
     axes = fig.subplots(rows, cols, squeeze=False, sharex=True)
     log = column == "error_rad" and _log_error(recs)
@@ -394,7 +395,7 @@ def scenario_figures(
         ),
     )
     for column, ylabel, title, name, caption, limits in panels:
-        fig = _per_joint(
+        fig = _joint_grid_figure(
             data,
             recs,
             column,

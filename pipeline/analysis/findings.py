@@ -1,0 +1,215 @@
+"""Physical checks of the recorded episodes, as typed findings the report only words.
+
+A physically broken setup is never hidden and never fatal: contact during execution, a
+joint in torque saturation, a completed episode that never reached its goal, a
+proportional gain too small against the configured friction. :func:`physical_checks`
+finds them per episode (this is where the nominal model is evaluated, with Pinocchio);
+the report words them and lists a finding shared by several episodes once.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import polars as pl
+
+from pipeline.analysis.catalog import SETTLING_TOLERANCE_RAD
+from pipeline.analysis.episodes import robot_spec
+from pipeline.analysis.protocol import ProtocolView
+from pipeline.log.reader import Recording
+from pipeline.robots.spec import RobotSpec
+from pipeline.settings import EpisodeSettings
+
+SATURATION_WARN_FRACTION = 0.05
+"""Warn when a joint's effort sits at its limit for more than this share of the samples."""
+GOAL_MISS_RAD = 1e-2
+"""A completed episode whose error at the target exceeds this never reached its goal."""
+_STIFFNESS_GAINS = ("pid", "pd_gravity")  # controller types whose kp is in N m/rad
+
+
+@dataclass(frozen=True)
+class ContactFinding:
+    """A contact during execution (from the episode's recorded safety settings).
+
+    Attributes:
+        episode: the episode.
+        kind: ``obstacle``, ``self`` or ``floor``.
+        bodies: the two bodies in contact.
+        max_depth_m: deepest penetration [m].
+        first_s, last_s: first and last sample in penetration, from the motion start [s].
+        samples: checked samples in penetration.
+    """
+
+    episode: str
+    kind: str
+    bodies: tuple[str, str]
+    max_depth_m: float
+    first_s: float
+    last_s: float
+    samples: int
+
+
+@dataclass(frozen=True)
+class SaturationFinding:
+    """A joint whose effort sat at its limit for more than :data:`SATURATION_WARN_FRACTION`
+    of the samples (``fraction``: the share)."""
+
+    episode: str
+    joint: str
+    fraction: float
+
+
+@dataclass(frozen=True)
+class GoalMissFinding:
+    """A joint whose error at the target exceeds :data:`GOAL_MISS_RAD` [rad]."""
+
+    episode: str
+    joint: str
+    final_error_rad: float
+
+
+@dataclass(frozen=True)
+class DeadBandFinding:
+    """A joint whose proportional stiffness leaves a friction dead band wider than the
+    settling band (:data:`pipeline.analysis.catalog.SETTLING_TOLERANCE_RAD`).
+
+    Attributes:
+        episode: the episode.
+        joint: the joint.
+        controller_type: the controller's type (``pid``, ``ctc``, ...).
+        stiffness_nm_per_rad: the proportional term's position stiffness [N m/rad].
+        friction_nm: the plant's Coulomb friction on the joint [N m].
+    """
+
+    episode: str
+    joint: str
+    controller_type: str
+    stiffness_nm_per_rad: float
+    friction_nm: float
+
+    @property
+    def width_rad(self) -> float:
+        """The dead band: friction / stiffness [rad]."""
+        return self.friction_nm / self.stiffness_nm_per_rad
+
+
+Finding = ContactFinding | SaturationFinding | GoalMissFinding | DeadBandFinding
+
+
+@dataclass(frozen=True)
+class PhysicalChecks:
+    """Every finding of the episodes, in episode order (per episode: contacts, then per
+    joint saturation, goal miss, dead band), and how many episodes stayed stable."""
+
+    findings: tuple[Finding, ...]
+    stable: int
+    episodes: int
+
+
+def physical_checks(
+    recordings: Sequence[Recording],
+    views: Mapping[str, ProtocolView],
+    metrics: pl.DataFrame,
+) -> PhysicalChecks:
+    """The physical checks of every recording.
+
+    Args:
+        recordings: the episodes.
+        views: per episode, its protocol view (typed settings, motion start).
+        metrics: :func:`pipeline.analysis.metrics.joint_metrics` of the episodes.
+    """
+    found: list[Finding] = []
+    rows: dict[tuple[str, str], dict[str, Any]] = {
+        (r["episode"], r["joint"]): r for r in metrics.iter_rows(named=True)
+    }
+    for rec in recordings:
+        view = views.get(rec.episode)
+        st = view.settings if view is not None else None
+        start = view.motion_start_s if view is not None else 0.0
+        if st is not None:
+            found += [
+                ContactFinding(
+                    rec.episode,
+                    c.kind,
+                    c.bodies,
+                    c.max_depth_m,
+                    c.first_ns * 1e-9 - start,
+                    c.last_ns * 1e-9 - start,
+                    c.samples,
+                )
+                for c in st.safety.contacts
+            ]
+        stiffness = stiffness_nm_per_rad(st, robot_spec(rec)) if st is not None else None
+        for j, joint in enumerate(rec.joint_names):
+            m = rows.get((rec.episode, joint), {})
+            sat = m.get("saturation_fraction")
+            if sat is not None and sat > SATURATION_WARN_FRACTION:
+                found.append(SaturationFinding(rec.episode, joint, sat))
+            final = m.get("final_error")
+            if final is not None and final > GOAL_MISS_RAD:
+                found.append(GoalMissFinding(rec.episode, joint, final))
+            friction = st.plant.frictionloss if st is not None else ()
+            if stiffness is None or j >= len(friction) or j >= len(stiffness):
+                continue
+            if stiffness[j] > 0 and friction[j] / stiffness[j] > SETTLING_TOLERANCE_RAD:
+                assert st is not None
+                found.append(
+                    DeadBandFinding(
+                        rec.episode, joint, st.controller.type, stiffness[j], friction[j]
+                    )
+                )
+    stable = sum(1 for r in recordings if r.status == "ok")
+    return PhysicalChecks(tuple(found), stable, len(recordings))
+
+
+def worst_saturation(metrics: pl.DataFrame) -> dict[str, float | None]:
+    """Per episode, the largest ``saturation_fraction`` over its joints (None: not recorded)."""
+    return {
+        r["episode"]: r["saturation_fraction"]
+        for r in metrics.group_by("episode")
+        .agg(pl.col("saturation_fraction").max())
+        .iter_rows(named=True)
+    }
+
+
+def nominal_plant(
+    recordings: Sequence[Recording], views: Mapping[str, ProtocolView]
+) -> bool | None:
+    """Whether the recordings' plant is the nominal model (None: unknown or mixed)."""
+    flags = {
+        view.settings.plant.exact
+        for rec in recordings
+        if (view := views.get(rec.episode)) is not None and view.settings is not None
+    }
+    return flags.pop() if len(flags) == 1 else None
+
+
+def stiffness_nm_per_rad(st: EpisodeSettings, spec: RobotSpec | None) -> list[float] | None:
+    """Per-joint position stiffness [N m/rad] of the controller's proportional term:
+    ``kp`` itself for the decentralized laws, ``M_n(goal)_jj * kp`` for the model-based
+    ones (their kp is an acceleration gain [1/s^2])."""
+    kp = st.controller.gains.get("kp")
+    if not (isinstance(kp, list) and all(isinstance(k, int | float) for k in kp)):
+        return None
+    if st.controller.type in _STIFFNESS_GAINS:
+        return [float(k) for k in kp]
+    if spec is None or not spec.has_dynamics or len(st.planner.goal) != spec.dof:
+        return None
+    mass = _mass_diagonal(spec, tuple(float(g) for g in st.planner.goal))
+    return [float(k) * mass[j] for j, k in enumerate(kp)]
+
+
+@functools.lru_cache(maxsize=256)
+def _mass_diagonal(spec: RobotSpec, q: tuple[float, ...]) -> tuple[float, ...]:
+    """diag M_n(q) of the nominal model (a campaign shares robot and goal: computed once)."""
+    import pinocchio as pin
+
+    from pipeline.model.urdf import build_pinocchio_model
+
+    model = build_pinocchio_model(spec)
+    mass = pin.crba(model, model.createData(), np.asarray(q, dtype=float))
+    return tuple(float(mass[j, j]) for j in range(len(q)))

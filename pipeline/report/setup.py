@@ -1,0 +1,145 @@
+"""The report's "Setup" section of a scenario or campaign: robot, start and goal, planner,
+plant and each controller's gains as recorded."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from pipeline.analysis.episodes import setting
+from pipeline.analysis.findings import nominal_plant
+from pipeline.report import md
+from pipeline.report.inputs import ReportData
+
+# Settings shown first, in this order, when present; any others follow as recorded.
+_PLANNER_KEYS = (
+    "planner",
+    "time_limit_s",
+    "path_length_rad",
+    "trajectory_duration_s",
+    "velocity_scaling",
+    "acceleration_scaling",
+)
+_PLANT_KEYS = (
+    "exact",
+    "damping",
+    "frictionloss",
+    "armature",
+    "nominal_armature",
+    "payload_kg",
+    "position_noise_std_rad",
+    "velocity_noise_std_rad_s",
+    "uncertainty",
+    "physics_dt_s",
+    "control_period_s",
+)
+
+
+def _settings_line(node: Any, first: Sequence[str], *, skip: Sequence[str] = ()) -> str:
+    """``key = value`` for a settings dict: the known keys first, then the rest."""
+    if not isinstance(node, dict) or not node:
+        return md.NA
+    keys = [k for k in first if k in node and k not in skip]
+    keys += [k for k in node if k not in keys and k not in skip]
+    return "; ".join(f"{k} = {md.value(node[k])}" for k in keys) or md.NA
+
+
+# Planner settings that the planner line states in words.
+_PATH_KEYS = ("planner", "direct", "simplify", "n_waypoints", "n_states_before_simplify")
+
+
+def _planner_line(planner: Any) -> str:
+    """What the planner did, in words, then its settings.
+
+    ``direct`` = the straight joint-space segment start -> goal was collision-free, so it
+    is the path: RRTConnect did not search and there was nothing to simplify.
+    """
+    if not isinstance(planner, dict) or not planner:
+        return md.NA
+    skip: tuple[str, ...] = ("start", "goal")
+    head = None
+    direct = planner.get("direct")
+    if direct is True:
+        head = "direct joint-space segment start → goal (collision-free; RRTConnect not needed)"
+        skip += _PATH_KEYS
+    elif direct is False:
+        name = md.value(planner.get("planner", "RRTConnect"))
+        n = md.value(planner.get("n_waypoints"))
+        raw = planner.get("n_states_before_simplify")
+        if planner.get("simplify"):
+            head = f"{name}, {n} waypoints after simplification" + (
+                f" (from {md.value(raw)} states)" if raw is not None else ""
+            )
+        else:
+            head = f"{name}, {n} waypoints (not simplified)"
+        skip += _PATH_KEYS
+    rest = _settings_line(planner, _PLANNER_KEYS, skip=skip)
+    if head is None:
+        return rest
+    return head if rest == md.NA else f"{head}; {rest}"
+
+
+def setup_section(data: ReportData, scenario: str) -> list[str]:
+    """The ``### Setup`` section of a scenario (or campaign condition): its first
+    episode's settings, and one row per episode (per controller and gains when many)."""
+    recs = data.in_group(scenario)
+    exact = nominal_plant(recs, data.protocol)
+    first = recs[0]
+    s = first.settings
+    sc = setting(s, "scenario", default={})
+    planner = setting(s, "planner", default={})
+
+    def pose(key: str) -> str:
+        # The planner records the joint-space start/goal it used; the scenario may hold a
+        # Cartesian goal instead.
+        value = setting(planner, key, default=None)
+        return md.value(value if value is not None else setting(sc, key))
+
+    obstacles = setting(sc, "obstacles", default=[])
+    lines = [
+        "### Setup",
+        "",
+        f"- Robot: **{first.robot}** ({len(first.joint_names)} joints: "
+        f"{', '.join(first.joint_names)}), DH convention "
+        f"{md.value(setting(s, 'robot', 'convention'))}.",
+        f"- Start [rad]: {pose('start')}; goal [rad]: {pose('goal')}; "
+        f"obstacles: {len(obstacles) if isinstance(obstacles, list) else md.NA}; "
+        f"hold after the motion: {md.value(setting(sc, 'hold_s'))} s.",
+        f"- Planner: {_planner_line(planner)}.",
+        f"- Plant: {_settings_line(setting(s, 'plant', default={}), _PLANT_KEYS, skip=('links',))}"
+        + (
+            "; link masses, centres of mass and inertias (and the armature above) drawn per "
+            "episode seed, recorded in each bag's `settings.plant.links`."
+            if exact is False
+            else ": the controllers' nominal model **is** the plant, so model-based terms are "
+            "exact by construction."
+            if exact
+            else "."
+        ),
+        "",
+        "Controllers:",
+        "",
+    ]
+    rows = []
+    for rec in recs:
+        ctrl = setting(rec.settings, "controller", default={})
+        gains = setting(ctrl, "gains", default=None)
+        shown = md.value(gains) if gains is not None else _settings_line(ctrl, (), skip=("name",))
+        rows.append([rec.episode, rec.controller, shown, rec.meta("seed"), rec.status])
+    if len(rows) > md.MAX_EPISODE_COLUMNS:
+        # one row per controller and gains: seeds and statuses summarised
+        grouped: dict[tuple[str, str], list[list[str]]] = {}
+        for row in rows:
+            grouped.setdefault((row[1], row[2]), []).append(row)
+        rows = [
+            [
+                f"{len(members)} episodes",
+                ctrl,
+                shown,
+                md.seed_span([m[3] for m in members]),
+                ", ".join(f"{k}: {v}" for k, v in md.count([m[4] for m in members]).items()),
+            ]
+            for (ctrl, shown), members in grouped.items()
+        ]
+    lines.append(md.table(["episode", "controller", "gains and settings", "seed", "status"], rows))
+    return lines

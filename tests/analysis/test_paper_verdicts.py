@@ -1,0 +1,44 @@
+"""Versus the paper: paired reductions and claim verdicts, decided in analysis/."""
+
+from __future__ import annotations
+
+from pipeline.analysis import paper
+from pipeline.analysis.aggregate import MeanCI, mean_ci
+from pipeline.analysis.findings import DeadBandFinding
+from pipeline.analysis.metrics import ERROR_FLOOR_RAD
+
+
+def test_a_claim_holds_only_when_the_whole_interval_is_above_zero() -> None:
+    assert paper.verdict(MeanCI(0, None, None, None)) == "n/a"
+    assert paper.verdict(MeanCI(1, 5.0, None, None)) == "holds"
+    assert paper.verdict(MeanCI(1, -5.0, None, None)) == "does not hold"
+    assert paper.verdict(mean_ci([10.0, 11.0, 12.0])) == "holds"
+    assert paper.verdict(mean_ci([-10.0, -11.0, -12.0])) == "does not hold"
+    assert paper.verdict(mean_ci([-10.0, 10.0, 1.0])) == "inconclusive"
+
+
+def test_reduction_is_none_below_the_noise_floor_or_when_missing() -> None:
+    assert paper.reduction_pct(2.0, 1.0, 2.0) == 50.0
+    assert paper.reduction_pct(2.0, 1.0, 1.0) == 100.0
+    assert paper.reduction_pct(1e-3, 0.0, ERROR_FLOOR_RAD / 2) is None
+    assert paper.reduction_pct(None, 1.0, 1.0) is None
+
+
+def test_the_papers_own_reductions_match_what_it_printed() -> None:
+    # Table 3 prints (PID - CTC) / CTC; recomputing it from its own values agrees to 0.1 %.
+    base = paper.PAPER_FINAL_ERROR_RAD[paper.PAPER_BASELINE]
+    cand = paper.PAPER_FINAL_ERROR_RAD[paper.PAPER_CANDIDATE]
+    for k, printed in enumerate(paper.PAPER_FINAL_ERROR_REDUCTION_PCT[:5]):
+        assert abs(paper.reduction_pct(base[k], cand[k], cand[k]) - printed) < 0.1  # type: ignore[operator]
+
+
+def test_an_empty_comparison_has_no_joint_values() -> None:
+    cmp = paper.PaperComparison("paper", None)
+    assert not cmp.pairs
+    assert cmp.at("max_abs_error", 0) == paper.JointComparison()
+    assert cmp.claim_verdicts("max_abs_error") == {}
+
+
+def test_dead_band_is_friction_over_stiffness() -> None:
+    f = DeadBandFinding("e", "j", "pid", stiffness_nm_per_rad=200.0, friction_nm=1.0)
+    assert f.width_rad == 0.005
