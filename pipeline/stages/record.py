@@ -124,7 +124,8 @@ def record(
 
     Raises:
         ParamsError: an episode would not fit in memory or time (before any runs).
-        Interrupted: Ctrl-C or SIGTERM; nothing half-written is left under a final name.
+        Interrupted: (:class:`pipeline.stages.executors.Interrupted`) Ctrl-C or SIGTERM;
+            nothing half-written is left under a final name.
     """
     emit = on_event or (lambda kind, name, value: None)
     started_s = time.time()
