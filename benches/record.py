@@ -33,7 +33,8 @@ from sim_loop import physics_floor_s  # noqa: E402
 
 from pipeline.params import load_params  # noqa: E402
 from pipeline.robots import load_spec  # noqa: E402
-from pipeline.stages.record import plan_scenario, run_one  # noqa: E402
+from pipeline.stages.episode import run_one  # noqa: E402
+from pipeline.stages.plans import plan_scenario  # noqa: E402
 
 
 def physics_floor_s_per_step(n_steps: int) -> float:

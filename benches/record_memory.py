@@ -3,7 +3,7 @@
 Runs ``pipeline record`` on the paper's CTC episode (UR5, 1 kHz, full logging) with
 growing ``hold_s``, each in a fresh process, and fits peak RSS and wall time against
 the number of control steps. The slopes, divided by the 6 joints, are what
-``pipeline.stages.record`` assumes (``BYTES_PER_JOINT_STEP``, ``SECONDS_PER_JOINT_STEP``);
+``pipeline.stages.budget`` assumes (``BYTES_PER_JOINT_STEP``, ``SECONDS_PER_JOINT_STEP``);
 it prints both so a change in the logging shows up as a gap.
 
 Usage: python benches/record_memory.py [--holds 1 11 31 61]
@@ -26,7 +26,7 @@ import yaml
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from pipeline.stages import record as rec  # noqa: E402
+from pipeline.stages import budget  # noqa: E402
 
 # Peak RSS of the child, read by a parent whose only child it is.
 _WRAPPER = (
@@ -69,9 +69,9 @@ def main() -> None:
         "peak_rss_mb": [round(r / 1e6, 1) for r in rss],
         "wall_s": [round(w, 2) for w in wall],
         "bytes_per_joint_step": round(bytes_per_step / 6, 1),
-        "assumed_bytes_per_joint_step": rec.BYTES_PER_JOINT_STEP,
+        "assumed_bytes_per_joint_step": budget.BYTES_PER_JOINT_STEP,
         "seconds_per_joint_step": seconds_per_step / 6,
-        "assumed_seconds_per_joint_step": rec.SECONDS_PER_JOINT_STEP,
+        "assumed_seconds_per_joint_step": budget.SECONDS_PER_JOINT_STEP,
     }, indent=2))  # fmt: skip
 
 

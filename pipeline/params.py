@@ -264,7 +264,7 @@ class CampaignParams(_Strict):
 class SimParams(_Strict):
     # Ranges a manipulator experiment can use; beyond them a value is a typo that would
     # exhaust the machine (1e-9 s steps, 1e9 Hz /tf), not a setting. What an in-range
-    # episode costs is estimated before it runs (pipeline.stages.record.estimate_episode).
+    # episode costs is estimated before it runs (pipeline.stages.budget.estimate_episode).
     physics_dt_s: float = Field(default=0.001, ge=MIN_PHYSICS_DT_S, le=0.01)
     control_period_steps: int = Field(default=1, ge=1, le=1000)
     joint_state_decimation: int = Field(default=1, ge=1, le=1000)

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from pipeline.stages.record import RECORD_CODE
+from pipeline.stages.provenance import RECORD_CODE
 
 REPO = Path(__file__).parents[1]
 _PROBE = """

@@ -35,13 +35,13 @@ from pipeline.params import (
 )
 from pipeline.robots.spec import format_validation_error
 from pipeline.settings import CampaignInfo
+from pipeline.stages.goals import resolve_goal
 
 GOAL_AXIS = "goal"
 MAX_GOAL_ATTEMPTS = 1000  # draws per random goal before giving up (region mostly blocked)
 MAX_KEY_CHARS = 200  # a file name holds 255 bytes, with room for ".<key>.partial-<pid>"
 KEY_DIGITS = 6  # significant digits of a drawn value in an episode key
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.-]")
-TUNING_KEYS = ("omega_n_rad_s", "zeta")
 
 
 @dataclass(frozen=True)
@@ -169,7 +169,6 @@ def draw_goals(
     from pipeline.model.scene import Box
     from pipeline.planning.collision import CollisionChecker
     from pipeline.robots.spec import load_spec
-    from pipeline.stages.record import resolve_goal
 
     scenario = params.scenarios[scenario_name]
     spec = load_spec(scenario.robot)
@@ -228,6 +227,8 @@ def _controller_for(
     """The controller with the swept gains: ``gains.K`` for every controller,
     ``controllers.NAME.gains.K`` for one. Sweeping a tuning knob (``omega_n_rad_s``,
     ``zeta``) drops the explicit gains it derives, so the knob takes effect."""
+    from pipeline.control.base import TUNING_KEYS
+
     base = params.controllers[name]
     gains = dict(base.gains)
     for axis, i in picks:
@@ -340,12 +341,3 @@ def episode_fingerprint(episode: Episode, *, commit: str) -> str:
     }
     text = json.dumps(data, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()
-
-
-def plan_key(scenario: ScenarioParams) -> str:
-    """What a plan depends on: robot, start, goal, obstacles, planner and timing settings.
-
-    Episodes with equal keys share one plan (planned once per campaign run).
-    """
-    data = scenario.model_dump(include={"robot", "start", "goal", "obstacles", "planner", "timing"})
-    return json.dumps(data, sort_keys=True, separators=(",", ":"))

@@ -22,6 +22,7 @@ from pathlib import Path
 from pipeline.errors import ParamsError
 from pipeline.params import Episode, Params
 from pipeline.stages.campaign import episode_fingerprint, expand
+from pipeline.stages.provenance import git_commit
 
 DONE_DIR = ".done"
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -103,8 +104,6 @@ def plan_run(params: Params, name: str, *, out: Path, force: bool = False) -> Ca
     Raises:
         ParamsError: unknown campaign or a bad sweep (names the field).
     """
-    from pipeline.stages.record import git_commit
-
     episodes = expand(params, name)
     out_dir = out / name
     commit = git_commit()

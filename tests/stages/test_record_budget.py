@@ -17,7 +17,7 @@ import yaml
 
 from pipeline.errors import ParamsError
 from pipeline.params import parse_params
-from pipeline.stages.record import (
+from pipeline.stages.budget import (
     BYTES_PER_JOINT_STEP,
     MAX_EPISODE_WALL_S,
     check_budget,

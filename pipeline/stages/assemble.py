@@ -1,0 +1,197 @@
+"""An episode as run, mapped onto the recording contract (:class:`EpisodeSettings`).
+
+What goes into a bag's ``settings`` metadata: the robot as plain data, the plant drawn
+for the episode, the planner's result, the protocol's start. Nothing here reads a
+clock: a recording's bytes depend on its params and seed alone.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import asdict
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from pipeline import __version__
+from pipeline.params import Episode, ScenarioParams
+from pipeline.planning import PlannedPath, TimedTrajectory
+from pipeline.robots.spec import RobotSpec
+from pipeline.settings import (
+    ControllerSettings,
+    EpisodeSettings,
+    ExecutionSafety,
+    PlannerSettings,
+    PlantSettings,
+    ProtocolSettings,
+    Uncertainty,
+    per_joint,
+)
+
+if TYPE_CHECKING:
+    from pipeline.sim.result import EpisodeResult
+
+
+def spec_as_dict(spec: RobotSpec) -> dict[str, Any]:
+    """The robot spec as plain data (radians), as recorded in every bag."""
+    return {
+        "name": spec.name,
+        "convention": spec.convention,
+        "angle_unit": "rad",
+        "joints": [
+            {
+                "name": j.name,
+                "dh": [j.dh.alpha, j.dh.a, j.dh.d, j.dh.theta_offset],
+                "limits": asdict(j.limits),
+                **(
+                    {
+                        "inertial": {
+                            "mass": j.inertial.mass,
+                            "com": list(j.inertial.com),
+                            "inertia": [
+                                j.inertial.inertia[0][0],
+                                j.inertial.inertia[1][1],
+                                j.inertial.inertia[2][2],
+                                j.inertial.inertia[0][1],
+                                j.inertial.inertia[0][2],
+                                j.inertial.inertia[1][2],
+                            ],
+                        }
+                    }
+                    if j.inertial is not None
+                    else {}
+                ),
+                "collision": {"radius": j.collision_radius},
+                "armature": j.armature,
+            }
+            for j in spec.joints
+        ],
+    }
+
+
+def param_values(value: float | list[float]) -> tuple[float, ...]:
+    """A params entry given as one number or one per joint, as a tuple (not yet per joint)."""
+    return tuple(value) if isinstance(value, list) else (float(value),)
+
+
+def _plant_is_exact(spec: RobotSpec, plant_spec: RobotSpec, scenario: ScenarioParams) -> bool:
+    """The nominal model is the plant: nothing drawn, no friction, damping, payload, noise."""
+    p = scenario.plant
+    zero = (
+        param_values(p.damping),
+        param_values(p.frictionloss),
+        (p.payload_kg,),
+        (p.position_noise_std_rad, p.velocity_noise_std_rad_s),
+    )
+    return plant_spec == spec and all(x == 0 for group in zero for x in group)
+
+
+def episode_settings(
+    episode: Episode,
+    *,
+    spec: RobotSpec,
+    plant_spec: RobotSpec,
+    uncertainty: Uncertainty,
+    gains: Mapping[str, Any],
+    path: PlannedPath,
+    trajectory: TimedTrajectory,
+    result: EpisodeResult,
+    safety: ExecutionSafety,
+    commit: str,
+) -> EpisodeSettings:
+    """What the episode's bag records about how it was run.
+
+    Args:
+        spec: the nominal robot (the controller's model).
+        plant_spec: the robot as simulated (drawn inertials, armature).
+        gains: the controller's gains in effect (``Controller.settings()``).
+        commit: the recording code's version (:func:`pipeline.stages.provenance.git_commit`).
+    """
+    from pipeline.model.uncertainty import link_inertials
+
+    scenario = episode.scenario
+    sim = episode.sim
+    p = scenario.plant
+    k0 = int(result.extra["motion_start_row"])
+    at_start = min(k0, len(result.stamp_ns) - 1)
+    plant = PlantSettings(
+        exact=_plant_is_exact(spec, plant_spec, scenario),
+        links=link_inertials(plant_spec),
+        armature=tuple(float(a) for a in plant_spec.armature),
+        nominal_armature=tuple(float(a) for a in spec.armature),
+        damping=per_joint(param_values(p.damping), spec.dof),
+        frictionloss=per_joint(param_values(p.frictionloss), spec.dof),
+        payload_kg=p.payload_kg,
+        position_noise_std_rad=p.position_noise_std_rad,
+        velocity_noise_std_rad_s=p.velocity_noise_std_rad_s,
+        uncertainty=uncertainty,
+        physics_dt_s=sim.physics_dt_s,
+        control_period_s=sim.physics_dt_s * sim.control_period_steps,
+    )
+    # planning_time_s is wall clock: printed, never recorded (recordings are byte-reproducible)
+    return EpisodeSettings(
+        episode=episode.name,
+        robot=spec_as_dict(spec),
+        scenario={"name": episode.scenario_name, **scenario.model_dump()},
+        controller=ControllerSettings(
+            name=episode.controller_name,
+            type=episode.controller.type,
+            gains=gains,
+        ),
+        plant=plant,
+        planner=PlannerSettings(
+            planner=path.planner,
+            seed=path.seed,
+            time_limit_s=path.time_limit_s,
+            simplify=path.simplified,
+            direct=path.direct,
+            n_waypoints=len(path.waypoints),
+            n_states_before_simplify=path.n_states_before_simplify,
+            path_length_rad=path.path_length_rad,
+            padding_m=path.padding_m,
+            check_step_rad=path.check_step_rad,
+            interpolation=trajectory.interpolation,
+            trajectory_duration_s=float(trajectory.duration_s),
+            velocity_scaling=scenario.timing.velocity_scaling,
+            acceleration_scaling=scenario.timing.acceleration_scaling,
+            start=tuple(float(x) for x in path.start),
+            goal=tuple(float(x) for x in path.goal),
+        ),
+        protocol=ProtocolSettings(
+            motion_start_s=float(result.extra["motion_start_s"]),
+            hold_s=scenario.hold_s,
+            start_abs_error_rad=tuple(
+                float(x) for x in np.abs(result.q_ref[at_start] - result.q_true[at_start])
+            )
+            if result.stamp_ns.size
+            else (),
+            start_effort_nm=tuple(float(x) for x in result.tau_nm[at_start])
+            if result.stamp_ns.size
+            else (),
+            reproduces_paper=scenario.reproduces_paper,
+        ),
+        safety=safety,
+        seed=episode.seed,
+        status=result.status,
+        reason=result.reason,
+        mujoco_warnings=result.mujoco_warnings,
+        package_version=__version__,
+        git_commit=commit,
+        campaign=episode.campaign,
+    )
+
+
+def bag_metadata(episode: Episode, settings: EpisodeSettings, *, robot: str) -> dict[str, str]:
+    """The bag's metadata: the episode's names, for tools that do not parse the settings,
+    and the settings as compact, key-sorted JSON."""
+    return {
+        "episode": episode.name,
+        "scenario": episode.scenario_name,
+        "controller": episode.controller_name,
+        "robot": robot,
+        "seed": str(episode.seed),
+        **({"campaign": episode.campaign.name} if episode.campaign else {}),
+        "status": settings.status,
+        "settings": json.dumps(settings.to_dict(), sort_keys=True, separators=(",", ":")),
+    }

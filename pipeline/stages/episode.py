@@ -1,0 +1,212 @@
+"""The episode runner: one episode on the MuJoCo plant, written as one ROS 2 bag.
+
+:func:`run_one` is what every executor runs (in this process, in a pool worker, as a
+Ray task); it writes its bag atomically and turns an error into a failed outcome.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.constants import FINAL_WINDOW_S
+from pipeline.errors import PipelineError
+from pipeline.fsutil import remove_stale
+from pipeline.params import Episode
+from pipeline.planning import PlannedPath, TimedTrajectory
+from pipeline.robots.spec import load_spec
+from pipeline.settings import Uncertainty, per_joint
+from pipeline.stages.assemble import bag_metadata, episode_settings, param_values
+from pipeline.stages.plans import ScenarioPlan, obstacle_boxes
+
+
+@dataclass(frozen=True)
+class EpisodeOutcome:
+    """What the summary table shows for one episode."""
+
+    name: str
+    status: str  # "ok", "diverged" or "failed"
+    reason: str
+    bag: str
+    max_abs_error_rad: float
+    final_abs_error_rad: float
+    duration_s: float
+    wall_s: float
+    contact: str = ""  # the execution-safety summary when the arm touched anything
+
+
+def failed_outcome(name: str, reason: str, wall_s: float = 0.0) -> EpisodeOutcome:
+    """The outcome of an episode that produced no recording."""
+    return EpisodeOutcome(name, "failed", reason, "", float("nan"), float("nan"), 0.0, wall_s)
+
+
+def run_one(
+    episode: Episode,
+    plan: ScenarioPlan,
+    *,
+    out_dir: Path,
+    force: bool,
+    commit: str,
+    progress: Callable[[float], None] | None = None,
+    before_write: Callable[[], None] | None = None,
+) -> EpisodeOutcome:
+    """Run one episode and write its bag. Errors become a failed outcome, not a raise.
+
+    ``before_write`` runs after the simulation, right before the bag is written and
+    published (a pool worker exits there if its parent is gone).
+    """
+    wall0 = time.perf_counter()
+    bag_dir = out_dir / episode.name
+    try:
+        if plan.path is None or plan.trajectory is None:
+            raise PipelineError(plan.error)
+        outcome = _run_and_write(
+            episode,
+            plan.path,
+            plan.trajectory,
+            bag_dir=bag_dir,
+            force=force,
+            commit=commit,
+            progress=progress,
+            before_write=before_write,
+        )
+    except (PipelineError, OSError, MemoryError) as err:
+        if isinstance(err, OSError):
+            reason = f"{bag_dir}: cannot write the recording ({err.strerror or err})"
+        elif isinstance(err, MemoryError):
+            reason = "out of memory: shorten the episode (hold_s) or log less"
+        else:
+            reason = str(err)
+        return failed_outcome(episode.name, reason, time.perf_counter() - wall0)
+    return EpisodeOutcome(**{**asdict(outcome), "wall_s": time.perf_counter() - wall0})
+
+
+def _run_and_write(
+    episode: Episode,
+    path: PlannedPath,
+    trajectory: TimedTrajectory,
+    *,
+    bag_dir: Path,
+    force: bool,
+    commit: str,
+    progress: Callable[[float], None] | None,
+    before_write: Callable[[], None] | None = None,
+) -> EpisodeOutcome:
+    from pipeline.control import make_controller
+    from pipeline.log.bag import write_episode_bag
+    from pipeline.model.mjcf import PlantOptions
+    from pipeline.model.uncertainty import draw_plant, link_inertials, with_plant
+    from pipeline.sim.runner import run_episode
+    from pipeline.sim.safety import SKIP_WITHIN_M, assess_execution
+
+    scenario = episode.scenario
+    spec = load_spec(scenario.robot)
+    sim = episode.sim
+    control_dt_s = sim.physics_dt_s * sim.control_period_steps
+    controller = make_controller(
+        episode.controller.type,
+        spec,
+        episode.controller.gains,
+        source=f"controllers.{episode.controller_name}",
+    )
+    p = scenario.plant
+    uncertainty = Uncertainty(**p.uncertainty.model_dump())
+    plant_spec = draw_plant(spec, uncertainty, seed=episode.seed)
+    extra_armature = param_values(p.armature)
+    plant_spec = with_plant(
+        plant_spec,
+        link_inertials(plant_spec),
+        [
+            a + x
+            for a, x in zip(plant_spec.armature, per_joint(extra_armature, spec.dof), strict=True)
+        ],
+    )
+    plant = PlantOptions(
+        damping=param_values(p.damping),
+        frictionloss=param_values(p.frictionloss),
+        payload_kg=p.payload_kg,
+    )
+    result = run_episode(
+        spec,
+        reference=trajectory,
+        controller=controller,
+        plant=plant,
+        plant_spec=plant_spec,
+        obstacles=obstacle_boxes(scenario),
+        physics_dt_s=sim.physics_dt_s,
+        control_period_steps=sim.control_period_steps,
+        hold_s=scenario.hold_s,
+        preroll_s=scenario.preroll_s,
+        position_noise_std_rad=p.position_noise_std_rad,
+        velocity_noise_std_rad_s=p.velocity_noise_std_rad_s,
+        seed=episode.seed,
+        progress=progress,
+    )
+    k0 = int(result.extra["motion_start_row"])
+    motion_start_s = float(result.extra["motion_start_s"])
+    # contacts and clearance along the plant's true motion: every control step that is
+    # not provably within SKIP_WITHIN_M of a checked one
+    safety = assess_execution(
+        spec,
+        q=result.q_true,
+        stamp_ns=result.stamp_ns,
+        obstacles=obstacle_boxes(scenario),
+        skip_within_m=SKIP_WITHIN_M,
+    )
+    settings = episode_settings(
+        episode,
+        spec=spec,
+        plant_spec=plant_spec,
+        uncertainty=uncertainty,
+        gains=controller.settings(),
+        path=path,
+        trajectory=trajectory,
+        result=result,
+        safety=safety,
+        commit=commit,
+    )
+    if before_write is not None:
+        before_write()
+    write_episode_bag(
+        bag_dir,
+        spec=spec,
+        result=result,
+        planned=trajectory.samples(0.01),
+        motion_start_ns=round(motion_start_s * 1e9),
+        metadata=bag_metadata(episode, settings, robot=spec.name),
+        joint_state_decimation=sim.joint_state_decimation,
+        tf_rate_hz=sim.tf_rate_hz,
+        ros_distro=sim.ros_distro,
+        force=force,
+    )
+    # true tracking error from the motion start (the report's definition)
+    err = np.abs(result.q_ref[k0:] - result.q_true[k0:])
+    # same window as the report's "error at the target"
+    n_hold = max(1, round(min(FINAL_WINDOW_S, scenario.hold_s / 2) / control_dt_s))
+    return EpisodeOutcome(
+        name=episode.name,
+        status=result.status,
+        reason=result.reason,
+        bag=str(bag_dir),
+        max_abs_error_rad=float(err.max()) if err.size else float("nan"),
+        final_abs_error_rad=float(err[-n_hold:].mean(axis=0).max()) if err.size else float("nan"),
+        duration_s=float(result.stamp_ns[-1] * 1e-9) if result.stamp_ns.size else 0.0,
+        wall_s=0.0,
+        contact=safety.summary() if safety.touched else "",
+    )
+
+
+# Work folders of the bag writer (pipeline/log/bag.py: ``.<name>.partial-<pid>`` while
+# writing, ``.<name>.old-<pid>`` while replacing with --force).
+_STALE_BAG = re.compile(r"\..+\.(?:partial|old)-(?P<pid>\d+)")
+
+
+def remove_work_folders(out_dir: Path, *, mine: bool = True) -> None:
+    """Remove bag work folders of writers that are gone (and this process's own, if ``mine``)."""
+    remove_stale(out_dir, _STALE_BAG, also_pids=frozenset({os.getpid()} if mine else ()))

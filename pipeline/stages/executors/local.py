@@ -1,0 +1,289 @@
+"""Episodes on this machine: in this process, or on a pool of forked worker processes.
+
+The pool has one pipe per worker and no manager process. Each worker asks the kernel
+to kill it when the parent dies (``prctl(PR_SET_PDEATHSIG)`` on Linux, a watcher
+thread elsewhere), ignores Ctrl-C and SIGTERM (the parent decides what it cancels),
+and never publishes a recording for a run that is gone.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import multiprocessing as mp
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from multiprocessing import connection as mp_connection
+from multiprocessing.connection import Connection
+from pathlib import Path
+from typing import Any, cast
+
+from pipeline.params import Episode
+from pipeline.stages.episode import EpisodeOutcome, remove_work_folders, run_one
+from pipeline.stages.executors.base import Emit, interrupted
+from pipeline.stages.plans import ScenarioPlan
+
+CANCEL_GRACE_S = 3.0  # a worker writing its bag when Ctrl-C (SIGTERM) comes may finish it
+
+
+@dataclass(frozen=True)
+class LocalExecutor:
+    """Episodes in this process (``jobs`` 1, or one episode), else on ``jobs`` workers."""
+
+    jobs: int = 1
+
+    def run(
+        self,
+        episodes: Sequence[Episode],
+        plans: Mapping[str, ScenarioPlan],
+        *,
+        out_dir: Path,
+        force: bool,
+        commit: str,
+        emit: Emit,
+    ) -> dict[str, EpisodeOutcome]:
+        """See :meth:`pipeline.stages.executors.base.Executor.run`."""
+        started_s = time.time()
+        if self.jobs > 1 and len(episodes) > 1:
+            return _run_pool(episodes, plans, out_dir=out_dir, force=force, commit=commit,
+                             jobs=self.jobs, emit=emit, started_s=started_s)  # fmt: skip
+        outcomes: dict[str, EpisodeOutcome] = {}
+        try:
+            for e in episodes:
+                outcomes[e.name] = run_one(
+                    e,
+                    plans[e.name],
+                    out_dir=out_dir,
+                    force=force,
+                    commit=commit,
+                    progress=_episode_progress(emit, e.name),
+                )
+                emit("done", e.name, 1.0)
+        except KeyboardInterrupt as err:
+            remove_work_folders(out_dir)
+            raise interrupted(episodes, outcomes, out_dir, started_s=started_s, cause=err) from None
+        return outcomes
+
+
+def _mp_context() -> mp.context.BaseContext:
+    # fork where available: workers inherit the imported libraries (a spawned worker spends
+    # ~2 s importing MuJoCo, Pinocchio and OMPL). No library here runs threads before the
+    # fork, and the plan is computed before it, so nothing random is inherited mid-use.
+    return mp.get_context("fork" if "fork" in mp.get_all_start_methods() else "spawn")
+
+
+def _episode_progress(emit: Emit, name: str) -> Callable[[float], None]:
+    return lambda fraction: emit("episode", name, fraction)
+
+
+_PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    """Make this (worker) process end when ``parent_pid`` does, however it ends.
+
+    Linux: the kernel sends SIGKILL at the parent's death (``PR_SET_PDEATHSIG``). Elsewhere
+    a daemon thread polls ``getppid``. Either way a worker never outlives its parent.
+    """
+    armed = False
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            armed = libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0
+        except (OSError, AttributeError):
+            armed = False
+    if os.getppid() != parent_pid:  # the parent died before the signal was armed
+        os._exit(1)
+    if not armed:
+
+        def watch() -> None:
+            while os.getppid() == parent_pid:
+                time.sleep(0.2)
+            os._exit(1)
+
+        threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
+class _Cancelled(BaseException):
+    """Raised inside a worker's episode once the parent cancelled the run (not an error)."""
+
+
+def _worker_main(
+    conn: Connection, cancel: Any, parent_pid: int, out_dir: str, force: bool, commit: str
+) -> None:
+    """A pool worker: run the episodes the parent sends until it sends None."""
+    _die_with_parent(parent_pid)
+    # Ctrl-C reaches the whole process group, and so does SIGTERM from `timeout`, systemd
+    # or a CI runner; the parent decides what it cancels (and kills the workers).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+    def before_write() -> None:
+        if os.getppid() != parent_pid:
+            os._exit(1)  # never publish a recording for a run that is gone
+        if cancel.is_set():
+            raise _Cancelled
+
+    while True:
+        try:
+            task = conn.recv()
+        except (EOFError, OSError):
+            return
+        if task is None:
+            return
+        episode, plan = task
+
+        def progress(fraction: float, name: str = episode.name) -> None:
+            if cancel.is_set():
+                raise _Cancelled
+            conn.send(("progress", name, fraction))
+
+        try:
+            outcome = run_one(
+                episode, plan, out_dir=Path(out_dir), force=force, commit=commit,
+                progress=progress, before_write=before_write,
+            )  # fmt: skip
+        except _Cancelled:
+            conn.send(("cancelled", episode.name, None))
+            continue
+        conn.send(("done", episode.name, outcome))
+
+
+def _run_pool(
+    episodes: Sequence[Episode],
+    plans: Mapping[str, ScenarioPlan],
+    *,
+    out_dir: Path,
+    force: bool,
+    commit: str,
+    jobs: int,
+    emit: Emit,
+    started_s: float,
+) -> dict[str, EpisodeOutcome]:
+    """Run episodes on ``jobs`` worker processes, one pipe each (no manager process).
+
+    A worker that dies (out-of-memory killer, a crash in a library) fails its episode
+    and is replaced. Ctrl-C cancels the run: workers abandon their episodes at the next
+    progress report (or just before writing), those already writing get
+    :data:`CANCEL_GRACE_S` to finish, then every worker is killed and
+    :class:`~pipeline.stages.executors.base.Interrupted` raised.
+    """
+    ctx = _mp_context()
+    cancel = ctx.Event()
+    queued = list(episodes)
+    outcomes: dict[str, EpisodeOutcome] = {}
+    workers: dict[Connection, tuple[Any, str | None]] = {}  # conn -> (process, episode)
+
+    def start_worker() -> None:
+        here, there = ctx.Pipe()
+        proc = ctx.Process(  # type: ignore[attr-defined]
+            target=_worker_main,
+            args=(there, cancel, os.getpid(), str(out_dir), force, commit),
+            name="pipeline-record-worker",
+            daemon=True,
+        )
+        proc.start()
+        there.close()
+        workers[here] = (proc, None)
+
+    def feed(conn: Connection) -> None:
+        proc, _ = workers[conn]
+        if queued:
+            episode = queued.pop(0)
+            conn.send((episode, plans[episode.name]))
+            workers[conn] = (proc, episode.name)
+        else:
+            with contextlib.suppress(OSError):
+                conn.send(None)
+            workers[conn] = (proc, None)
+
+    try:
+        for _ in range(min(jobs, len(queued))):
+            start_worker()
+        for conn in list(workers):
+            feed(conn)
+        while len(outcomes) < len(episodes):
+            ready = mp_connection.wait(list(workers), timeout=0.5)
+            for item in ready:
+                conn = cast(Connection, item)
+                proc, current = workers[conn]
+                try:
+                    kind, name, value = conn.recv()
+                except (EOFError, OSError):
+                    proc.join(timeout=5)
+                    if current is not None and current not in outcomes:
+                        outcomes[current] = _worker_died(current, proc.exitcode)
+                        emit("done", current, 1.0)
+                    del workers[conn]
+                    conn.close()
+                    if queued:
+                        start_worker()
+                        feed(list(workers)[-1])
+                    continue
+                if kind == "progress":
+                    emit("episode", name, value)
+                else:
+                    outcomes[name] = value
+                    emit("done", name, 1.0)
+                    feed(conn)
+            if not workers and len(outcomes) < len(episodes):  # pragma: no cover - defensive
+                for e in queued:
+                    outcomes[e.name] = _worker_died(e.name, None)
+                queued.clear()
+    except KeyboardInterrupt as err:
+        cancel.set()
+        _collect_until_idle(workers, outcomes, timeout_s=CANCEL_GRACE_S)
+        _kill_all(workers)
+        remove_work_folders(out_dir)
+        raise interrupted(episodes, outcomes, out_dir, started_s=started_s, cause=err) from None
+    finally:
+        _kill_all(workers)
+        remove_work_folders(out_dir, mine=False)  # what a worker that died mid-write left
+    return outcomes
+
+
+def _collect_until_idle(
+    workers: dict[Connection, tuple[Any, str | None]],
+    outcomes: dict[str, EpisodeOutcome],
+    *,
+    timeout_s: float,
+) -> None:
+    """After a cancel: take the outcomes busy workers still send, until none is busy."""
+    busy = [conn for conn, (_, current) in workers.items() if current is not None]
+    deadline = time.monotonic() + timeout_s
+    while busy and time.monotonic() < deadline:
+        for item in mp_connection.wait(busy, timeout=max(0.0, deadline - time.monotonic())):
+            conn = cast(Connection, item)
+            try:
+                kind, name, value = conn.recv()
+            except (EOFError, OSError):
+                busy.remove(conn)
+                continue
+            if kind == "done":
+                outcomes[name] = value
+            if kind in ("done", "cancelled"):
+                busy.remove(conn)
+
+
+def _worker_died(name: str, exitcode: int | None) -> EpisodeOutcome:
+    how = f"killed by signal {-exitcode}" if exitcode is not None and exitcode < 0 else (
+        f"exit code {exitcode}")  # fmt: skip
+    hint = " (out of memory?)" if exitcode == -signal.SIGKILL else ""
+    return EpisodeOutcome(
+        name, "failed", f"its worker process died ({how}){hint}", "", float("nan"),
+        float("nan"), 0.0, 0.0,
+    )  # fmt: skip
+
+
+def _kill_all(workers: dict[Connection, tuple[Any, str | None]]) -> None:
+    for conn, (proc, _) in list(workers.items()):
+        if proc.is_alive():
+            proc.kill()
+        proc.join(timeout=5)
+        conn.close()
+    workers.clear()

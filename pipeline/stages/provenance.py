@@ -1,0 +1,69 @@
+"""Provenance of a recording: which code made it (``RECORD_CODE``, :func:`git_commit`)."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+# The code a recording depends on (relative to pipeline/): dvc.yaml's record deps list
+# the same paths (a test keeps them equal), and recordings carry the last commit that
+# changed them, so a commit that only touches the report, docs or results leaves the
+# recordings' bytes, and committed results, reproducible from a clone.
+RECORD_CODE = (
+    "__init__.py",
+    "__main__.py",
+    "cli.py",
+    "constants.py",
+    "errors.py",
+    "fsutil.py",
+    "params.py",
+    "settings.py",
+    "trajectory.py",
+    "yamlio.py",
+    "robots",
+    "model",
+    "kinematics",
+    "planning",
+    "control",
+    "sim",
+    "log/__init__.py",
+    "log/bag.py",
+    "log/cdr.py",
+    "log/gather.py",
+    "log/mcap.py",
+    "log/msgdef.py",
+    "log/rosbag2.py",
+    "log/schemas.py",
+    "log/topics.py",
+    "stages/__init__.py",
+    "stages/assemble.py",
+    "stages/budget.py",
+    "stages/campaign.py",
+    "stages/campaign_run.py",
+    "stages/episode.py",
+    "stages/executors",
+    "stages/goals.py",
+    "stages/plans.py",
+    "stages/provenance.py",
+    "stages/record.py",
+)
+
+
+def git_commit() -> str:
+    """Last commit that changed the record code, ``-dirty`` if it has local changes.
+
+    "" outside a git checkout.
+    """
+    package = Path(__file__).resolve().parents[1]
+
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", *args], cwd=package, capture_output=True, text=True, check=True
+        ).stdout.strip()
+
+    try:
+        sha = git("log", "-1", "--format=%H", "--", *RECORD_CODE)
+        dirty = git("status", "--porcelain", "--untracked-files=no", "--", *RECORD_CODE)
+    except (OSError, subprocess.CalledProcessError):
+        return ""
+    return f"{sha}-dirty" if sha and dirty else sha
