@@ -19,6 +19,7 @@ from pipeline.constants import (
     TOPIC_GROUND_TRUTH,
     TOPIC_JOINT_STATES,
 )
+from pipeline.control.registry import stiffness_gains
 from pipeline.log.reader import Recording
 from pipeline.report import paper
 from pipeline.report.campaigns import CampaignSection
@@ -350,7 +351,6 @@ SATURATION_WARN_FRACTION = 0.05
 """Warn when a joint's effort sits at its limit for more than this share of the samples."""
 GOAL_MISS_RAD = 1e-2
 """A completed episode whose error at the target exceeds this never reached its goal."""
-_STIFFNESS_GAINS = ("pid", "pd_gravity")  # controller types whose kp is in N m/rad
 
 
 def _stiffness_nm_per_rad(st: EpisodeSettings, spec: RobotSpec | None) -> list[float] | None:
@@ -360,7 +360,7 @@ def _stiffness_nm_per_rad(st: EpisodeSettings, spec: RobotSpec | None) -> list[f
     kp = st.controller.gains.get("kp")
     if not (isinstance(kp, list) and all(isinstance(k, int | float) for k in kp)):
         return None
-    if st.controller.type in _STIFFNESS_GAINS:
+    if "kp" in stiffness_gains(st.controller.type):  # the entry declares kp [N m/rad]
         return [float(k) for k in kp]
     if spec is None or not spec.has_dynamics or len(st.planner.goal) != spec.dof:
         return None

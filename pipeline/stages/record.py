@@ -84,6 +84,7 @@ RECORD_CODE = (
     "errors.py",
     "fsutil.py",
     "params.py",
+    "plugins.py",
     "settings.py",
     "trajectory.py",
     "yamlio.py",
@@ -348,7 +349,7 @@ def _run_and_write(
     progress: Callable[[float], None] | None,
     before_write: Callable[[], None] | None = None,
 ) -> EpisodeOutcome:
-    from pipeline.control import make_controller
+    from pipeline.control import controller_origin, make_controller
     from pipeline.log.bag import write_episode_bag
     from pipeline.model.mjcf import PlantOptions
     from pipeline.model.uncertainty import draw_plant, link_inertials, with_plant
@@ -433,6 +434,7 @@ def _run_and_write(
             name=episode.controller_name,
             type=episode.controller.type,
             gains=controller.settings(),
+            origin=controller_origin(episode.controller.type),
         ),
         plant=plant_settings,
         planner=PlannerSettings(
