@@ -1,4 +1,4 @@
-"""The plug-in seam: built-in, then entry point, then ``module:Object``; origins; one-line errors."""
+"""The plug-in seam: built-in, entry point, ``module:Object``; origins; one-line errors."""
 
 from __future__ import annotations
 
