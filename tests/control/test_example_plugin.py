@@ -39,7 +39,7 @@ def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
         capture_output=True, text=True, timeout=600,
     )  # fmt: skip
     if proc.returncode != 0 and any(s in proc.stderr for s in OFFLINE):
-        pytest.skip(f"pip cannot fetch the example's build backend (offline?): {proc.stderr[-200:]}")
+        pytest.skip(f"pip cannot fetch the example's build backend: {proc.stderr[-200:]}")
     assert proc.returncode == 0, proc.stderr
     return target
 
