@@ -112,13 +112,13 @@ def controller_origin(name: str) -> dict[str, str]:
     return dict(found.origin)
 
 
-def stiffness_gains(name: str) -> tuple[str, ...]:
-    """Keys of controller ``name``'s gains that are joint stiffnesses [N m/rad]
-    (empty when the name resolves to nothing here)."""
+def stiffness_gains(name: str) -> tuple[str, ...] | None:
+    """Keys of controller ``name``'s gains that are joint stiffnesses [N m/rad];
+    None when the name resolves to nothing here (a plug-in not importable)."""
     try:
         entry = controller_entry(name)
     except PipelineError:
-        return ()
+        return None
     return tuple(g.key for g in entry.gain_specs if g.stiffness)
 
 

@@ -360,7 +360,10 @@ def _stiffness_nm_per_rad(st: EpisodeSettings, spec: RobotSpec | None) -> list[f
     kp = st.controller.gains.get("kp")
     if not (isinstance(kp, list) and all(isinstance(k, int | float) for k in kp)):
         return None
-    if "kp" in stiffness_gains(st.controller.type):  # the entry declares kp [N m/rad]
+    stiff = stiffness_gains(st.controller.type)  # the entry declares which are [N m/rad]
+    if stiff is None:
+        return None  # a plug-in not importable here: the unit of its kp is unknown
+    if "kp" in stiff:
         return [float(k) for k in kp]
     if spec is None or not spec.has_dynamics or len(st.planner.goal) != spec.dof:
         return None

@@ -119,7 +119,7 @@ def test_the_report_asks_the_entry_which_gains_are_stiffnesses():
     assert stiffness_gains("pid") == ("kp",) and stiffness_gains("pd_gravity") == ("kp",)
     assert stiffness_gains("ctc") == () and stiffness_gains("ctc_pid") == ()
     assert stiffness_gains(GOOD) == ("kp",)
-    assert stiffness_gains("not_a_controller_anywhere") == ()
+    assert stiffness_gains("not_a_controller_anywhere") is None
 
 
 def test_colours_come_from_the_entries_and_others_take_free_palette_colours():
