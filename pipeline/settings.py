@@ -306,20 +306,23 @@ class ProtocolSettings:
 
 @dataclass(frozen=True)
 class ControllerSettings:
-    """The controller as run: its params name, registry type and every gain in effect."""
+    """The controller as run: its params name, registry type, every gain in effect and
+    where its code came from (``origin``: ``pipeline.control.controller_origin``)."""
 
     name: str
     type: str
     gains: Mapping[str, Any]
+    origin: Mapping[str, Any] = field(default_factory=lambda: {"kind": "builtin"})
 
     @classmethod
     def from_dict(cls, data: Any, path: str = "controller") -> ControllerSettings:
         d = _mapping(data, path)
-        _check_keys(d, cls, path)
+        _check_keys({"origin": None, **d}, cls, path)  # no origin before issue 18: built-in
         return cls(
             name=_str(d["name"], f"{path}.name"),
             type=_str(d["type"], f"{path}.type"),
             gains=_mapping(d["gains"], f"{path}.gains"),
+            origin=_mapping(d.get("origin", {"kind": "builtin"}), f"{path}.origin"),
         )
 
 

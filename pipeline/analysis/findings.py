@@ -20,6 +20,7 @@ import polars as pl
 from pipeline.analysis.catalog import SETTLING_TOLERANCE_RAD
 from pipeline.analysis.episodes import robot_spec
 from pipeline.analysis.protocol import ProtocolView
+from pipeline.control.registry import stiffness_gains
 from pipeline.log.reader import Recording
 from pipeline.robots.spec import RobotSpec
 from pipeline.settings import EpisodeSettings
@@ -28,7 +29,6 @@ SATURATION_WARN_FRACTION = 0.05
 """Warn when a joint's effort sits at its limit for more than this share of the samples."""
 GOAL_MISS_RAD = 1e-2
 """A completed episode whose error at the target exceeds this never reached its goal."""
-_STIFFNESS_GAINS = ("pid", "pd_gravity")  # controller types whose kp is in N m/rad
 
 
 @dataclass(frozen=True)
@@ -195,7 +195,10 @@ def stiffness_nm_per_rad(st: EpisodeSettings, spec: RobotSpec | None) -> list[fl
     kp = st.controller.gains.get("kp")
     if not (isinstance(kp, list) and all(isinstance(k, int | float) for k in kp)):
         return None
-    if st.controller.type in _STIFFNESS_GAINS:
+    stiff = stiffness_gains(st.controller.type)  # the entry declares which are [N m/rad]
+    if stiff is None:
+        return None  # a plug-in not importable here: the unit of its kp is unknown
+    if "kp" in stiff:
         return [float(k) for k in kp]
     if spec is None or not spec.has_dynamics or len(st.planner.goal) != spec.dof:
         return None

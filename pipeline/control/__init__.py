@@ -1,13 +1,17 @@
-"""Joint-space controllers behind one interface, chosen by name: pid, ctc, pd_gravity."""
+"""Joint-space controllers behind one interface, chosen by name (built-in or plug-in)."""
 
 from __future__ import annotations
 
-from pipeline.control.base import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, Controller
+from pipeline.control.base import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, Controller, GainSpec
 from pipeline.control.registry import (
     CONTROLLERS,
+    ControllerEntry,
     UnknownControllerError,
+    controller_entry,
     controller_names,
+    controller_origin,
     default_gains,
+    installed_controllers,
     make_controller,
 )
 
@@ -16,8 +20,13 @@ __all__ = [
     "DEFAULT_OMEGA_N_RAD_S",
     "DEFAULT_ZETA",
     "Controller",
+    "ControllerEntry",
+    "GainSpec",
     "UnknownControllerError",
+    "controller_entry",
     "controller_names",
+    "controller_origin",
     "default_gains",
+    "installed_controllers",
     "make_controller",
 ]

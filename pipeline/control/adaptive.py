@@ -62,7 +62,11 @@ from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
 
 NAME = "adaptive"
-GAINS = (*passivity.GAINS, GainSpec("gamma"), GainSpec("box_rel"))
+GAINS = (
+    *passivity.GAINS,
+    GainSpec("gamma", unit="1/J", default="1 (scaled per parameter)"),
+    GainSpec("box_rel", unit="1", default="0.5"),
+)
 PARAMS_PER_LINK = 10
 DEFAULT_GAMMA_PER_J = 1.0
 """Default adaptation gain ``gamma_j`` [1/J] (see the module docstring)."""
@@ -110,6 +114,11 @@ def parameter_scales(theta0: F64, dof: int) -> F64:
 
 class AdaptiveController:
     """Slotine–Li adaptive control with a projected gradient update of ``theta_hat``."""
+
+    NAME = NAME
+    GAINS = GAINS
+    REPORTS = ("estimates",)  # settings() also holds the final estimates (not a gain)
+    DEFAULT_GAINS = staticmethod(default_gains)
 
     def __init__(
         self, spec: RobotSpec, gains: Mapping[str, Any] | None = None, *, where: str = "gains"

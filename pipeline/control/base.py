@@ -67,11 +67,18 @@ class GainSpec:
         key: name in ``params.yaml`` and in ``settings()``.
         flag: a boolean switch instead of a per-joint number.
         nonnegative: refuse values < 0 (stiffness, damping, integral gains).
+        unit: its unit, e.g. ``N m/rad`` (empty for flags and dimensionless gains).
+        stiffness: a joint position stiffness [N m/rad] (the report's friction
+            dead-band check reads it as is; other ``kp`` are scaled by the inertia).
+        default: how the default is chosen, in one short formula (docs, the kit).
     """
 
     key: str
     flag: bool = False
     nonnegative: bool = True
+    unit: str = ""
+    stiffness: bool = False
+    default: str = ""
 
 
 def _is_number(x: object) -> bool:

@@ -26,7 +26,10 @@ from pipeline.control.base import (
 from pipeline.robots.spec import RobotSpec
 
 NAME = "ctc"
-GAINS = (GainSpec("kp"), GainSpec("kd"))
+GAINS = (
+    GainSpec("kp", unit="1/s^2", default="w^2"),
+    GainSpec("kd", unit="1/s", default="2 zeta w"),
+)
 
 
 def default_gains(

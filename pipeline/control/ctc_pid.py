@@ -36,7 +36,12 @@ from pipeline.control.pid import INTEGRAL_POLE_FRACTION
 from pipeline.robots.spec import RobotSpec
 
 NAME = "ctc_pid"
-GAINS = (GainSpec("kp"), GainSpec("kd"), GainSpec("ki"), GainSpec("i_clamp"))
+GAINS = (
+    GainSpec("kp", unit="1/s^2", default="w^2 + 2 zeta w p"),
+    GainSpec("kd", unit="1/s", default="2 zeta w + p"),
+    GainSpec("ki", unit="1/s^3", default="p w^2, p = 0.1 w"),
+    GainSpec("i_clamp", unit="rad s", default="0.5 effort_j / (m_jj ki)"),
+)
 INTEGRAL_EFFORT_FRACTION = 0.5
 """Default clamp: the integral may ask for at most this share of a joint's effort limit."""
 

@@ -48,7 +48,10 @@ from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
 
 NAME = "passivity"
-GAINS = (GainSpec("lambda"), GainSpec("kd"))
+GAINS = (
+    GainSpec("lambda", unit="1/s", default="w r"),
+    GainSpec("kd", unit="N m s/rad", default="(w / r) m_jj"),
+)
 
 
 def pole_ratio(zeta: float) -> float:
@@ -93,6 +96,10 @@ class SlotineLi:
 
 class PassivityController:
     """Slotine–Li passivity-based tracking on the nominal model (the YAML robot)."""
+
+    NAME = NAME
+    GAINS = GAINS
+    DEFAULT_GAINS = staticmethod(default_gains)
 
     def __init__(
         self, spec: RobotSpec, gains: Mapping[str, Any] | None = None, *, where: str = "gains"

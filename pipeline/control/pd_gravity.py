@@ -24,7 +24,10 @@ from pipeline.control.base import (
 from pipeline.robots.spec import RobotSpec
 
 NAME = "pd_gravity"
-GAINS = (GainSpec("kp"), GainSpec("kd"))
+GAINS = (
+    GainSpec("kp", unit="N m/rad", stiffness=True, default="m_jj w^2"),
+    GainSpec("kd", unit="N m s/rad", default="2 zeta w m_jj"),
+)
 
 
 def default_gains(

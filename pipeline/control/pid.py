@@ -36,13 +36,13 @@ from pipeline.robots.spec import RobotSpec
 
 NAME = "pid"
 GAINS = (
-    GainSpec("kp"),
-    GainSpec("ki"),
-    GainSpec("kd"),
-    GainSpec("i_clamp_min", nonnegative=False),
-    GainSpec("i_clamp_max", nonnegative=False),
-    GainSpec("antiwindup", flag=True),
-    GainSpec("ff_velocity_scale", nonnegative=False),
+    GainSpec("kp", unit="N m/rad", stiffness=True, default="m_jj w^2"),
+    GainSpec("ki", unit="N m/(rad s)", default="m_jj w^2 0.1 w"),
+    GainSpec("kd", unit="N m s/rad", default="2 zeta w m_jj"),
+    GainSpec("i_clamp_min", nonnegative=False, unit="N m", default="-effort limit"),
+    GainSpec("i_clamp_max", nonnegative=False, unit="N m", default="effort limit"),
+    GainSpec("antiwindup", flag=True, default="true"),
+    GainSpec("ff_velocity_scale", nonnegative=False, unit="N m s/rad", default="0"),
 )
 INTEGRAL_POLE_FRACTION = 0.1
 """Default ki puts the integrator's pole near ``-0.1 omega_n`` (see docs/control.md)."""
@@ -87,6 +87,8 @@ class PidController:
     NAME: ClassVar[str] = NAME
     GAINS: ClassVar[tuple[GainSpec, ...]] = GAINS
     DEFAULT_GAINS: ClassVar[Callable[..., dict[str, Any]]] = staticmethod(default_gains)
+
+    GAINS = GAINS
 
     def __init__(
         self, spec: RobotSpec, gains: Mapping[str, Any] | None = None, *, where: str = "gains"

@@ -39,11 +39,11 @@ from pipeline.robots.spec import RobotSpec
 
 NAME = "pid_humble"
 GAINS = (
-    GainSpec("kp"),
-    GainSpec("ki"),
-    GainSpec("kd"),
-    GainSpec("i_clamp"),
-    GainSpec("ff_velocity_scale", nonnegative=False),
+    GainSpec("kp", unit="N m/rad", stiffness=True, default="m_jj w^2"),
+    GainSpec("ki", unit="N m/(rad s)", default="m_jj w^2 0.1 w"),
+    GainSpec("kd", unit="N m s/rad", default="2 zeta w m_jj"),
+    GainSpec("i_clamp", unit="N m", default="0 (Humble: integral off)"),
+    GainSpec("ff_velocity_scale", nonnegative=False, unit="N m s/rad", default="0"),
 )
 INTEGRAL_OFF = (
     "pid_humble: i_clamp = 0 on {joints} (Humble's JTC default) switches the integral "
@@ -78,6 +78,11 @@ def default_gains(
 
 class PidHumbleController:
     """Humble JTC + control_toolbox 3.x ``Pid``: no anti-windup, output-clamped integral."""
+
+    NAME = NAME
+    GAINS = GAINS
+    REPORTS = ("warning",)  # settings() says when the integral is off (not a gain)
+    DEFAULT_GAINS = staticmethod(default_gains)
 
     def __init__(
         self, spec: RobotSpec, gains: Mapping[str, Any] | None = None, *, where: str = "gains"

@@ -1,63 +1,180 @@
-"""Controllers by name: one file per controller, one line here per controller."""
+"""Controllers by name: one file per controller, one line here per controller.
+
+A name resolves to a built-in (:data:`CONTROLLERS`), else an installed entry point in
+the group ``armlab.controllers``, else ``package.module:Object`` (see
+:mod:`pipeline.plugins`). A plug-in points at a :class:`ControllerEntry`, or at a
+controller class that declares ``GAINS`` (a tuple of :class:`GainSpec`) and
+``DEFAULT_GAINS`` (and optionally ``COLOR`` and ``DESCRIPTION``), as
+:class:`~pipeline.control.base.NominalPDController` subclasses do.
+"""
 
 from __future__ import annotations
 
-import difflib
+import inspect
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from pipeline.control import adaptive, ctc, ctc_pid, passivity, pd_gravity, pid, pid_ff, pid_humble
-from pipeline.control.base import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, Controller
-from pipeline.errors import ParamsError
+from pipeline.control.base import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, Controller, GainSpec
+from pipeline.errors import ParamsError, PipelineError
+from pipeline.plugins import installed_names, resolve
 from pipeline.robots.spec import RobotSpec
+
+GROUP = "armlab.controllers"
+"""Entry-point group of installed controllers."""
+
+RGB = tuple[int, int, int]
 
 
 class UnknownControllerError(ParamsError):
-    """A controller name that is not in the registry."""
+    """A controller name that resolves to nothing (or to something that is not a controller)."""
 
 
 @dataclass(frozen=True)
 class ControllerEntry:
-    """How to build a controller and its default gains.
+    """How to build a controller, and what the rest of the pipeline needs to know of it.
 
     Attributes:
         factory: ``factory(spec, gains, where=...)``; gains override the defaults key
             by key; ``where`` prefixes error messages.
         default_gains: ``default_gains(spec, *, omega_n_rad_s, zeta, q_config)``.
+        gains: the accepted gains (key, unit, default rule, which are stiffnesses);
+            empty: the factory's ``GAINS``.
+        color: display colour (RGB bytes); None: the next free palette colour.
+        description: one line; empty: the first line of the factory's docstring.
     """
 
     factory: Callable[..., Controller]
     default_gains: Callable[..., dict[str, Any]]
+    gains: tuple[GainSpec, ...] = ()
+    color: RGB | None = None
+    description: str = ""
+
+    @property
+    def gain_specs(self) -> tuple[GainSpec, ...]:
+        """The declared gains (the entry's, else the factory's ``GAINS``)."""
+        return self.gains or tuple(getattr(self.factory, "GAINS", ()))
+
+    @property
+    def summary(self) -> str:
+        """One-line description."""
+        doc = inspect.getdoc(self.factory) or ""
+        return self.description or (doc.splitlines()[0] if doc else "")
 
 
 CONTROLLERS: dict[str, ControllerEntry] = {
-    pid.NAME: ControllerEntry(pid.PidController, pid.default_gains),
-    ctc.NAME: ControllerEntry(ctc.ComputedTorqueController, ctc.default_gains),
-    ctc_pid.NAME: ControllerEntry(ctc_pid.ComputedTorquePidController, ctc_pid.default_gains),
-    pd_gravity.NAME: ControllerEntry(pd_gravity.PdGravityController, pd_gravity.default_gains),
-    pid_ff.NAME: ControllerEntry(pid_ff.PidFeedForwardController, pid_ff.default_gains),
-    pid_humble.NAME: ControllerEntry(pid_humble.PidHumbleController, pid_humble.default_gains),
-    passivity.NAME: ControllerEntry(passivity.PassivityController, passivity.default_gains),
-    adaptive.NAME: ControllerEntry(adaptive.AdaptiveController, adaptive.default_gains),
+    pid.NAME: ControllerEntry(pid.PidController, pid.default_gains, color=(31, 119, 180)),
+    ctc.NAME: ControllerEntry(
+        ctc.ComputedTorqueController, ctc.default_gains, color=(255, 127, 14)
+    ),
+    ctc_pid.NAME: ControllerEntry(
+        ctc_pid.ComputedTorquePidController, ctc_pid.default_gains, color=(44, 160, 44)
+    ),
+    pd_gravity.NAME: ControllerEntry(
+        pd_gravity.PdGravityController, pd_gravity.default_gains, color=(148, 103, 189)
+    ),
+    pid_ff.NAME: ControllerEntry(
+        pid_ff.PidFeedForwardController, pid_ff.default_gains, color=(214, 39, 40)
+    ),
+    pid_humble.NAME: ControllerEntry(
+        pid_humble.PidHumbleController, pid_humble.default_gains, color=(23, 190, 207)
+    ),
+    passivity.NAME: ControllerEntry(
+        passivity.PassivityController, passivity.default_gains, color=(140, 86, 75)
+    ),
+    adaptive.NAME: ControllerEntry(
+        adaptive.AdaptiveController, adaptive.default_gains, color=(227, 119, 194)
+    ),
 }
+"""The built-in controllers (colours: matplotlib's tab10, as ``.dvc/plots/`` lists them)."""
 
 
 def controller_names() -> tuple[str, ...]:
-    """Registered controller names, sorted."""
+    """Built-in controller names, sorted."""
     return tuple(sorted(CONTROLLERS))
 
 
-def _entry(name: str, source: str = "") -> ControllerEntry:
+def installed_controllers() -> tuple[str, ...]:
+    """Names of the controllers installed as entry points (group ``armlab.controllers``)."""
+    return installed_names(GROUP)
+
+
+def controller_entry(name: str, *, source: str = "") -> ControllerEntry:
+    """The entry of controller ``name``: built-in, entry point or ``module:Object``.
+
+    Raises:
+        UnknownControllerError: unknown name (lists built-in and installed names), a
+            plug-in that fails to import, or an object that is not a controller.
+    """
+    where = f"{source}.type: " if source else ""
+    found = resolve(
+        name, CONTROLLERS, group=GROUP, what="controller", error=UnknownControllerError, where=where
+    )
+    return _as_entry(found.obj, name, where)
+
+
+def controller_origin(name: str) -> dict[str, str]:
+    """Where controller ``name``'s code comes from, for the recording.
+
+    ``{"kind": "builtin"}``; an entry point's distribution and version; or a module's
+    file path and SHA-256 (see :class:`pipeline.plugins.Resolved`).
+    """
+    found = resolve(name, CONTROLLERS, group=GROUP, what="controller", error=UnknownControllerError)
+    return dict(found.origin)
+
+
+def stiffness_gains(name: str) -> tuple[str, ...] | None:
+    """Keys of controller ``name``'s gains that are joint stiffnesses [N m/rad];
+    None when the name resolves to nothing here (a plug-in not importable)."""
     try:
-        return CONTROLLERS[name]
-    except (KeyError, TypeError):
-        near = difflib.get_close_matches(str(name).lower(), list(CONTROLLERS), n=1)
-        hint = f" (did you mean '{near[0]}'?)" if near else ""
-        where = f"{source}.type: " if source else ""
+        entry = controller_entry(name)
+    except PipelineError:
+        return None
+    return tuple(g.key for g in entry.gain_specs if g.stiffness)
+
+
+def declared_color(name: str) -> RGB | None:
+    """Controller ``name``'s own colour, if it resolves and declares one."""
+    if name in CONTROLLERS:
+        return CONTROLLERS[name].color
+    try:
+        return controller_entry(name).color
+    except PipelineError:
+        return None
+
+
+def _as_entry(obj: object, name: str, where: str) -> ControllerEntry:
+    """A plug-in's object as an entry: an entry itself, or a class declaring its gains."""
+    if isinstance(obj, ControllerEntry):
+        entry = obj
+    elif callable(obj) and hasattr(obj, "GAINS") and callable(getattr(obj, "DEFAULT_GAINS", None)):
+        color = getattr(obj, "COLOR", None)
+        entry = ControllerEntry(
+            obj,
+            getattr(obj, "DEFAULT_GAINS"),  # noqa: B009 - a plug-in class, checked above
+            gains=tuple(getattr(obj, "GAINS")),  # noqa: B009
+            color=tuple(color) if color is not None else None,
+            description=str(getattr(obj, "DESCRIPTION", "")),
+        )
+    else:
         raise UnknownControllerError(
-            f"{where}unknown controller '{name}'{hint}; valid: {', '.join(controller_names())}"
-        ) from None
+            f"{where}controller '{name}' is not a controller: expected a ControllerEntry or a "
+            f"class with GAINS and DEFAULT_GAINS, got {type(obj).__name__} {obj!r:.60}"
+        )
+    bad = [g for g in entry.gain_specs if not isinstance(g, GainSpec)]
+    if bad or not entry.gain_specs:
+        raise UnknownControllerError(
+            f"{where}controller '{name}': GAINS must be a non-empty tuple of GainSpec, "
+            f"got {entry.gain_specs!r:.80}"
+        )
+    if entry.color is not None and not (
+        len(entry.color) == 3 and all(isinstance(c, int) and 0 <= c <= 255 for c in entry.color)
+    ):
+        raise UnknownControllerError(
+            f"{where}controller '{name}': colour must be three bytes (R, G, B), got {entry.color!r}"
+        )
+    return entry
 
 
 def make_controller(
@@ -73,11 +190,12 @@ def make_controller(
     (``source="controllers.pid_slow"`` gives ``controllers.pid_slow.gains.kp: ...``).
 
     Raises:
-        UnknownControllerError: ``name`` is not registered (the message lists valid names).
+        UnknownControllerError: ``name`` resolves to no controller (the message lists
+            valid names).
         ParamsError: an unknown gain key or a bad gain value.
     """
     where = f"{source}.gains" if source else "gains"
-    return _entry(name, source).factory(spec, gains, where=where)
+    return controller_entry(name, source=source).factory(spec, gains, where=where)
 
 
 def default_gains(
@@ -93,6 +211,6 @@ def default_gains(
     Model-free gains are scaled by the nominal mass-matrix diagonal at
     ``q_config`` [rad] (default: zeros, the paper's start pose); see docs/control.md.
     """
-    return _entry(controller_name).default_gains(
+    return controller_entry(controller_name).default_gains(
         spec, omega_n_rad_s=omega_n_rad_s, zeta=zeta, q_config=q_config
     )

@@ -1,11 +1,13 @@
-"""IK solvers by name: a dict from name to factory, nothing more.
+"""IK solvers by name: a dict from name to factory, then plug-ins.
 
-Adding a solver is one new module plus one line in :data:`SOLVERS`.
+Adding a solver is one new module plus one line in :data:`SOLVERS`. A name that is
+not built in resolves to an installed entry point in the group ``armlab.ik_solvers``,
+else to ``package.module:Object`` (see :mod:`pipeline.plugins`); either points at a
+factory ``factory(spec, options) -> IKSolver`` (e.g. the solver class).
 """
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Callable
 
 import numpy as np
@@ -15,6 +17,7 @@ from pipeline.errors import KinematicsError
 from pipeline.kinematics.analytic import AnalyticURSolver
 from pipeline.kinematics.base import IKOptions, IKSolver, target_pose, verify_solution
 from pipeline.kinematics.numeric import NumericLMSolver
+from pipeline.plugins import installed_names, resolve
 from pipeline.robots.spec import RobotSpec
 
 SolverFactory = Callable[[RobotSpec, IKOptions], IKSolver]
@@ -26,9 +29,34 @@ SOLVERS: dict[str, SolverFactory] = {
 """Registered IK solvers: ``analytic`` (closed form, UR-type arms), ``numeric`` (LM, any arm)."""
 
 
+GROUP = "armlab.ik_solvers"
+"""Entry-point group of installed IK solvers."""
+
+
 def solver_names() -> list[str]:
-    """Names accepted by :func:`make_solver`."""
+    """Built-in solver names (plug-ins: :func:`installed_solvers`, or ``module:Object``)."""
     return sorted(SOLVERS)
+
+
+def installed_solvers() -> tuple[str, ...]:
+    """Names of the IK solvers installed as entry points (group ``armlab.ik_solvers``)."""
+    return installed_names(GROUP)
+
+
+def solver_factory(name: str) -> SolverFactory:
+    """The factory of solver ``name``: built-in, entry point or ``module:Object``.
+
+    Raises:
+        KinematicsError: unknown name (lists built-in and installed names), a plug-in
+            that fails to import or is not callable.
+    """
+    found = resolve(name, SOLVERS, group=GROUP, what="IK solver", error=KinematicsError)
+    if not callable(found.obj):
+        raise KinematicsError(
+            f"IK solver '{name}' is not a solver factory: got {type(found.obj).__name__}"
+        )
+    factory: SolverFactory = found.obj
+    return factory
 
 
 def make_solver(name: str, spec: RobotSpec, *, options: IKOptions | None = None) -> IKSolver:
@@ -38,14 +66,7 @@ def make_solver(name: str, spec: RobotSpec, *, options: IKOptions | None = None)
         KinematicsError: unknown name (lists the valid ones), or a robot the solver
             cannot handle (e.g. analytic on a non-UR geometry).
     """
-    factory = SOLVERS.get(name)
-    if factory is None:
-        close = difflib.get_close_matches(name, SOLVERS, n=1)
-        hint = f"; did you mean '{close[0]}'?" if close else ""
-        raise KinematicsError(
-            f"unknown IK solver '{name}'. Available: {', '.join(solver_names())}{hint}"
-        )
-    return factory(spec, options or IKOptions())
+    return solver_factory(name)(spec, options or IKOptions())
 
 
 def solve_pose_nearest(

@@ -1,7 +1,7 @@
 """One colour per controller, the same in every figure, the .rrd and the DVC plots.
 
-The registered controllers have fixed colours (the DVC plot template in
-``.dvc/plots/controller_joint.json`` lists the same ones; a test checks they agree);
+A controller's entry may declare its colour (the built-ins do; the DVC plot template in
+``.dvc/plots/controller_joint.json`` lists the same ones, a test checks they agree);
 any other controller name takes the next unused palette colour in sorted order.
 """
 
@@ -9,7 +9,9 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-# Matplotlib's tab10, as RGB bytes.
+from pipeline.control.registry import CONTROLLERS, declared_color
+
+# Matplotlib's tab10, then tab20's lighter shades (eight built-ins take most of tab10), as RGB bytes.
 PALETTE: tuple[tuple[int, int, int], ...] = (
     (31, 119, 180),
     (255, 127, 14),
@@ -21,13 +23,19 @@ PALETTE: tuple[tuple[int, int, int], ...] = (
     (127, 127, 127),
     (188, 189, 34),
     (23, 190, 207),
+    (174, 199, 232),
+    (255, 187, 120),
+    (152, 223, 138),
+    (255, 152, 150),
+    (197, 176, 213),
+    (196, 156, 148),
+    (247, 182, 210),
+    (219, 219, 141),
+    (158, 218, 229),
 )
-# The registered controllers (pipeline.control.registry), by name.
+# The built-in controllers' declared colours (pipeline.control.registry), by name.
 FIXED: dict[str, tuple[int, int, int]] = {
-    "pid": PALETTE[0],
-    "ctc": PALETTE[1],
-    "ctc_pid": PALETTE[2],
-    "pd_gravity": PALETTE[4],
+    name: entry.color for name, entry in sorted(CONTROLLERS.items()) if entry.color is not None
 }
 # The reference: light grey, visible on Rerun's dark theme and on white.
 REFERENCE_RGB = (200, 200, 200)
@@ -35,10 +43,15 @@ REFERENCE_MPL = "0.25"
 
 
 def controller_colors(names: Iterable[str]) -> dict[str, tuple[int, int, int]]:
-    """Colour of each controller name (fixed ones first, then the rest in sorted order)."""
-    out = {n: FIXED[n] for n in set(names) if n in FIXED}
-    free = [c for c in PALETTE if c not in FIXED.values()]
-    for k, name in enumerate(sorted(n for n in set(names) if n not in FIXED)):
+    """Colour of each controller name (declared ones first, then the rest in sorted order)."""
+    out: dict[str, tuple[int, int, int]] = {}
+    for name in sorted(set(names)):
+        color = declared_color(name)
+        if color is not None:
+            out[name] = color
+    taken = {*FIXED.values(), *out.values()}
+    free = [c for c in PALETTE if c not in taken] or list(PALETTE)
+    for k, name in enumerate(sorted(n for n in set(names) if n not in out)):
         out[name] = free[k % len(free)]
     return out
 

@@ -94,6 +94,7 @@ def episode_settings(
     plant_spec: RobotSpec,
     uncertainty: Uncertainty,
     gains: Mapping[str, Any],
+    origin: Mapping[str, Any],
     path: PlannedPath,
     trajectory: TimedTrajectory,
     result: EpisodeResult,
@@ -106,6 +107,8 @@ def episode_settings(
         spec: the nominal robot (the controller's model).
         plant_spec: the robot as simulated (drawn inertials, armature).
         gains: the controller's gains in effect (``Controller.settings()``).
+        origin: where the controller's code came from
+            (:func:`pipeline.control.registry.controller_origin`).
         commit: the recording code's version (:func:`pipeline.stages.provenance.git_commit`).
     """
     from pipeline.model.uncertainty import link_inertials
@@ -138,6 +141,7 @@ def episode_settings(
             name=episode.controller_name,
             type=episode.controller.type,
             gains=gains,
+            origin=origin,
         ),
         plant=plant,
         planner=PlannerSettings(

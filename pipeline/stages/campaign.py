@@ -245,11 +245,12 @@ def _controller_for(
 @functools.cache
 def _tuned_keys(controller_type: str, robot: str) -> tuple[str, ...]:
     """Gain keys a controller type derives from its tuning knobs (``kp``, ``kd``, ...)."""
-    from pipeline.control.registry import CONTROLLERS
+    from pipeline.control.registry import controller_entry
     from pipeline.robots.spec import load_spec
 
-    entry = CONTROLLERS.get(controller_type)
-    if entry is None:
+    try:
+        entry = controller_entry(controller_type)
+    except PipelineError:
         return ()  # validate_episodes names the unknown type
     return tuple(entry.default_gains(load_spec(robot), omega_n_rad_s=40.0, zeta=1.0))
 

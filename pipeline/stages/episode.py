@@ -98,7 +98,7 @@ def _run_and_write(
     progress: Callable[[float], None] | None,
     before_write: Callable[[], None] | None = None,
 ) -> EpisodeOutcome:
-    from pipeline.control import make_controller
+    from pipeline.control import controller_origin, make_controller
     from pipeline.log.bag import write_episode_bag
     from pipeline.model.mjcf import PlantOptions
     from pipeline.model.uncertainty import draw_plant, link_inertials, with_plant
@@ -165,6 +165,7 @@ def _run_and_write(
         plant_spec=plant_spec,
         uncertainty=uncertainty,
         gains=controller.settings(),
+        origin=controller_origin(episode.controller.type),
         path=path,
         trajectory=trajectory,
         result=result,

@@ -17,6 +17,7 @@ RECORD_CODE = (
     "errors.py",
     "fsutil.py",
     "params.py",
+    "plugins.py",
     "settings.py",
     "trajectory.py",
     "yamlio.py",
