@@ -11,7 +11,7 @@ from collections.abc import Iterable
 
 from pipeline.control.registry import CONTROLLERS, declared_color
 
-# Matplotlib's tab10, then tab20's lighter shades (eight built-ins take most of tab10), as RGB bytes.
+# Matplotlib's tab10, then tab20's light shades (the built-ins take most of tab10), as RGB.
 PALETTE: tuple[tuple[int, int, int], ...] = (
     (31, 119, 180),
     (255, 127, 14),
