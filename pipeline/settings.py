@@ -579,8 +579,9 @@ class EpisodeSettings(_Contract):
         return super().from_dict(data, path)
 
     @property
-    def motion_end_s(self) -> float:
-        """When the reference stops, from the recording's first sample [s]."""
+    def motion_end_from_first_sample_s(self) -> float:
+        """When the reference stops, from the recording's first sample [s]: the pre-roll
+        plus the trajectory's duration (not the duration alone)."""
         return self.protocol.motion_start_s + self.planner.trajectory_duration_s
 
 

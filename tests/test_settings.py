@@ -36,6 +36,14 @@ def test_from_dict_inverts_to_dict_byte_for_byte() -> None:
         back.seed = 3  # type: ignore[misc]
 
 
+def test_the_motion_end_counts_from_the_recordings_first_sample() -> None:
+    data = _settings()
+    data["protocol"]["motion_start_s"] = 0.5
+    data["planner"]["trajectory_duration_s"] = 0.4
+    settings = EpisodeSettings.from_dict(data)
+    assert settings.motion_end_from_first_sample_s == pytest.approx(0.9)
+
+
 def _set(path: str, value: Any) -> dict[str, Any]:
     data = _settings()
     *parents, last = path.split(".")
