@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from pipeline.control import ctc, ctc_pid, pd_gravity, pid
 from pipeline.control.base import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, Controller
-from pipeline.errors import ParamsError
+from pipeline.errors import ParamsError, unknown_name_message
 from pipeline.robots.spec import RobotSpec
 
 
@@ -48,11 +47,9 @@ def _entry(name: str, source: str = "") -> ControllerEntry:
     try:
         return CONTROLLERS[name]
     except (KeyError, TypeError):
-        near = difflib.get_close_matches(str(name).lower(), list(CONTROLLERS), n=1)
-        hint = f" (did you mean '{near[0]}'?)" if near else ""
-        where = f"{source}.type: " if source else ""
+        where = f"{source}.type" if source else ""
         raise UnknownControllerError(
-            f"{where}unknown controller '{name}'{hint}; valid: {', '.join(controller_names())}"
+            unknown_name_message("controller", name, controller_names(), where=where)
         ) from None
 
 

@@ -5,13 +5,12 @@ Adding a solver is one new module plus one line in :data:`SOLVERS`.
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pipeline.errors import KinematicsError
+from pipeline.errors import KinematicsError, unknown_name_message
 from pipeline.kinematics.analytic import AnalyticURSolver
 from pipeline.kinematics.base import IKOptions, IKSolver, target_pose, verify_solution
 from pipeline.kinematics.numeric import NumericLMSolver
@@ -40,11 +39,7 @@ def make_solver(name: str, spec: RobotSpec, *, options: IKOptions | None = None)
     """
     factory = SOLVERS.get(name)
     if factory is None:
-        close = difflib.get_close_matches(name, SOLVERS, n=1)
-        hint = f"; did you mean '{close[0]}'?" if close else ""
-        raise KinematicsError(
-            f"unknown IK solver '{name}'. Available: {', '.join(solver_names())}{hint}"
-        )
+        raise KinematicsError(unknown_name_message("IK solver", name, solver_names()))
     return factory(spec, options or IKOptions())
 
 

@@ -111,7 +111,7 @@ def test_ik_check_analytic_passes_and_prints_a_verdict(tmp_path):
           "--solver", "analytic"],
          "error: analytic IK does not fit robot 'mdh_example'"),
         (["ik", "ur5", "--position", "0.3", "0", "0.3", "--solver", "fast", "--rpy", "0", "0", "0"],
-         "error: unknown IK solver 'fast'. Available: analytic, numeric"),
+         "error: unknown IK solver 'fast'; valid: analytic, numeric"),
     ],
 )  # fmt: skip
 def test_user_errors_exit_1_with_one_line(args, message):

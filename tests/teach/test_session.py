@@ -112,7 +112,7 @@ def test_robot_without_closed_form_uses_numeric_and_says_why() -> None:
     assert "modified" in note and "numeric" in note
     solver, note = choose_solver(load_spec("ur5"), None)
     assert solver.name == "analytic" and note == ""
-    with pytest.raises(KinematicsError, match="Available: analytic, numeric"):
+    with pytest.raises(KinematicsError, match="valid: analytic, numeric"):
         choose_solver(spec, "anlytic")
 
 
