@@ -160,6 +160,12 @@ class RobotSpec:
         """Rotor (reflected) inertia per joint [kg m^2]."""
         return np.array([j.armature for j in self.joints])
 
+    def reach_m(self, first: int = 0) -> float:
+        """The summed DH lengths ``|a_j| + |d_j|`` of joints ``first`` onwards [m]: a bound on
+        how far the flange gets from joint ``first``'s axis (from the base for 0), in any
+        configuration."""
+        return sum(abs(j.dh.a) + abs(j.dh.d) for j in self.joints[first:])
+
     def require_dynamics(self, what: str) -> None:
         """Raise a clear error if ``what`` needs link inertias this robot lacks."""
         if not self.has_dynamics:
