@@ -6,8 +6,10 @@ else is a bug and shows a traceback.
 
 from __future__ import annotations
 
+import difflib
 import signal
 import threading
+from collections.abc import Iterable
 from types import FrameType
 
 
@@ -49,6 +51,26 @@ class ReportError(PipelineError):
 
 class TeachError(PipelineError):
     """The teach page cannot start (e.g. its port is in use)."""
+
+
+def unknown_name_message(kind: str, name: object, valid: Iterable[str], *, where: str = "") -> str:
+    """The one wording for a name that is not among the valid ones, with the nearest.
+
+    E.g. ``controllers.slow.type: unknown controller 'ctcc' (did you mean 'ctc'?); valid:
+    ctc, ctc_pid, pd_gravity, pid`` (MuJoCo Menagerie's difflib hint, mink's list).
+
+    Args:
+        kind: what the name names (``controller``, ``IK solver``, ``pid gain``).
+        name: the name given (any value: it may come from YAML).
+        valid: the valid names, in the order to list them.
+        where: the field path or file the name came from ("" for none).
+    """
+    names = list(valid)
+    folded = {n.lower(): n for n in names}  # a near miss in another case still matches
+    near = difflib.get_close_matches(str(name).lower(), list(folded), n=1)
+    hint = f" (did you mean '{folded[near[0]]}'?)" if near else ""
+    prefix = f"{where}: " if where else ""
+    return f"{prefix}unknown {kind} '{name}'{hint}; valid: {', '.join(names) or 'none'}"
 
 
 class Terminated(KeyboardInterrupt):

@@ -26,7 +26,7 @@ from pydantic import (
 )
 
 from pipeline.constants import MAX_SEED
-from pipeline.errors import ParamsError
+from pipeline.errors import ParamsError, unknown_name_message
 from pipeline.robots.spec import Name, format_validation_error
 from pipeline.settings import CampaignInfo
 from pipeline.yamlio import parse_yaml, refuse_bool_numbers
@@ -314,14 +314,19 @@ class _Params(_Strict):
                 raise ValueError(f"{where}.{c.problem()}")
             if c.scenario not in self.scenarios:
                 raise ValueError(
-                    f"{where}.scenario: unknown scenario '{c.scenario}' "
-                    f"(defined: {', '.join(sorted(self.scenarios))})"
+                    unknown_name_message(
+                        "scenario", c.scenario, sorted(self.scenarios), where=f"{where}.scenario"
+                    )
                 )
             for i, ctrl in enumerate(c.controllers):
                 if ctrl not in self.controllers:
                     raise ValueError(
-                        f"{where}.controllers[{i}]: unknown controller '{ctrl}' "
-                        f"(defined: {', '.join(sorted(self.controllers))})"
+                        unknown_name_message(
+                            "controller",
+                            ctrl,
+                            sorted(self.controllers),
+                            where=f"{where}.controllers[{i}]",
+                        )
                     )
             for path in c.sweep:
                 problem = sweep_path_problem(path, self.controllers)
@@ -340,13 +345,21 @@ class _Params(_Strict):
                 )
             if ep.scenario not in self.scenarios:
                 raise ValueError(
-                    f"episodes.{name}.scenario: unknown scenario '{ep.scenario}' "
-                    f"(defined: {', '.join(sorted(self.scenarios))})"
+                    unknown_name_message(
+                        "scenario",
+                        ep.scenario,
+                        sorted(self.scenarios),
+                        where=f"episodes.{name}.scenario",
+                    )
                 )
             if ep.controller not in self.controllers:
                 raise ValueError(
-                    f"episodes.{name}.controller: unknown controller '{ep.controller}' "
-                    f"(defined: {', '.join(sorted(self.controllers))})"
+                    unknown_name_message(
+                        "controller",
+                        ep.controller,
+                        sorted(self.controllers),
+                        where=f"episodes.{name}.controller",
+                    )
                 )
         return self
 
@@ -370,7 +383,7 @@ def sweep_path_problem(path: str, controllers: Mapping[str, ControllerParams]) -
         if len(parts) != 4 or parts[2] != "gains" or not parts[3]:
             return "expected controllers.<name>.gains.<key>"
         if parts[1] not in controllers:
-            return f"unknown controller '{parts[1]}' (defined: {', '.join(sorted(controllers))})"
+            return unknown_name_message("controller", parts[1], sorted(controllers))
         return ""
     model: type[BaseModel] = ScenarioParams
     for i, part in enumerate(parts):
@@ -425,9 +438,7 @@ class Params:
         known = {e.name: e for e in self.episodes}
         missing = [n for n in only if n not in known]
         if missing:
-            raise ParamsError(
-                f"{self.source}: unknown episode '{missing[0]}' (episodes: {', '.join(known)})"
-            )
+            raise ParamsError(unknown_name_message("episode", missing[0], known, where=self.source))
         return tuple(known[n] for n in only)
 
     def with_ros_distro(self, ros_distro: Literal["jazzy", "humble"]) -> Params:

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pipeline.errors import PipelineError
+from pipeline.errors import PipelineError, unknown_name_message
 
 BUILTIN_ORIGIN: Mapping[str, str] = {"kind": "builtin"}
 
@@ -73,7 +73,7 @@ def resolve(
             to import, or a missing object.
     """
     if not isinstance(name, str) or not name:
-        raise error(f"{where}unknown {what} {name!r}; valid: {', '.join(sorted(builtins))}")
+        raise error(where + unknown_name_message(what, name, sorted(builtins)))
     if name in builtins:
         return Resolved(builtins[name], BUILTIN_ORIGIN)
     try:
@@ -83,14 +83,13 @@ def resolve(
     except PipelineError as err:
         raise error(f"{where}{err}") from err.__cause__
     installed = installed_names(group)
-    known = [*sorted(builtins), *installed]
-    near = difflib.get_close_matches(name.lower(), known, n=1)
-    hint = f" (did you mean '{near[0]}'?)" if near else ""
+    message = unknown_name_message(what, name, sorted(builtins))
     extra = f"; installed ({group}): {', '.join(installed)}" if installed else ""
-    raise error(
-        f"{where}unknown {what} '{name}'{hint}; valid: {', '.join(sorted(builtins))}{extra}; "
-        f"or 'package.module:Object'"
-    )
+    if installed and "did you mean" not in message:  # a near miss among the installed
+        near = difflib.get_close_matches(name.lower(), installed, n=1)
+        message = unknown_name_message(what, name, [*sorted(builtins), *near])
+        message = message.split("; valid: ")[0] + "; valid: " + ", ".join(sorted(builtins))
+    raise error(f"{where}{message}{extra}; or 'package.module:Object'")
 
 
 class _NotFound(Exception):

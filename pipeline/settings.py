@@ -3,9 +3,13 @@
 The recorder builds an :class:`EpisodeSettings` and writes ``to_dict()`` as JSON into
 the MCAP metadata record (and ``metadata.yaml``); the report parses it back with
 :meth:`EpisodeSettings.from_dict`, and test fixtures build recordings through the same
-classes, so a fixture cannot carry keys production never writes. ``from_dict``
-validates types and ranges and raises :class:`SettingsError` naming the field path
-(``planner.trajectory_duration_s: expected a finite number >= 0, got -1``).
+classes, so a fixture cannot carry keys production never writes.
+
+Validation is declared once, in the field types: each field's type says what it accepts
+(``NonNegative``, ``Names``, ...), pydantic walks the frozen dataclasses with those rules,
+and ``from_dict`` raises :class:`SettingsError` naming the field path
+(``planner.trajectory_duration_s: expected a finite number >= 0, got -1``). Every field
+must be present (defaults serve the recorder, not old bags); unknown keys are ignored.
 
 Times are from the recording's first sample: the motion starts at
 ``protocol.motion_start_s`` (after the pre-roll) and ends
@@ -15,9 +19,13 @@ Times are from the recording's first sample: the motion starts at
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, fields
-from typing import Any, Literal, TypeVar
+from typing import Annotated, Any, ClassVar, Literal, Self, cast
+
+from pydantic import BeforeValidator, GetCoreSchemaHandler, PlainValidator, TypeAdapter
+from pydantic import ValidationError as _ValidationError
+from pydantic_core import CoreSchema, PydanticCustomError, core_schema
 
 from pipeline.errors import RecordingError
 
@@ -28,49 +36,183 @@ class SettingsError(RecordingError):
     """A recording's settings do not follow the contract (names the field path)."""
 
 
-T = TypeVar("T")
+# --- the rules a field's type declares ------------------------------------------------
 
 
-def _fail(path: str, expected: str, value: Any) -> SettingsError:
-    return SettingsError(f"{path}: expected {expected}, got {value!r}")
+def _expected(what: str) -> PydanticCustomError:
+    return PydanticCustomError("contract", "expected {expected}", {"expected": what})
 
 
-def _number(value: Any, path: str, *, minimum: float | None = None, strict: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise _fail(path, "a finite number", value)
-    if minimum is not None and (value <= minimum if strict else value < minimum):
-        raise _fail(path, f"a finite number {'>' if strict else '>='} {minimum:g}", value)
-    return float(value)
+def _rule(
+    expected: str, ok: Callable[[Any], bool], cast: Callable[[Any], Any] = lambda v: v
+) -> Any:
+    """A leaf: ``cast(value)`` if ``ok(value)``, else "expected <expected>"."""
+
+    def check(value: Any) -> Any:
+        if not ok(value):
+            raise _expected(expected)
+        return cast(value)
+
+    return PlainValidator(check)
 
 
-def _int(value: Any, path: str, *, minimum: int = 0) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        raise _fail(path, f"an integer >= {minimum}", value)
-    return int(value)
+def _guard(expected: str, ok: Callable[[Any], bool]) -> Any:
+    """A container's own type, checked before pydantic checks its items."""
+
+    def check(value: Any) -> Any:
+        if not ok(value):
+            raise _expected(expected)
+        return value
+
+    return BeforeValidator(check)
 
 
-def _str(value: Any, path: str) -> str:
+def _listed(expected: str, *, tuples: bool = True, length: int = 0, sized: str = "") -> Any:
+    """A JSON list (or a tuple): of ``length`` items if given, else "expected <sized>"."""
+
+    def check(value: Any) -> Any:
+        if not isinstance(value, list | tuple if tuples else list):
+            raise _expected(expected)
+        if length and len(value) != length:
+            raise _expected(sized or expected)
+        return value
+
+    return BeforeValidator(check)
+
+
+def _number(minimum: float | None = None, *, strict: bool = False) -> Any:
+    def check(value: Any) -> float:
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, int | float)
+            or not math.isfinite(value)
+        ):
+            raise _expected("a finite number")
+        if minimum is not None and (value <= minimum if strict else value < minimum):
+            raise _expected(f"a finite number {'>' if strict else '>='} {minimum:g}")
+        return float(value)
+
+    return PlainValidator(check)
+
+
+def _integer(minimum: int) -> Any:
+    return _rule(
+        f"an integer >= {minimum}",
+        lambda v: not isinstance(v, bool) and isinstance(v, int) and v >= minimum,
+        int,
+    )
+
+
+def _is_mapping(value: Any) -> bool:
+    return isinstance(value, Mapping)
+
+
+def _is_scalar(value: Any) -> bool:
+    return value is None or isinstance(value, str | int | float | bool)
+
+
+ContactKind = Literal["obstacle", "floor", "self"]
+KINDS: tuple[ContactKind, ...] = ("obstacle", "floor", "self")
+
+Finite = Annotated[float, _number()]
+NonNegative = Annotated[float, _number(0)]
+Positive = Annotated[float, _number(0, strict=True)]
+Count = Annotated[int, _integer(0)]
+CountFromOne = Annotated[int, _integer(1)]
+Text = Annotated[str, _rule("a string", lambda v: isinstance(v, str))]
+Flag = Annotated[bool, _rule("true or false", lambda v: isinstance(v, bool))]
+Numbers = Annotated[tuple[Finite, ...], _listed("a list of numbers")]
+NonNegatives = Annotated[tuple[NonNegative, ...], _listed("a list of numbers")]
+Names = Annotated[tuple[Text, Text], _listed("two names", length=2)]
+Kind = Annotated[ContactKind, _rule(f"one of {', '.join(KINDS)}", lambda v: v in KINDS)]
+Plain = Annotated[Mapping[str, Any], _rule("a mapping", _is_mapping, dict)]
+Scalar = Annotated[Any, _rule("a JSON scalar", _is_scalar)]
+
+
+def _status(value: Any) -> str:
     if not isinstance(value, str):
-        raise _fail(path, "a string", value)
+        raise _expected("a string")
+    if value not in ("ok", "diverged"):
+        raise _expected("'ok' or 'diverged'")
     return value
 
 
-def _bool(value: Any, path: str) -> bool:
-    if not isinstance(value, bool):
-        raise _fail(path, "true or false", value)
-    return value
+Status = Annotated[str, PlainValidator(_status)]
+Version = Annotated[
+    int, _rule(f"settings version {SETTINGS_VERSION}", lambda v: v == SETTINGS_VERSION, int)
+]
 
 
-def _vector(value: Any, path: str, *, minimum: float | None = None) -> tuple[float, ...]:
-    if not isinstance(value, list | tuple):
-        raise _fail(path, "a list of numbers", value)
-    return tuple(_number(v, f"{path}[{i}]", minimum=minimum) for i, v in enumerate(value))
+class _Contract:
+    """What every settings dataclass shares: ``from_dict``, validated by its field types.
+
+    Subclasses set ``_where`` (the field path their errors start with) and may name
+    ``_may_be_absent`` fields (added after bags were written; their default stands in).
+    """
+
+    _where: ClassVar[str]
+    _may_be_absent: ClassVar[frozenset[str]] = frozenset()
+
+    @classmethod
+    def from_dict(cls, data: Any, path: str | None = None) -> Self:
+        """Validate plain data (parsed JSON) into settings; the inverse of ``to_dict``.
+
+        Args:
+            data: the parsed JSON.
+            path: the field path errors start with (default: where the class sits in
+                :class:`EpisodeSettings`).
+
+        Raises:
+            SettingsError: a missing or ill-typed field, a value out of range (names it).
+        """
+        try:
+            value: Self = _adapter(cls).validate_python(data)
+        except _ValidationError as err:
+            raise _settings_error(err, cls._where if path is None else path) from err
+        return value
+
+    @classmethod
+    def __get_pydantic_core_schema__(cls, source: Any, handler: GetCoreSchemaHandler) -> CoreSchema:
+        """pydantic's schema of the dataclass, behind a check that the data is a mapping
+        holding every field (a dataclass default is the recorder's, not an old bag's)."""
+        required = sorted(f.name for f in fields(cls) if f.name not in cls._may_be_absent)  # type: ignore[arg-type]
+
+        def check(value: Any) -> Any:
+            if not isinstance(value, Mapping):
+                raise _expected("a mapping")
+            for name in required:
+                if name not in value:
+                    raise PydanticCustomError("contract_missing", "missing", {"field": name})
+            return dict(value)
+
+        # the check takes the schema's reference, so every use of the class goes through it
+        schema = dict(handler(source))
+        ref = schema.pop("ref", None)
+        return core_schema.no_info_before_validator_function(
+            check, cast(CoreSchema, schema), ref=ref
+        )
 
 
-def _mapping(value: Any, path: str) -> dict[str, Any]:
-    if not isinstance(value, Mapping):
-        raise _fail(path, "a mapping", value)
-    return dict(value)
+_ADAPTERS: dict[type, TypeAdapter[Any]] = {}
+
+
+def _adapter(cls: type) -> TypeAdapter[Any]:
+    if cls not in _ADAPTERS:  # built on first use: the schema needs every class defined
+        _ADAPTERS[cls] = TypeAdapter(cls)
+    return _ADAPTERS[cls]
+
+
+def _settings_error(err: _ValidationError, where: str) -> SettingsError:
+    """pydantic's first error as one line naming the field path."""
+    first = err.errors()[0]
+    path = where
+    for part in first["loc"]:
+        path += f"[{part}]" if isinstance(part, int) else f"{'.' if path else ''}{part}"
+    if first["type"] == "contract_missing":
+        field_name = (first.get("ctx") or {}).get("field", "")
+        path += f"{'.' if path else ''}{field_name}"
+        return SettingsError(f"{path}: missing (required by the contract)")
+    return SettingsError(f"{path or 'settings'}: {first['msg']}, got {first['input']!r}")
 
 
 def _plain(value: Any) -> Any:
@@ -82,69 +224,32 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def _check_keys(data: Mapping[str, Any], cls: type, path: str) -> None:
-    names = {f.name for f in fields(cls)}
-    missing = [n for n in names if n not in data]
-    if missing:
-        where = f"{path}." if path else ""
-        raise SettingsError(f"{where}{sorted(missing)[0]}: missing (required by the contract)")
-
-
 @dataclass(frozen=True)
-class PlannerSettings:
+class PlannerSettings(_Contract):
     """The planned path and its timing (what the planner and TOPP-RA produced)."""
 
-    planner: str
-    seed: int
-    time_limit_s: float
-    simplify: bool
-    direct: bool
-    n_waypoints: int
-    n_states_before_simplify: int
-    path_length_rad: float
-    padding_m: float
-    check_step_rad: float
-    interpolation: str
-    trajectory_duration_s: float
-    velocity_scaling: float
-    acceleration_scaling: float
-    start: tuple[float, ...]
-    goal: tuple[float, ...]
+    _where = "planner"
 
-    @classmethod
-    def from_dict(cls, data: Any, path: str = "planner") -> PlannerSettings:
-        d = _mapping(data, path)
-        _check_keys(d, cls, path)
-        return cls(
-            planner=_str(d["planner"], f"{path}.planner"),
-            seed=_int(d["seed"], f"{path}.seed"),
-            time_limit_s=_number(d["time_limit_s"], f"{path}.time_limit_s", minimum=0, strict=True),
-            simplify=_bool(d["simplify"], f"{path}.simplify"),
-            direct=_bool(d["direct"], f"{path}.direct"),
-            n_waypoints=_int(d["n_waypoints"], f"{path}.n_waypoints", minimum=1),
-            n_states_before_simplify=_int(
-                d["n_states_before_simplify"], f"{path}.n_states_before_simplify"
-            ),
-            path_length_rad=_number(d["path_length_rad"], f"{path}.path_length_rad", minimum=0),
-            padding_m=_number(d["padding_m"], f"{path}.padding_m", minimum=0),
-            check_step_rad=_number(d["check_step_rad"], f"{path}.check_step_rad", minimum=0),
-            interpolation=_str(d["interpolation"], f"{path}.interpolation"),
-            trajectory_duration_s=_number(
-                d["trajectory_duration_s"], f"{path}.trajectory_duration_s", minimum=0
-            ),
-            velocity_scaling=_number(
-                d["velocity_scaling"], f"{path}.velocity_scaling", minimum=0, strict=True
-            ),
-            acceleration_scaling=_number(
-                d["acceleration_scaling"], f"{path}.acceleration_scaling", minimum=0, strict=True
-            ),
-            start=_vector(d["start"], f"{path}.start"),
-            goal=_vector(d["goal"], f"{path}.goal"),
-        )
+    planner: Text
+    seed: Count
+    time_limit_s: Positive
+    simplify: Flag
+    direct: Flag
+    n_waypoints: CountFromOne
+    n_states_before_simplify: Count
+    path_length_rad: NonNegative
+    padding_m: NonNegative
+    check_step_rad: NonNegative
+    interpolation: Text
+    trajectory_duration_s: NonNegative
+    velocity_scaling: Positive
+    acceleration_scaling: Positive
+    start: Numbers
+    goal: Numbers
 
 
 @dataclass(frozen=True)
-class LinkInertial:
+class LinkInertial(_Contract):
     """One link's rigid-body inertia as the plant has it (DH frame of its joint).
 
     Attributes:
@@ -152,29 +257,20 @@ class LinkInertial:
         inertia: [ixx, iyy, izz, ixy, ixz, iyz] about the centre of mass [kg m^2].
     """
 
-    mass: float
-    com: tuple[float, float, float]
-    inertia: tuple[float, float, float, float, float, float]
+    _where = "plant.links[0]"
 
-    @classmethod
-    def from_dict(cls, data: Any, path: str) -> LinkInertial:
-        d = _mapping(data, path)
-        _check_keys(d, cls, path)
-        com = _vector(d["com"], f"{path}.com")
-        inertia = _vector(d["inertia"], f"{path}.inertia")
-        if len(com) != 3:
-            raise _fail(f"{path}.com", "3 numbers", d["com"])
-        if len(inertia) != 6:
-            raise _fail(f"{path}.inertia", "6 numbers (ixx iyy izz ixy ixz iyz)", d["inertia"])
-        return cls(
-            mass=_number(d["mass"], f"{path}.mass", minimum=0, strict=True),
-            com=(com[0], com[1], com[2]),
-            inertia=(inertia[0], inertia[1], inertia[2], inertia[3], inertia[4], inertia[5]),
-        )
+    mass: Positive
+    com: Annotated[
+        tuple[Finite, Finite, Finite], _listed("a list of numbers", length=3, sized="3 numbers")
+    ]
+    inertia: Annotated[
+        tuple[Finite, Finite, Finite, Finite, Finite, Finite],
+        _listed("a list of numbers", length=6, sized="6 numbers (ixx iyy izz ixy ixz iyz)"),
+    ]
 
 
 @dataclass(frozen=True)
-class Uncertainty:
+class Uncertainty(_Contract):
     """How far the plant may differ from the nominal model (uniform draws per episode seed).
 
     Attributes:
@@ -185,26 +281,20 @@ class Uncertainty:
         armature_rel: rotor armature factor in ``[1 - r, 1 + r]``.
     """
 
-    mass_rel: float = 0.0
-    com_m: float = 0.0
-    inertia_rel: float = 0.0
-    armature_rel: float = 0.0
+    _where = "plant.uncertainty"
+
+    mass_rel: NonNegative = 0.0
+    com_m: NonNegative = 0.0
+    inertia_rel: NonNegative = 0.0
+    armature_rel: NonNegative = 0.0
 
     @property
     def any(self) -> bool:
         return any(v > 0 for v in (self.mass_rel, self.com_m, self.inertia_rel, self.armature_rel))
 
-    @classmethod
-    def from_dict(cls, data: Any, path: str) -> Uncertainty:
-        d = _mapping(data, path)
-        _check_keys(d, cls, path)
-        return cls(
-            **{f.name: _number(d[f.name], f"{path}.{f.name}", minimum=0) for f in fields(cls)}
-        )
-
 
 @dataclass(frozen=True)
-class PlantSettings:
+class PlantSettings(_Contract):
     """The simulated plant, exactly enough to rebuild it (with the robot's geometry).
 
     Attributes:
@@ -221,56 +311,26 @@ class PlantSettings:
         integrator, engine: MuJoCo's integrator, "mujoco".
     """
 
-    exact: bool
-    links: tuple[LinkInertial, ...]
-    armature: tuple[float, ...]
-    nominal_armature: tuple[float, ...]
-    damping: tuple[float, ...]
-    frictionloss: tuple[float, ...]
-    payload_kg: float
-    position_noise_std_rad: float
-    velocity_noise_std_rad_s: float
-    uncertainty: Uncertainty
-    physics_dt_s: float
-    control_period_s: float
-    integrator: str = "Euler"
-    engine: str = "mujoco"
+    _where = "plant"
 
-    @classmethod
-    def from_dict(cls, data: Any, path: str = "plant") -> PlantSettings:
-        d = _mapping(data, path)
-        _check_keys(d, cls, path)
-        links = d["links"]
-        if not isinstance(links, list):
-            raise _fail(f"{path}.links", "a list of link inertials", links)
-        return cls(
-            exact=_bool(d["exact"], f"{path}.exact"),
-            links=tuple(
-                LinkInertial.from_dict(x, f"{path}.links[{i}]") for i, x in enumerate(links)
-            ),
-            armature=_vector(d["armature"], f"{path}.armature", minimum=0),
-            nominal_armature=_vector(d["nominal_armature"], f"{path}.nominal_armature", minimum=0),
-            damping=_vector(d["damping"], f"{path}.damping", minimum=0),
-            frictionloss=_vector(d["frictionloss"], f"{path}.frictionloss", minimum=0),
-            payload_kg=_number(d["payload_kg"], f"{path}.payload_kg", minimum=0),
-            position_noise_std_rad=_number(
-                d["position_noise_std_rad"], f"{path}.position_noise_std_rad", minimum=0
-            ),
-            velocity_noise_std_rad_s=_number(
-                d["velocity_noise_std_rad_s"], f"{path}.velocity_noise_std_rad_s", minimum=0
-            ),
-            uncertainty=Uncertainty.from_dict(d["uncertainty"], f"{path}.uncertainty"),
-            physics_dt_s=_number(d["physics_dt_s"], f"{path}.physics_dt_s", minimum=0, strict=True),
-            control_period_s=_number(
-                d["control_period_s"], f"{path}.control_period_s", minimum=0, strict=True
-            ),
-            integrator=_str(d["integrator"], f"{path}.integrator"),
-            engine=_str(d["engine"], f"{path}.engine"),
-        )
+    exact: Flag
+    links: Annotated[tuple[LinkInertial, ...], _listed("a list of link inertials", tuples=False)]
+    armature: NonNegatives
+    nominal_armature: NonNegatives
+    damping: NonNegatives
+    frictionloss: NonNegatives
+    payload_kg: NonNegative
+    position_noise_std_rad: NonNegative
+    velocity_noise_std_rad_s: NonNegative
+    uncertainty: Uncertainty
+    physics_dt_s: Positive
+    control_period_s: Positive
+    integrator: Text = "Euler"
+    engine: Text = "mujoco"
 
 
 @dataclass(frozen=True)
-class ProtocolSettings:
+class ProtocolSettings(_Contract):
     """How the episode was run (the fair-comparison protocol).
 
     Attributes:
@@ -283,68 +343,31 @@ class ProtocolSettings:
             with the paper's numbers only then).
     """
 
-    motion_start_s: float
-    hold_s: float
-    start_abs_error_rad: tuple[float, ...]
-    start_effort_nm: tuple[float, ...]
-    reproduces_paper: bool = False
+    _where = "protocol"
 
-    @classmethod
-    def from_dict(cls, data: Any, path: str = "protocol") -> ProtocolSettings:
-        d = _mapping(data, path)
-        _check_keys(d, cls, path)
-        return cls(
-            motion_start_s=_number(d["motion_start_s"], f"{path}.motion_start_s", minimum=0),
-            hold_s=_number(d["hold_s"], f"{path}.hold_s", minimum=0),
-            start_abs_error_rad=_vector(
-                d["start_abs_error_rad"], f"{path}.start_abs_error_rad", minimum=0
-            ),
-            start_effort_nm=_vector(d["start_effort_nm"], f"{path}.start_effort_nm"),
-            reproduces_paper=_bool(d["reproduces_paper"], f"{path}.reproduces_paper"),
-        )
+    motion_start_s: NonNegative
+    hold_s: NonNegative
+    start_abs_error_rad: NonNegatives
+    start_effort_nm: Numbers
+    reproduces_paper: Flag = False
 
 
 @dataclass(frozen=True)
-class ControllerSettings:
+class ControllerSettings(_Contract):
     """The controller as run: its params name, registry type, every gain in effect and
     where its code came from (``origin``: ``pipeline.control.controller_origin``)."""
 
-    name: str
-    type: str
-    gains: Mapping[str, Any]
-    origin: Mapping[str, Any] = field(default_factory=lambda: {"kind": "builtin"})
+    _where = "controller"
+    _may_be_absent = frozenset({"origin"})  # bags written before issue 18: built-in
 
-    @classmethod
-    def from_dict(cls, data: Any, path: str = "controller") -> ControllerSettings:
-        d = _mapping(data, path)
-        _check_keys({"origin": None, **d}, cls, path)  # no origin before issue 18: built-in
-        return cls(
-            name=_str(d["name"], f"{path}.name"),
-            type=_str(d["type"], f"{path}.type"),
-            gains=_mapping(d["gains"], f"{path}.gains"),
-            origin=_mapping(d.get("origin", {"kind": "builtin"}), f"{path}.origin"),
-        )
-
-
-def _pair(value: Any, path: str) -> tuple[str, str]:
-    if not (isinstance(value, list | tuple) and len(value) == 2):
-        raise _fail(path, "two names", value)
-    return (_str(value[0], f"{path}[0]"), _str(value[1], f"{path}[1]"))
-
-
-ContactKind = Literal["obstacle", "floor", "self"]
-KINDS: tuple[ContactKind, ...] = ("obstacle", "floor", "self")
-
-
-def _kind_of(value: Any, path: str) -> ContactKind:
-    for kind in KINDS:
-        if value == kind:
-            return kind
-    raise _fail(path, f"one of {', '.join(KINDS)}", value)
+    name: Text
+    type: Text
+    gains: Plain
+    origin: Plain = field(default_factory=lambda: {"kind": "builtin"})
 
 
 @dataclass(frozen=True)
-class ContactSpan:
+class ContactSpan(_Contract):
     """One pair that penetrated during the episode.
 
     Attributes:
@@ -357,13 +380,15 @@ class ContactSpan:
         deepest_ns: when it was deepest [ns].
     """
 
-    bodies: tuple[str, str]
-    kind: ContactKind
-    first_ns: int
-    last_ns: int
-    samples: int
-    max_depth_m: float
-    deepest_ns: int
+    _where = "safety.contacts[0]"
+
+    bodies: Names
+    kind: Kind
+    first_ns: Count
+    last_ns: Count
+    samples: CountFromOne
+    max_depth_m: NonNegative
+    deepest_ns: Count
 
     def summary(self) -> str:
         """E.g. ``touched box by 0.7 mm at t=1.234-2.111 s (878 samples): forearm_link–box``."""
@@ -376,34 +401,12 @@ class ContactSpan:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
-        return {
-            "bodies": list(self.bodies),
-            "kind": self.kind,
-            "first_ns": self.first_ns,
-            "last_ns": self.last_ns,
-            "samples": self.samples,
-            "max_depth_m": self.max_depth_m,
-            "deepest_ns": self.deepest_ns,
-        }
-
-    @classmethod
-    def from_dict(cls, data: Any, path: str = "safety.contacts[0]") -> ContactSpan:
-        """Inverse of ``to_dict``, validated (:class:`SettingsError` names the field)."""
-        d = _mapping(data, path)
-        _check_keys(d, cls, path)
-        return cls(
-            bodies=_pair(d["bodies"], f"{path}.bodies"),
-            kind=_kind_of(d["kind"], f"{path}.kind"),
-            first_ns=_int(d["first_ns"], f"{path}.first_ns"),
-            last_ns=_int(d["last_ns"], f"{path}.last_ns"),
-            samples=_int(d["samples"], f"{path}.samples", minimum=1),
-            max_depth_m=_number(d["max_depth_m"], f"{path}.max_depth_m", minimum=0),
-            deepest_ns=_int(d["deepest_ns"], f"{path}.deepest_ns"),
-        )
+        out: dict[str, Any] = _plain(asdict(self))
+        return out
 
 
 @dataclass(frozen=True)
-class Clearance:
+class Clearance(_Contract):
     """The closest approach of one kind of pair during the episode.
 
     Attributes:
@@ -413,10 +416,12 @@ class Clearance:
         stamp_ns: when [ns].
     """
 
-    kind: ContactKind
-    bodies: tuple[str, str]
-    distance_m: float
-    stamp_ns: int
+    _where = "safety.clearances[0]"
+
+    kind: Kind
+    bodies: Names
+    distance_m: Finite
+    stamp_ns: Count
 
     def summary(self) -> str:
         """E.g. ``obstacle 11.2 mm (wrist_2_link–blocker at t=0.007 s)``."""
@@ -426,28 +431,12 @@ class Clearance:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
-        return {
-            "kind": self.kind,
-            "bodies": list(self.bodies),
-            "distance_m": self.distance_m,
-            "stamp_ns": self.stamp_ns,
-        }
-
-    @classmethod
-    def from_dict(cls, data: Any, path: str = "safety.clearances[0]") -> Clearance:
-        """Inverse of ``to_dict``, validated."""
-        d = _mapping(data, path)
-        _check_keys(d, cls, path)
-        return cls(
-            kind=_kind_of(d["kind"], f"{path}.kind"),
-            bodies=_pair(d["bodies"], f"{path}.bodies"),
-            distance_m=_number(d["distance_m"], f"{path}.distance_m"),
-            stamp_ns=_int(d["stamp_ns"], f"{path}.stamp_ns"),
-        )
+        out: dict[str, Any] = _plain(asdict(self))
+        return out
 
 
 @dataclass(frozen=True)
-class ExecutionSafety:
+class ExecutionSafety(_Contract):
     """Contacts and clearance over an episode's true states.
 
     Attributes:
@@ -461,12 +450,15 @@ class ExecutionSafety:
         contacts: every pair that penetrated, by first contact time.
     """
 
-    padding_m: float
-    every: int
-    samples_checked: int
-    clearances: tuple[Clearance, ...]
-    contacts: tuple[ContactSpan, ...]
-    skip_within_m: float = 0.0
+    _where = "safety"
+    _may_be_absent = frozenset({"skip_within_m"})  # bags written before it existed
+
+    padding_m: NonNegative
+    every: CountFromOne
+    samples_checked: Count
+    clearances: Annotated[tuple[Clearance, ...], _listed("a list", tuples=False)]
+    contacts: Annotated[tuple[ContactSpan, ...], _listed("a list", tuples=False)]
+    skip_within_m: NonNegative = 0.0
 
     @property
     def touched(self) -> bool:
@@ -491,7 +483,8 @@ class ExecutionSafety:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form (for a recording's settings); ``touched``, ``min_clearance_m``
-        and ``summary`` are derived, for readers of the JSON alone."""
+        and ``summary`` are derived, for readers of the JSON alone (``from_dict`` ignores
+        them)."""
         return {
             "padding_m": self.padding_m,
             "every": self.every,
@@ -504,32 +497,9 @@ class ExecutionSafety:
             "summary": self.summary(),
         }
 
-    @classmethod
-    def from_dict(cls, data: Any, path: str = "safety") -> ExecutionSafety:
-        """Inverse of ``to_dict`` (derived keys are not read), validated."""
-        d = {"skip_within_m": 0.0, **_mapping(data, path)}  # absent before it existed
-        _check_keys(d, cls, path)
-        clearances, contacts = d["clearances"], d["contacts"]
-        if not isinstance(clearances, list):
-            raise _fail(f"{path}.clearances", "a list", clearances)
-        if not isinstance(contacts, list):
-            raise _fail(f"{path}.contacts", "a list", contacts)
-        return cls(
-            padding_m=_number(d["padding_m"], f"{path}.padding_m", minimum=0),
-            every=_int(d["every"], f"{path}.every", minimum=1),
-            samples_checked=_int(d["samples_checked"], f"{path}.samples_checked"),
-            skip_within_m=_number(d["skip_within_m"], f"{path}.skip_within_m", minimum=0),
-            clearances=tuple(
-                Clearance.from_dict(c, f"{path}.clearances[{i}]") for i, c in enumerate(clearances)
-            ),
-            contacts=tuple(
-                ContactSpan.from_dict(c, f"{path}.contacts[{i}]") for i, c in enumerate(contacts)
-            ),
-        )
-
 
 @dataclass(frozen=True)
-class CampaignInfo:
+class CampaignInfo(_Contract):
     """Where an episode sits in a campaign (a sweep), for the report's summaries.
 
     Attributes:
@@ -541,27 +511,15 @@ class CampaignInfo:
             JSON scalars, keyed by the params path (``plant.payload_kg``).
     """
 
-    name: str
-    condition: str
-    swept: Mapping[str, Any]
+    _where = "campaign"
 
-    @classmethod
-    def from_dict(cls, data: Any, path: str = "campaign") -> CampaignInfo:
-        d = _mapping(data, path)
-        _check_keys(d, cls, path)
-        swept = _mapping(d["swept"], f"{path}.swept")
-        for key, value in swept.items():
-            if not (value is None or isinstance(value, str | int | float | bool)):
-                raise _fail(f"{path}.swept.{key}", "a JSON scalar", value)
-        return cls(
-            name=_str(d["name"], f"{path}.name"),
-            condition=_str(d["condition"], f"{path}.condition"),
-            swept=swept,
-        )
+    name: Text
+    condition: Text
+    swept: Annotated[Mapping[str, Scalar], _guard("a mapping", _is_mapping)]
 
 
 @dataclass(frozen=True)
-class EpisodeSettings:
+class EpisodeSettings(_Contract):
     """Everything a recording says about how it was made (its ``settings`` JSON).
 
     Attributes:
@@ -581,22 +539,26 @@ class EpisodeSettings:
         version: settings layout version.
     """
 
-    episode: str
-    robot: Mapping[str, Any]
-    scenario: Mapping[str, Any]
+    _where = ""
+
+    episode: Text
+    robot: Plain
+    scenario: Plain
     controller: ControllerSettings
     plant: PlantSettings
     planner: PlannerSettings
     protocol: ProtocolSettings
     safety: ExecutionSafety
-    seed: int
-    status: str
-    reason: str
-    package_version: str
-    git_commit: str
-    mujoco_warnings: Mapping[str, int] = field(default_factory=dict)
+    seed: Count
+    status: Status
+    reason: Text
+    package_version: Text
+    git_commit: Text
+    mujoco_warnings: Annotated[Mapping[str, Count], _guard("a mapping", _is_mapping)] = field(
+        default_factory=dict
+    )
     campaign: CampaignInfo | None = None
-    version: int = SETTINGS_VERSION
+    version: Version = SETTINGS_VERSION
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready plain data (lists, not tuples)."""
@@ -605,43 +567,24 @@ class EpisodeSettings:
         return out
 
     @classmethod
-    def from_dict(cls, data: Any) -> EpisodeSettings:
-        """Validate plain data (parsed JSON) into settings.
+    def from_dict(cls, data: Any, path: str | None = None) -> Self:
+        """Validate plain data (parsed JSON) into settings; another layout version is
+        named as such before any of its fields.
 
         Raises:
             SettingsError: a missing or ill-typed field, a value out of range (names it).
         """
-        d = _mapping(data, "settings")
-        version = d.get("version")
+        version = data.get("version") if isinstance(data, Mapping) else SETTINGS_VERSION
         if version != SETTINGS_VERSION:
-            raise _fail("version", f"settings version {SETTINGS_VERSION}", version)
-        _check_keys(d, cls, "")
-        status = _str(d["status"], "status")
-        if status not in ("ok", "diverged"):
-            raise _fail("status", "'ok' or 'diverged'", status)
-        warnings = _mapping(d["mujoco_warnings"], "mujoco_warnings")
-        return cls(
-            episode=_str(d["episode"], "episode"),
-            robot=_mapping(d["robot"], "robot"),
-            scenario=_mapping(d["scenario"], "scenario"),
-            controller=ControllerSettings.from_dict(d["controller"]),
-            plant=PlantSettings.from_dict(d["plant"]),
-            planner=PlannerSettings.from_dict(d["planner"]),
-            protocol=ProtocolSettings.from_dict(d["protocol"]),
-            safety=ExecutionSafety.from_dict(d["safety"]),
-            seed=_int(d["seed"], "seed"),
-            status=status,
-            reason=_str(d["reason"], "reason"),
-            package_version=_str(d["package_version"], "package_version"),
-            git_commit=_str(d["git_commit"], "git_commit"),
-            mujoco_warnings={str(k): _int(v, f"mujoco_warnings.{k}") for k, v in warnings.items()},
-            campaign=None if d["campaign"] is None else CampaignInfo.from_dict(d["campaign"]),
-            version=SETTINGS_VERSION,
-        )
+            raise SettingsError(
+                f"version: expected settings version {SETTINGS_VERSION}, got {version!r}"
+            )
+        return super().from_dict(data, path)
 
     @property
-    def motion_end_s(self) -> float:
-        """When the reference stops, from the recording's first sample [s]."""
+    def motion_end_from_first_sample_s(self) -> float:
+        """When the reference stops, from the recording's first sample [s]: the pre-roll
+        plus the trajectory's duration (not the duration alone)."""
         return self.protocol.motion_start_s + self.planner.trajectory_duration_s
 
 

@@ -34,7 +34,7 @@ from pipeline.analysis.catalog import (
 )
 from pipeline.analysis.episodes import comparable
 from pipeline.constants import FINAL_WINDOW_S
-from pipeline.errors import ReportError
+from pipeline.errors import ReportError, unknown_name_message
 
 __all__ = [
     "COMPARED_METRICS",
@@ -254,8 +254,8 @@ def check_baseline(episodes: pl.DataFrame, baseline: str) -> bool:
     if len(present) <= 1:
         return False
     raise ReportError(
-        f"unknown baseline controller '{baseline}'; controllers in the recordings: "
-        f"{', '.join(present)} (choose one with --baseline)"
+        unknown_name_message("baseline controller", baseline, present)
+        + " (the controllers in the recordings; choose one with --baseline)"
     )
 
 

@@ -9,7 +9,6 @@ so a recording holds exactly what ran.
 
 from __future__ import annotations
 
-import difflib
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -19,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from pipeline.errors import ParamsError
+from pipeline.errors import ParamsError, unknown_name_message
 from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
 
@@ -111,11 +110,8 @@ def resolve_gains(
     merged = dict(defaults)
     for key, value in (gains or {}).items():
         if key not in by_key:
-            valid = ", ".join(by_key)
-            near = difflib.get_close_matches(str(key).lower(), list(by_key), n=1)
-            hint = f" (did you mean '{near[0]}'?)" if near else ""
             raise ParamsError(
-                f"{where}.{key}: unknown gain for controller '{controller}'{hint}; valid: {valid}"
+                unknown_name_message(f"{controller} gain", key, by_key, where=f"{where}.{key}")
             )
         merged[key] = value
     out: dict[str, Any] = {}

@@ -40,9 +40,8 @@ def reach_terms_m(spec: RobotSpec) -> list[float]:
     """``R_i`` [m] per joint: a bound on the distance of the geometry beyond joint ``i``
     from its axis (the summed DH lengths ``|a_j| + |d_j|`` for ``j >= i`` plus the
     largest capsule radius); see ``reach_bound_m``."""
-    rows = [j.dh for j in spec.joints]
     r_max = max(j.collision_radius for j in spec.joints)
-    return [sum(abs(r.a) + abs(r.d) for r in rows[i:]) + r_max for i in range(len(rows))]
+    return [spec.reach_m(i) + r_max for i in range(spec.dof)]
 
 
 def reach_bound_m(spec: RobotSpec) -> float:

@@ -291,8 +291,7 @@ def _reach_m(data: ReportData) -> float:
     for rec in data.sample():
         spec = robot_spec(rec)
         if spec is not None:
-            total = sum(abs(j.dh.a) + abs(j.dh.d) for j in spec.joints)
-            reach = max(reach, total)
+            reach = max(reach, spec.reach_m())
     return reach or 1.0
 
 

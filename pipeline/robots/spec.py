@@ -7,7 +7,6 @@ everything is radians, metres, kilograms and newton-metres.
 
 from __future__ import annotations
 
-import difflib
 import functools
 import math
 import re
@@ -27,7 +26,7 @@ from pydantic import (
     model_validator,
 )
 
-from pipeline.errors import SpecError
+from pipeline.errors import SpecError, unknown_name_message
 from pipeline.yamlio import parse_yaml, refuse_bool_numbers
 
 Convention = Literal["standard", "modified"]
@@ -160,6 +159,12 @@ class RobotSpec:
     def armature(self) -> np.ndarray:
         """Rotor (reflected) inertia per joint [kg m^2]."""
         return np.array([j.armature for j in self.joints])
+
+    def reach_m(self, first: int = 0) -> float:
+        """The summed DH lengths ``|a_j| + |d_j|`` of joints ``first`` onwards [m]: a bound on
+        how far the flange gets from joint ``first``'s axis (from the base for 0), in any
+        configuration."""
+        return sum(abs(j.dh.a) + abs(j.dh.d) for j in self.joints[first:])
 
     def require_dynamics(self, what: str) -> None:
         """Raise a clear error if ``what`` needs link inertias this robot lacks."""
@@ -430,12 +435,8 @@ def load_spec(name_or_path: str | Path) -> RobotSpec:
     else:
         names = builtin_robot_names()
         if text not in names:
-            close = difflib.get_close_matches(text, names, n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
-            raise SpecError(
-                f"unknown robot '{text}'. Available: {', '.join(names)}{hint} "
-                "(or pass a path to a YAML file)"
-            )
+            hint = unknown_name_message("robot", text, names)
+            raise SpecError(f"{hint} (or pass a path to a YAML file)")
         return _load_builtin(text)
     return _parse_text(content, source)
 

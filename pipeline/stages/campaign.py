@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
-from pipeline.errors import ParamsError, PipelineError
+from pipeline.errors import ParamsError, PipelineError, unknown_name_message
 from pipeline.params import (
     CampaignParams,
     ControllerParams,
@@ -112,8 +112,9 @@ def campaign_axes(params: Params, name: str) -> Campaign:
         ParamsError: unknown campaign, or goals that cannot be drawn or are invalid.
     """
     if name not in params.campaigns:
-        known = ", ".join(params.campaigns) or "none defined"
-        raise ParamsError(f"{params.source}: unknown campaign '{name}' (campaigns: {known})")
+        raise ParamsError(
+            unknown_name_message("campaign", name, params.campaigns, where=params.source)
+        )
     c = params.campaigns[name]
     axes: list[Axis] = []
     if c.goals is not None:

@@ -260,7 +260,7 @@ class TeachServer:
         self._gizmo = scene.add_transform_controls(TARGET_NODE, scale=0.2, depth_test=False)
         self._marker = scene.add_icosphere(MARKER_NODE, radius=0.015, color=OK_RGB)
         self._gizmo.on_update(self._on_gizmo)
-        reach = sum(abs(j.dh.a) + abs(j.dh.d) for j in self._spec.joints)
+        reach = self._spec.reach_m()
         self._server.initial_camera.position = (1.1 * reach, -1.1 * reach, 0.75 * reach)
         self._server.initial_camera.look_at = (0.0, 0.15 * reach, 0.1 * reach)
 

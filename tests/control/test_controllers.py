@@ -79,7 +79,7 @@ def test_unknown_gain_key_names_the_key_and_the_valid_ones(ur5):
     with pytest.raises(ParamsError) as err:
         make_controller("pid", ur5, {"Kp": 1.0})
     message = str(err.value)
-    assert message.startswith("gains.Kp: unknown gain for controller 'pid'")
+    assert message.startswith("gains.Kp: unknown pid gain 'Kp'")
     assert "did you mean 'kp'" in message
     assert "kp, ki, kd, i_clamp_min, i_clamp_max, antiwindup, ff_velocity_scale" in message
     assert "\n" not in message

@@ -111,7 +111,7 @@ def test_a_plug_in_refuses_gains_it_does_not_declare_in_one_line(ur5):
     with pytest.raises(ParamsError) as err:
         make_controller(GOOD, ur5, {"ki": 1.0}, source="controllers.mine")
     message = str(err.value)
-    assert message.startswith("controllers.mine.gains.ki: unknown gain for controller 'good_pd'")
+    assert message.startswith("controllers.mine.gains.ki: unknown good_pd gain 'ki'")
     assert "valid: kp, kd" in message and "\n" not in message
 
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -135,3 +136,14 @@ def test_a_folder_named_like_a_robot_does_not_hide_the_builtin(tmp_path, monkeyp
     assert load_spec("ur5").name == "ur5"
     with pytest.raises(SpecError, match=r"is a directory, expected a robot YAML file"):
         load_spec("./ur5")
+
+
+@pytest.mark.parametrize("name", builtin_robot_names())
+def test_no_configuration_takes_the_flange_beyond_the_reach(name):
+    from pipeline.model.dh import forward_kinematics
+
+    spec = load_spec(name)
+    rng = np.random.default_rng(0)
+    for q in rng.uniform(spec.lower, spec.upper, size=(200, spec.dof)):
+        assert np.linalg.norm(forward_kinematics(spec, q)[:3, 3]) <= spec.reach_m() + 1e-12
+    assert spec.reach_m(spec.dof) == 0.0  # nothing beyond the last joint

@@ -162,7 +162,7 @@ def test_unknown_executor_and_stray_address_fail_in_one_line(tmp_path):
     for extra, expected in (
         (["--executor", "dask"], "error: --executor: expected local or ray, got 'dask'"),
         (["--address", "auto"], "error: --address: only with --executor ray"),
-        (["--campaign", "nope"], "unknown campaign 'nope' (campaigns: c)"),
+        (["--campaign", "nope"], "unknown campaign 'nope'; valid: c"),
     ):
         result = subprocess.run(
             [*PIPELINE, "record", "--params", str(params), "--out", str(tmp_path / "o"), *extra],

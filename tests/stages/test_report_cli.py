@@ -128,8 +128,8 @@ def test_unknown_baseline_lists_controllers_present(
     assert _run(monkeypatch, tmp_path, "--baseline", "lqr") == 1
     err = capsys.readouterr().err.strip()
     assert err == (
-        "error: unknown baseline controller 'lqr'; controllers in the recordings: ctc, pid "
-        "(choose one with --baseline)"
+        "error: unknown baseline controller 'lqr'; valid: ctc, pid "
+        "(the controllers in the recordings; choose one with --baseline)"
     )
     assert not (tmp_path / "reports").exists()
 
