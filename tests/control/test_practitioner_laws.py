@@ -138,7 +138,9 @@ def test_pid_humble_clamps_only_the_integral_output_as_without_antiwindup(ur5):
     np.testing.assert_allclose(back, -2.0 + 0.2)  # still at the clamp: the state wound up
     with pytest.raises(ParamsError, match=r"^gains\.i_clamp: must be >= 0"):
         make_controller("pid_humble", ur5, {"i_clamp": -1.0})
-    with pytest.raises(ParamsError, match=r"^gains\.antiwindup: unknown pid_humble gain 'antiwindup'"):
+    with pytest.raises(
+        ParamsError, match=r"^gains\.antiwindup: unknown pid_humble gain 'antiwindup'"
+    ):
         make_controller("pid_humble", ur5, {"antiwindup": True})
 
 
