@@ -19,6 +19,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, Literal, TypeVar
 
+from pipeline.constants import PLANT_FRICTION, PLANT_INTEGRATOR
 from pipeline.errors import RecordingError
 
 SETTINGS_VERSION = 2
@@ -219,6 +220,7 @@ class PlantSettings:
         uncertainty: the spread the links and armature were drawn from.
         physics_dt_s, control_period_s: MuJoCo step and control period [s].
         integrator, engine: MuJoCo's integrator, "mujoco".
+        friction_model: the joint friction law the plant ran (``frictionloss`` and ``damping``).
     """
 
     exact: bool
@@ -233,8 +235,9 @@ class PlantSettings:
     uncertainty: Uncertainty
     physics_dt_s: float
     control_period_s: float
-    integrator: str = "Euler"
+    integrator: str = PLANT_INTEGRATOR
     engine: str = "mujoco"
+    friction_model: str = PLANT_FRICTION
 
     @classmethod
     def from_dict(cls, data: Any, path: str = "plant") -> PlantSettings:
@@ -266,6 +269,7 @@ class PlantSettings:
             ),
             integrator=_str(d["integrator"], f"{path}.integrator"),
             engine=_str(d["engine"], f"{path}.engine"),
+            friction_model=_str(d["friction_model"], f"{path}.friction_model"),
         )
 
 
