@@ -21,6 +21,11 @@ Definitions (also in docs/report.md and in every report):
   ``min(FINAL_WINDOW_S, hold/2)`` of the episode, hold = end - motion end
   (the last sample alone when there is no hold; the last FINAL_WINDOW_S when
   the motion end is unknown).
+- final_drift = mean |e| over the second half of the final window minus over its
+  first half (null when a half is empty). The error at the target is
+  "not settled" (:func:`pipeline.analysis.catalog.not_settled`) when
+  |final_drift| > ``FINAL_DRIFT_REL`` x final_error and > ``DRIFT_FLOOR_RAD``: its
+  last windows still move, so it measures a transient, not a steady state.
 - settling_time = time from the motion end until |e| stays within
   ``SETTLING_TOLERANCE_RAD`` for the rest of the episode (the first sample after
   the last violation; 0 when |e| never leaves the band after the motion end);
@@ -136,6 +141,7 @@ def _prepared_controller_states(
         .with_columns(
             after_motion=(t >= pl.col("motion_end_s")),
             in_final=(t >= pl.col("end_s") - pl.col("final_window_s") - 1e-9),
+            final_late=(t >= pl.col("end_s") - pl.col("final_window_s") / 2 - 1e-9),
         )
         .with_columns(
             violating=(pl.col("after_motion") & (e.abs() > settling_tolerance_rad)).fill_null(

@@ -252,6 +252,7 @@ def _intro(data: ReportData) -> list[str]:
         .agg(pl.col("saturation_fraction").max())
         .iter_rows(named=True)
     }
+    unsettled = _unsettled_joints(data.metrics)
     listed = {r.episode for r in data.listed}
     table_rows = [r for r in data.episodes.iter_rows(named=True) if r["episode"] in listed]
     for row in table_rows[:MAX_ROWS]:
@@ -271,6 +272,7 @@ def _intro(data: ReportData) -> list[str]:
                 _sci(row["start_abs_error_rad"], 1),
                 _num(row["start_abs_effort_nm"], ".1f"),
                 NA if sat is None else f"{sat * 100:.1f} %",
+                unsettled.get(row["episode"], NA),
             ]
         )
     lines.append(
@@ -289,6 +291,7 @@ def _intro(data: ReportData) -> list[str]:
                 "|e| at start [rad]",
                 "|effort| at start [N m]",
                 "saturated (worst joint)",
+                "error at the target",
             ],
             rows,
         )
@@ -315,7 +318,11 @@ def _intro(data: ReportData) -> list[str]:
         f"{SATURATION_WARN_FRACTION * 100:.0f} %); *status* ok = stable (not diverged); "
         "*salvaged*: read with `--salvage` from a damaged file up to the damage (the share "
         "of the file, or of a `.db3`'s messages, not read); cut before its motion end, "
-        "such an episode takes no part in comparisons.",
+        "such an episode takes no part in comparisons. *Error at the target*: **not "
+        "settled** on the joints whose mean |e| changes between the two halves of the "
+        f"final window by more than {catalog.FINAL_DRIFT_REL:g} x it (and "
+        f"{catalog.DRIFT_FLOOR_RAD:g} rad): a transient, not a steady state (a longer "
+        "`hold_s` measures the steady state).",
     ]
     lines += _physical_checks(data)
     failed = [r for r in recs if r.status != "ok"]
@@ -454,6 +461,25 @@ def _physical_checks(data: ReportData) -> list[str]:
             "and `final_error` in metrics.json, contacts in each bag's settings)"
         )
     return lines
+
+
+def _unsettled_joints(metrics: pl.DataFrame) -> dict[str, str]:
+    """Per episode, "settled" or "not settled: <joints>" (joints whose error at the target
+    still moves in its last windows, ``catalog.not_settled``); none where unknown."""
+    if not {"final_error", "final_drift"} <= set(metrics.columns):
+        return {}
+    flagged = metrics.with_columns(
+        flag=catalog.not_settled(pl.col("final_error"), pl.col("final_drift"))
+    ).filter(pl.col("flag").is_not_null())
+    out: dict[str, str] = {}
+    for row in (
+        flagged.group_by("episode", maintain_order=True)
+        .agg(pl.col("joint").filter(pl.col("flag")))
+        .iter_rows(named=True)
+    ):
+        joints = row["joint"]
+        out[row["episode"]] = "settled" if not joints else "not settled: " + ", ".join(joints)
+    return out
 
 
 # Settings shown first, in this order, when present; any others follow as recorded.
