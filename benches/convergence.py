@@ -34,7 +34,7 @@ import polars as pl
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from pipeline.analysis.catalog import BY_NAME, METRIC_COLUMNS  # noqa: E402
+from pipeline.analysis.catalog import BY_NAME, FINAL_DRIFT_REL, METRIC_COLUMNS  # noqa: E402
 from pipeline.analysis.episodes import episode_table, limits_table  # noqa: E402
 from pipeline.analysis.metrics import joint_metrics  # noqa: E402
 from pipeline.analysis.protocol import protocol_view  # noqa: E402
@@ -52,7 +52,8 @@ the realistic plant's encoder noise scale (1e-5 rad), 1e-2 rad/s about 1 % of a 
 joint's peak speed, 2 ms two control periods (a settling time is a sample index), 1e-3
 of a fraction one sample in a thousand. The time of the peak velocity is compared only
 for joints whose peak velocity is above its floor (a joint that does not move peaks
-anywhere)."""
+anywhere). A change of ``final_drift`` is relative to at least ``FINAL_DRIFT_REL`` x the
+error at the target, the threshold the "not settled" flag compares the drift with."""
 
 
 def default_experiment(params: Params) -> tuple[Episode, ...]:
@@ -135,7 +136,11 @@ def changes(coarse: pl.DataFrame, fine: pl.DataFrame) -> dict[str, dict[str, Any
     for name in METRIC_COLUMNS:
         floor = FLOORS.get(BY_NAME[name].unit, 0.0)
         a, b = pl.col(name), pl.col(f"{name}_fine")
-        rel = (a - b).abs() / pl.max_horizontal(b.abs(), pl.lit(floor))
+        scale = pl.max_horizontal(b.abs(), pl.lit(floor))
+        if name == "final_drift":
+            # a drift counts against the threshold the "not settled" flag compares it with
+            scale = pl.max_horizontal(scale, pl.col("final_error_fine").abs() * FINAL_DRIFT_REL)
+        rel = (a - b).abs() / scale
         if name == "peak_velocity_time":
             moving = pl.col("peak_velocity_fine").abs() >= FLOORS["rad/s"]
             both_here = both.filter(moving)
