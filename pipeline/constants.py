@@ -28,3 +28,14 @@ FINAL_WINDOW_S = 0.5
 
 # Seeds: OMPL seeds are 32-bit and must be non-zero, and the planner passes seed + 1.
 MAX_SEED = 2**32 - 2
+
+# The plant every episode runs on (pipeline.model.mjcf builds it; every bag's plant
+# settings record both). RK4 with the control period's zero-order hold: halving the step
+# moves no metric of the default experiment by 5 % (benches/convergence.py).
+PLANT_INTEGRATOR = "RK4"
+# Joint friction sticks: MuJoCo's frictionloss constraint made stiff (tests/model/test_friction.py).
+FRICTION_IMPEDANCE = 0.9999
+PLANT_FRICTION = (
+    "stick-slip Coulomb (frictionloss, solimpfriction "
+    f"{FRICTION_IMPEDANCE:g}, solreffriction 2 physics steps) + viscous damping"
+)

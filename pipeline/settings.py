@@ -30,6 +30,8 @@ from pydantic_core import CoreSchema, PydanticCustomError, core_schema
 from pipeline.errors import RecordingError
 
 SETTINGS_VERSION = 2
+LEGACY_FRICTION = "frictionloss at MuJoCo's default softness (creeps under the breakaway torque)"
+"""The friction law of bags that do not name theirs (recorded before it stuck)."""
 
 
 class SettingsError(RecordingError):
@@ -309,9 +311,12 @@ class PlantSettings(_Contract):
         uncertainty: the spread the links and armature were drawn from.
         physics_dt_s, control_period_s: MuJoCo step and control period [s].
         integrator, engine: MuJoCo's integrator, "mujoco".
+        friction_model: the joint friction law the plant ran (``frictionloss`` and ``damping``).
     """
 
     _where = "plant"
+    # bags written before the plant recorded its friction law ran MuJoCo's soft default
+    _may_be_absent = frozenset({"friction_model"})
 
     exact: Flag
     links: Annotated[tuple[LinkInertial, ...], _listed("a list of link inertials", tuples=False)]
@@ -327,6 +332,7 @@ class PlantSettings(_Contract):
     control_period_s: Positive
     integrator: Text = "Euler"
     engine: Text = "mujoco"
+    friction_model: Text = LEGACY_FRICTION
 
 
 @dataclass(frozen=True)

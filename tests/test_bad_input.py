@@ -87,7 +87,7 @@ PARAMS_CASES: list[tuple[str, Callable[[dict[str, Any]], None], str]] = [
     ("period-1e9", _set("sim.control_period_steps", 10**9), "sim.control_period_steps"),
     ("period-zero", _set("sim.control_period_steps", 0), "sim.control_period_steps"),
     ("period-float", _set("sim.control_period_steps", 1.5), "sim.control_period_steps"),
-    ("period-slow", _set("sim.control_period_steps", 200), "control period"),
+    ("period-slow", _set("sim.control_period_steps", 500), "control period"),
     ("tf-1e9", _set("sim.tf_rate_hz", 1e9), "sim.tf_rate_hz"),
     ("tf-zero", _set("sim.tf_rate_hz", 0), "sim.tf_rate_hz"),
     ("decimation-zero", _set("sim.joint_state_decimation", 0), "sim.joint_state_decimation"),

@@ -26,8 +26,9 @@ does not see its neighbours):
 
 - ``controller_state`` frame: ``time_s``, ``error_rad``, ``reference_position_rad``,
   ``feedback_position_rad`` plus ``completed``, ``motion_end_s``, ``after_motion``
-  (t >= motion end), ``in_final`` (inside the final window) and ``violating`` (|e|
-  outside the settling band after the motion end).
+  (t >= motion end), ``in_final`` (inside the final window), ``final_late`` (inside
+  its second half) and ``violating`` (|e| outside the
+  settling band after the motion end).
 - ``joint_states`` frame: ``time_s``, ``velocity_rad_s``, ``effort_nm``,
   ``commanded_effort_nm``, ``effort_limit_nm`` and ``saturated`` (at the limit or clipped;
   null where no effort was recorded).
@@ -47,6 +48,13 @@ from pipeline.constants import FINAL_WINDOW_S, TOPIC_CONTROLLER_STATE, TOPIC_JOI
 MIN_TRAVEL_RAD = 1e-9
 # The band |e| must stay in, after the motion end, to count as settled [rad].
 SETTLING_TOLERANCE_RAD = 1e-3
+
+# The error at the target is "not settled" when the mean |e| over the final window's second
+# half differs from the one over its first half by more than this share of the error at
+# the target, and by more than
+# DRIFT_FLOOR_RAD (below it, numerical noise: a perfect-model CTC settles to ~1e-13 rad).
+FINAL_DRIFT_REL = 0.1
+DRIFT_FLOOR_RAD = 1e-6
 
 Frame = Literal["controller_state", "joint_states"]
 # A finish reads the partial ``key`` of its own metric as ``p(key)``.
@@ -171,6 +179,28 @@ def _final_error() -> dict[str, pl.Expr]:
     return {"sum": final.sum(), "n": final.count()}
 
 
+def _final_drift() -> dict[str, pl.Expr]:
+    final = pl.col("in_final")
+    early = _e().abs().filter(final & ~pl.col("final_late"))
+    late = _e().abs().filter(final & pl.col("final_late"))
+    return {"sum_early": early.sum(), "n_early": early.count(), "sum_late": late.sum(),
+            "n_late": late.count()}  # fmt: skip
+
+
+def _final_drift_finish(p: PartialColumn) -> pl.Expr:
+    n_early, n_late = p("n_early").sum(), p("n_late").sum()
+    return pl.when((n_early > 0) & (n_late > 0)).then(
+        p("sum_late").sum() / n_late - p("sum_early").sum() / n_early
+    )
+
+
+def not_settled(final_error: pl.Expr, final_drift: pl.Expr) -> pl.Expr:
+    """The error at the target still moves in its last windows (null where either is)."""
+    return final_drift.abs() > pl.max_horizontal(
+        final_error.abs() * FINAL_DRIFT_REL, pl.lit(DRIFT_FLOOR_RAD)
+    )
+
+
 def _mean(p: PartialColumn) -> pl.Expr:
     n = p("n").sum()
     return pl.when(n > 0).then(p("sum").sum() / n)
@@ -266,6 +296,19 @@ METRICS: tuple[Metric, ...] = (
             f"error at the target: mean |e| over the last min({FINAL_WINDOW_S} s, hold / 2) "
             "of the episode, hold = episode end − motion end (motion end = the planned "
             "trajectory's duration); the last sample alone when there is no hold"
+        ),
+    ),
+    Metric(
+        "final_drift", "rad", "Drift of the error at the target", ".2e", "controller_state",
+        _CS, _final_drift, _final_drift_finish, needs_completed_motion=True, in_tables=False,
+        detail="final window's second half minus its first; not settled when it is over "
+        f"{FINAL_DRIFT_REL:g} x the error at the target and {DRIFT_FLOOR_RAD:g} rad",
+        definition=(
+            "drift of the error at the target: mean |e| over the final window's second half "
+            "minus over its first half; the error at the target is flagged 'not settled' "
+            f"where |drift| > {FINAL_DRIFT_REL:g} × the error at the target and > "
+            f"{DRIFT_FLOOR_RAD:g} rad (its last windows still move: a transient, not a "
+            "steady state)"
         ),
     ),
     Metric(

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import polars as pl
 
-from pipeline.analysis.catalog import SETTLING_TOLERANCE_RAD
+from pipeline.analysis.catalog import SETTLING_TOLERANCE_RAD, not_settled
 from pipeline.analysis.episodes import robot_spec
 from pipeline.analysis.protocol import ProtocolView
 from pipeline.control.registry import stiffness_gains
@@ -216,3 +216,22 @@ def _mass_diagonal(spec: RobotSpec, q: tuple[float, ...]) -> tuple[float, ...]:
     model = build_pinocchio_model(spec)
     mass = pin.crba(model, model.createData(), np.asarray(q, dtype=float))
     return tuple(float(mass[j, j]) for j in range(len(q)))
+
+
+def unsettled_joints(metrics: pl.DataFrame) -> dict[str, str]:
+    """Per episode, "settled" or "not settled: <joints>" (joints whose error at the target
+    still moves in its last windows, ``catalog.not_settled``); none where unknown."""
+    if not {"final_error", "final_drift"} <= set(metrics.columns):
+        return {}
+    flagged = metrics.with_columns(
+        flag=not_settled(pl.col("final_error"), pl.col("final_drift"))
+    ).filter(pl.col("flag").is_not_null())
+    out: dict[str, str] = {}
+    for row in (
+        flagged.group_by("episode", maintain_order=True)
+        .agg(pl.col("joint").filter(pl.col("flag")))
+        .iter_rows(named=True)
+    ):
+        joints = row["joint"]
+        out[row["episode"]] = "settled" if not joints else "not settled: " + ", ".join(joints)
+    return out

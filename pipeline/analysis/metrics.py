@@ -111,6 +111,7 @@ def _prepared_controller_states(
         .with_columns(
             after_motion=(t >= pl.col("motion_end_s")),
             in_final=(t >= pl.col("end_s") - pl.col("final_window_s") - 1e-9),
+            final_late=(t >= pl.col("end_s") - pl.col("final_window_s") / 2 - 1e-9),
         )
         .with_columns(
             violating=(pl.col("after_motion") & (e.abs() > settling_tolerance_rad)).fill_null(

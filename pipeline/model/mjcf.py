@@ -17,6 +17,7 @@ from xml.sax.saxutils import quoteattr
 import mujoco
 import numpy as np
 
+from pipeline.constants import FRICTION_IMPEDANCE, PLANT_INTEGRATOR
 from pipeline.errors import ModelError
 from pipeline.model import transforms as tf
 from pipeline.model.chain import BASE_LINK, FLANGE, chain, link_name
@@ -79,6 +80,22 @@ def _expand_to_dof(values: tuple[float, ...], dof: int, what: str) -> list[float
     return list(values)
 
 
+def _stiff_friction(timestep_s: float) -> str:
+    """Joint attributes that make ``frictionloss`` stick.
+
+    MuJoCo's friction loss is a soft constraint: it delivers a fraction d of the force
+    that would stop the joint (``solimpfriction``, default 0.9) and relaxes towards rest
+    with a time constant (``solreffriction``, default 0.02 s). A joint held below its
+    friction torque then creeps at about ``(1 - d) tau / M x timeconst / 2`` (mrad/s on
+    the UR5) instead of sticking. d = ``FRICTION_IMPEDANCE`` and the smallest time
+    constant MuJoCo keeps stable (2 physics steps) make it stick-slip Coulomb friction:
+    creep below 1e-6 rad/s at a 1 ms step, while a sliding joint feels the full
+    ``frictionloss`` (+ viscous ``damping``), as before (tests/model/test_friction.py).
+    """
+    d = FRICTION_IMPEDANCE
+    return f' solreffriction="{2 * timestep_s!r} 1" solimpfriction="{d!r} {d!r} 0.001 0.5 2"'
+
+
 def build_mjcf(
     spec: RobotSpec,
     *,
@@ -87,6 +104,7 @@ def build_mjcf(
     obstacles: Sequence[Box] = (),
     excluded_pairs: Sequence[tuple[str, str]] | None = None,
     obstacle_bounds: bool = False,
+    integrator: str = PLANT_INTEGRATOR,
 ) -> str:
     """MJCF text for the robot on a pedestal, floor at ``FLOOR_Z_M``.
 
@@ -100,6 +118,9 @@ def build_mjcf(
     for ``mj_geomDistance``) and a capsule that encloses it takes its place, named
     ``<box>`` + ``BOUND_SUFFIX``: capsule pairs are exact within the margin, while
     MuJoCo's capsule–box collider misses pairs there (google-deepmind/mujoco#1473).
+
+    ``integrator`` is MuJoCo's (``PLANT_INTEGRATOR``: RK4; "Euler" is semi-implicit Euler
+    with implicit joint damping).
 
     A kinematics-only robot gets geometry-derived inertias (density 1000)
     so the model still compiles and steps; simulation code calls
@@ -118,7 +139,7 @@ def build_mjcf(
     out = [
         f"<mujoco model={quoteattr(spec.name)}>",
         '  <compiler angle="radian" autolimits="true" inertiafromgeom="auto"/>',
-        f'  <option timestep="{timestep_s!r}" integrator="Euler"/>',
+        f'  <option timestep="{timestep_s!r}" integrator="{integrator}"/>',
         '  <visual><global offwidth="1280" offheight="960"/></visual>',
         "  <worldbody>",
         f'    <geom name="ground" type="plane" pos="0 0 {FLOOR_Z_M!r}" size="3 3 0.05" '
@@ -157,7 +178,9 @@ def build_mjcf(
         out.append(
             f'{indent}  <joint name={quoteattr(joint.name)} type="hinge" pos="{_v(anchor)}" '
             f'axis="{_v(axis)}" range="{lim.lower!r} {lim.upper!r}" '
-            f'damping="{damping[i]!r}" frictionloss="{friction[i]!r}" armature="{armature[i]!r}"/>'
+            f'damping="{damping[i]!r}" frictionloss="{friction[i]!r}" armature="{armature[i]!r}"'
+            + (_stiff_friction(timestep_s) if friction[i] > 0 else "")
+            + "/>"
         )
         if joint.inertial is not None:
             inn = joint.inertial
@@ -237,9 +260,10 @@ def build_mujoco_model(
     plant: PlantOptions | None = None,
     obstacles: Sequence[Box] = (),
     obstacle_bounds: bool = False,
+    integrator: str = PLANT_INTEGRATOR,
 ) -> mujoco.MjModel:
     """Compile the spec into an ``MjModel`` with auto-reset on divergence disabled
-    (``obstacle_bounds``: see ``build_mjcf``).
+    (``obstacle_bounds``, ``integrator``: see ``build_mjcf``).
 
     Compiled models are cached per process (``compiled_model``), so the episodes of
     a campaign in one worker compile each plant and checker once; every call gets
@@ -252,6 +276,7 @@ def build_mujoco_model(
             plant=plant or PlantOptions(),
             obstacles=tuple(obstacles),
             obstacle_bounds=bool(obstacle_bounds),
+            integrator=str(integrator),
         )
     )
 
@@ -264,6 +289,7 @@ def compiled_model(
     plant: PlantOptions,
     obstacles: tuple[Box, ...],
     obstacle_bounds: bool,
+    integrator: str = PLANT_INTEGRATOR,
 ) -> mujoco.MjModel:
     """The cached compile behind ``build_mujoco_model`` (do not modify the result: copy it)."""
     xml = build_mjcf(
@@ -272,6 +298,7 @@ def compiled_model(
         plant=plant,
         obstacles=obstacles,
         obstacle_bounds=obstacle_bounds,
+        integrator=integrator,
     )
     try:
         model = mujoco.MjModel.from_xml_string(xml)

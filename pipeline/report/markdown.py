@@ -20,6 +20,7 @@ from pipeline.analysis.episodes import setting, shown_status
 from pipeline.analysis.findings import (
     SATURATION_WARN_FRACTION,
     physical_checks,
+    unsettled_joints,
     worst_saturation,
 )
 from pipeline.log.reader import Recording
@@ -160,6 +161,7 @@ def _intro(data: ReportData) -> list[str]:
     ]
     rows = []
     worst_sat = worst_saturation(data.metrics)
+    unsettled = unsettled_joints(data.metrics)
     listed = {r.episode for r in data.listed}
     table_rows = [r for r in data.episodes.iter_rows(named=True) if r["episode"] in listed]
     for row in table_rows[:MAX_ROWS]:
@@ -179,6 +181,7 @@ def _intro(data: ReportData) -> list[str]:
                 md.sci(row["start_abs_error_rad"], 1),
                 md.num(row["start_abs_effort_nm"], ".1f"),
                 NA if sat is None else f"{sat * 100:.1f} %",
+                unsettled.get(row["episode"], NA),
             ]
         )
     lines.append(
@@ -197,6 +200,7 @@ def _intro(data: ReportData) -> list[str]:
                 "|e| at start [rad]",
                 "|effort| at start [N m]",
                 "saturated (worst joint)",
+                "error at the target",
             ],
             rows,
         )
@@ -223,7 +227,11 @@ def _intro(data: ReportData) -> list[str]:
         f"{SATURATION_WARN_FRACTION * 100:.0f} %); *status* ok = stable (not diverged); "
         "*salvaged*: read with `--salvage` from a damaged file up to the damage (the share "
         "of the file, or of a `.db3`'s messages, not read); cut before its motion end, "
-        "such an episode takes no part in comparisons.",
+        "such an episode takes no part in comparisons. *Error at the target*: **not "
+        "settled** on the joints whose mean |e| changes between the two halves of the "
+        f"final window by more than {catalog.FINAL_DRIFT_REL:g} x it (and "
+        f"{catalog.DRIFT_FLOOR_RAD:g} rad): a transient, not a steady state (a longer "
+        "`hold_s` measures the steady state).",
     ]
     lines += physical_checks_section(physical_checks(data.recordings, data.protocol, data.metrics))
     failed = [r for r in recs if r.status != "ok"]

@@ -31,6 +31,7 @@ _PLANT_KEYS = (
     "velocity_noise_std_rad_s",
     "uncertainty",
     "physics_dt_s",
+    "integrator",
     "control_period_s",
 )
 

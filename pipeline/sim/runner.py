@@ -31,6 +31,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from pipeline.constants import PLANT_FRICTION, PLANT_INTEGRATOR
 from pipeline.control.base import Controller
 from pipeline.errors import SimulationError
 from pipeline.model.mjcf import PlantOptions, build_mujoco_model
@@ -53,6 +54,9 @@ _PER_JOINT_WARNINGS = frozenset(
     )
 )
 
+_INTEGRATORS = ("Euler", "RK4", "implicit", "implicitfast")
+"""MuJoCo's integrators, as MJCF names them."""
+
 ProgressFn = Callable[[float], None]
 
 
@@ -66,6 +70,7 @@ def run_episode(
     obstacles: Sequence[Box] = (),
     physics_dt_s: float = 0.001,
     control_period_steps: int = 1,
+    integrator: str = PLANT_INTEGRATOR,
     hold_s: float = 1.0,
     preroll_s: float = 0.0,
     plant_spec: RobotSpec | None = None,
@@ -94,6 +99,7 @@ def run_episode(
         obstacles: boxes added to the MuJoCo scene.
         physics_dt_s: MuJoCo time step [s].
         control_period_steps: physics steps per control update (torque held between).
+        integrator: MuJoCo's integrator ("RK4", "Euler", "implicit", "implicitfast").
         hold_s: time kept at the goal after the reference ends [s].
         preroll_s: time the start pose is held before the reference starts [s].
         plant_spec: the plant's robot (drawn link parameters, armature); None = ``spec``.
@@ -113,6 +119,7 @@ def run_episode(
         seed=seed,
         physics_dt_s=physics_dt_s,
         control_period_steps=control_period_steps,
+        integrator=integrator,
         hold_s=hold_s,
         preroll_s=preroll_s,
         position_noise_std_rad=position_noise_std_rad,
@@ -128,7 +135,11 @@ def run_episode(
             f"{spec.joint_names}"
         )
     model = build_mujoco_model(
-        plant_spec, timestep_s=physics_dt_s, plant=plant, obstacles=obstacles
+        plant_spec,
+        timestep_s=physics_dt_s,
+        plant=plant,
+        obstacles=obstacles,
+        integrator=integrator,
     )
     data = mujoco.MjData(model)
     dof = spec.dof
@@ -215,6 +226,8 @@ def run_episode(
         "physics_dt_s": float(physics_dt_s),
         "control_period_steps": int(control_period_steps),
         "control_period_s": float(control_dt_s),
+        "integrator": integrator,
+        "friction_model": PLANT_FRICTION,
         "reference_duration_s": duration_s,
         "hold_s": float(hold_s),
         "preroll_s": float(preroll_s),
@@ -398,6 +411,7 @@ def _check_settings(
     seed: int,
     physics_dt_s: float,
     control_period_steps: int,
+    integrator: str,
     hold_s: float,
     preroll_s: float,
     position_noise_std_rad: float,
@@ -421,6 +435,10 @@ def _check_settings(
         raise SimulationError(
             f"control_period_steps: expected an integer >= 1 (physics steps per control "
             f"update), got {control_period_steps!r}"
+        )
+    if integrator not in _INTEGRATORS:
+        raise SimulationError(
+            f"integrator: expected one of {', '.join(_INTEGRATORS)}, got {integrator!r}"
         )
     for name, value in (
         ("hold_s", hold_s),

@@ -131,6 +131,8 @@ def episode_settings(
         uncertainty=uncertainty,
         physics_dt_s=sim.physics_dt_s,
         control_period_s=sim.physics_dt_s * sim.control_period_steps,
+        integrator=str(result.extra["integrator"]),
+        friction_model=str(result.extra["friction_model"]),
     )
     # planning_time_s is wall clock: printed, never recorded (recordings are byte-reproducible)
     return EpisodeSettings(

@@ -115,6 +115,29 @@ def test_final_error_and_settling_time_after_the_motion_end(tmp_path: Path) -> N
     assert _value(m, "fin", 2, "final_error") == pytest.approx((250 * 5e-4 + 251 * 2e-4) / 501)
 
 
+def test_error_at_the_target_still_decaying_is_flagged_not_settled(tmp_path: Path) -> None:
+    """Joint 1 decays with a 0.2 s time constant through the final window (a transient,
+    not a steady state); joint 2 holds a constant offset (stuck by friction: settled);
+    joint 3 is numerical noise (below the floor: settled)."""
+    from pipeline.analysis.catalog import not_settled
+
+    stamp = time_grid(2.0, period_s=1e-3)
+    t = stamp / 1e9
+    err = np.zeros((t.size, N_JOINTS))
+    err[:, 0] = 1e-3 * np.exp(-np.clip(t - 1.0, 0.0, None) / 0.2)
+    err[:, 1] = 3e-3
+    err[:, 2] = 1e-9 * np.exp(-np.clip(t - 1.0, 0.0, None) / 0.2)
+    rec = read_recording(write_bag(tmp_path, _episode("tail", "pid", stamp, q=-err)))
+    m = _metrics([rec]).with_columns(flag=not_settled(pl.col("final_error"), pl.col("final_drift")))
+    early = (t >= 1.5 - 1e-9) & (t < 1.75 - 1e-9)
+    late = t >= 1.75 - 1e-9
+    drift = err[late, 0].mean() - err[early, 0].mean()
+    assert _value(m, "tail", 0, "final_drift") == pytest.approx(drift, rel=1e-9)
+    assert drift < -0.5 * _value(m, "tail", 0, "final_error")
+    assert [_value(m, "tail", j, "flag") for j in range(3)] == [True, False, False]
+    assert _value(m, "tail", 1, "final_drift") == pytest.approx(0.0, abs=1e-15)
+
+
 def test_final_window_is_half_the_hold_when_the_hold_is_short(tmp_path: Path) -> None:
     stamp = time_grid(1.2, period_s=1e-3)
     t = stamp / 1e9

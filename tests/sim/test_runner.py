@@ -52,12 +52,14 @@ def _ideal_double_integrators(result, kp, kd, dt_s, nstep):
 
 def test_ctc_with_a_perfect_model_is_exactly_a_bank_of_double_integrators(dynamic_robot):
     """Perfect nominal model, no friction, no noise: the nonlinear arm behaves as
-    qdd = qdd_r + Kd e' + Kp e (eq. 15-17), to rounding, over the whole episode."""
+    qdd = qdd_r + Kd e' + Kp e (eq. 15-17), to rounding, over the whole episode
+    (on semi-implicit Euler, which evaluates the dynamics once per step, where the
+    controller did)."""
     spec = dynamic_robot
     reference = QuinticReference.between(
         np.zeros(spec.dof), PAPER_GOAL_RAD[: spec.dof], duration_s=MOTION_S
     )
-    result = _run(spec, reference)
+    result = _run(spec, reference, integrator="Euler")
     assert result.ok, result.reason
     kp = np.array(result.extra["controller_settings"]["kp"])
     kd = np.array(result.extra["controller_settings"]["kd"])
@@ -65,19 +67,35 @@ def test_ctc_with_a_perfect_model_is_exactly_a_bank_of_double_integrators(dynami
     assert np.abs(result.q_true - ideal).max() < 1e-12
 
 
-def test_ctc_tracking_error_is_only_the_first_order_integration_error(ur5, reference):
-    """What is left is semi-implicit Euler's position update running dt/2 * qdd ahead
-    of the sampled velocity: e ~ zeta dt |qdd_r| / omega_n, halving with dt, ~1e-6 rad
-    at 10 kHz. Not a model error (previous test)."""
+def test_euler_ctc_tracking_error_is_only_the_first_order_integration_error(ur5, reference):
+    """On semi-implicit Euler what is left is its position update running dt/2 * qdd
+    ahead of the sampled velocity: e ~ zeta dt |qdd_r| / omega_n, halving with dt, ~1e-6
+    rad at 10 kHz. Not a model error (previous test)."""
     omega_n, zeta = 40.0, 1.0
     errors = {}
     for dt_s in (0.001, 0.0005, 0.0001):
-        result = _run(ur5, reference, physics_dt_s=dt_s)
+        result = _run(ur5, reference, physics_dt_s=dt_s, integrator="Euler")
         errors[dt_s] = np.abs(result.q_ref - result.q_true).max()
         predicted = zeta * dt_s * np.abs(result.qdd_ref).max() / omega_n
         assert errors[dt_s] == pytest.approx(predicted, rel=0.05)
     assert errors[0.001] / errors[0.0005] == pytest.approx(2.0, rel=0.05)
     assert errors[0.0001] < 5e-6
+
+
+def test_rk4_plant_leaves_ctc_only_the_sampling_error(ur5, reference):
+    """The default plant (RK4) under a 1 kHz zero-order-hold controller: CTC's residual
+    is the sampling's (the torque held while the arm moves), not the integrator's. It
+    does not move when the physics step halves or quarters at the same control rate,
+    and is over 10x below semi-implicit Euler's at the control period."""
+    errors = {}
+    for steps in (1, 2, 4):
+        result = _run(ur5, reference, physics_dt_s=0.001 / steps, control_period_steps=steps)
+        assert result.extra["integrator"] == "RK4"
+        errors[steps] = np.abs(result.q_ref - result.q_true).max()
+    assert errors[2] == pytest.approx(errors[4], rel=1e-3)
+    assert errors[1] == pytest.approx(errors[4], rel=1e-3)
+    euler = _run(ur5, reference, integrator="Euler")
+    assert np.abs(euler.q_ref - euler.q_true).max() > 10 * errors[4]
 
 
 @pytest.mark.parametrize("name", ["ctc", "pid", "pd_gravity"])
