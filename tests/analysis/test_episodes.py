@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.analysis.episodes import effort_limits, episode_table, robot_spec, setting
+from pipeline.analysis.episodes import episode_table, robot_spec
 from pipeline.log.reader import Recording, read_recording
+from pipeline.log.robot_facts import robot_facts
 from pipeline.model.dh import forward_kinematics
 from pipeline.robots import load_spec
 from tests.analysis.bagfactory import default_settings, paper_like, write_bag
@@ -36,7 +37,7 @@ def test_robot_dumped_as_dataclasses_is_understood_too(tmp_path: Path) -> None:
     rec = _recording(tmp_path, settings, "dc")
     spec = robot_spec(rec)
     assert spec is not None
-    assert effort_limits(rec, spec)["wrist_3_joint"] == 28.0
+    assert robot_facts(rec).effort_limits_nm["wrist_3_joint"] == 28.0
 
 
 def test_missing_settings_fall_back_to_metadata_and_na(tmp_path: Path) -> None:
@@ -46,7 +47,7 @@ def test_missing_settings_fall_back_to_metadata_and_na(tmp_path: Path) -> None:
     row = table.row(0, named=True)
     assert (row["controller"], row["scenario"], row["status"]) == ("pid", "paper", "ok")
     assert row["motion_end_s"] == pytest.approx(0.1)  # last planned point
-    assert setting(rec.settings, "planner", "planner") == "n/a"
+    assert rec.settings is None and not rec.notes  # absent: n/a, nothing to note
 
 
 def test_unusable_robot_settings_give_no_spec_and_raw_limits(tmp_path: Path) -> None:
@@ -58,5 +59,5 @@ def test_unusable_robot_settings_give_no_spec_and_raw_limits(tmp_path: Path) -> 
     }
     rec = _recording(tmp_path, settings, "raw")
     assert robot_spec(rec) is None
-    limits = effort_limits(rec, None)
+    limits = robot_facts(rec).effort_limits_nm
     assert limits["shoulder_pan_joint"] == 99.0 and limits["elbow_joint"] is None
