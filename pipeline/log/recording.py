@@ -210,7 +210,7 @@ class Recording:
 
     @property
     def status(self) -> str:
-        """"ok" or "diverged" as recorded; "ok" without settings (nothing says otherwise)."""
+        """ "ok" or "diverged" as recorded; "ok" without settings (nothing says otherwise)."""
         return self.settings.status if self.settings is not None else "ok"
 
     @property
