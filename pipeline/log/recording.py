@@ -150,7 +150,10 @@ class Recording:
         sample_count: ``/joint_states`` messages with a controller state (the rows of an
             undecimated ``samples`` frame per joint); None: count the frame.
         controller_sample_count: ``/controller_state`` messages; None: count the frame.
-        end_s: the last control-rate ``time_s`` of the recording [s]; None: from the frames.
+        end_s: the last control-rate ``time_s`` of the recording [s], on the frames' time
+            axis (from the first control-rate stamp as read; from the motion start once
+            :func:`pipeline.analysis.protocol.protocol_view` cut the pre-roll); None: from
+            the frames.
         control_period_s: median ``/controller_state`` period [s]; None: from the frames.
     """
 
@@ -210,7 +213,8 @@ class Recording:
 
     @property
     def status(self) -> str:
-        """ "ok" or "diverged" as recorded; "ok" without settings (nothing says otherwise)."""
+        """The recorded status, "ok" or "diverged"; "ok" without settings (nothing says
+        otherwise)."""
         return self.settings.status if self.settings is not None else "ok"
 
     @property
