@@ -61,3 +61,14 @@ def test_unusable_robot_settings_give_no_spec_and_raw_limits(tmp_path: Path) -> 
     assert robot_spec(rec) is None
     limits = robot_facts(rec).effort_limits_nm
     assert limits["shoulder_pan_joint"] == 99.0 and limits["elbow_joint"] is None
+
+
+def test_a_foreign_bag_gives_no_settings_and_its_own_urdf_facts(tmp_path: Path) -> None:
+    ep = paper_like("foreign", "jtc", duration_s=0.2)
+    ep.episode_metadata = False  # a bag we did not write (and without a URDF)
+    rec = read_recording(write_bag(tmp_path, ep))
+    assert rec.settings is None and not rec.armlab_metadata
+    assert any("no 'armlab.episode' metadata record" in n for n in rec.notes)
+    facts = robot_facts(rec)
+    assert (facts.name, facts.source, facts.spec) == (rec.robot, "urdf", None)
+    assert facts.effort_limits_nm == dict.fromkeys(rec.joint_names)  # unknown: no URDF
