@@ -14,20 +14,11 @@ MAX_LINES = 600
 LONG_MARK = "# long:"
 HEAD_LINES = 3
 
-# Cycles being broken on other branches (removed when issue 16 item 2 lands).
-KNOWN_CYCLES: frozenset[frozenset[str]] = frozenset()
-# Modules above MAX_LINES being split on other branches (removed when issue 16 item 2 lands).
-KNOWN_LONG: frozenset[str] = frozenset(
-    {
-        "pipeline/cli.py",
-        "pipeline/settings.py",
-    }
-)
+# Modules allowed above MAX_LINES without a reason (none).
+KNOWN_LONG: frozenset[str] = frozenset()
 
-# Private names imported across modules, outside issue 16's log layer (left for its closing pass).
-KNOWN_PRIVATE_IMPORTS: frozenset[tuple[str, str]] = frozenset(
-    {("pipeline.kinematics.jacobian", "pipeline.kinematics.limits._joints")}
-)
+# Private names allowed to be imported across modules (none).
+KNOWN_PRIVATE_IMPORTS: frozenset[tuple[str, str]] = frozenset()
 
 
 def _modules() -> dict[str, Path]:
@@ -143,11 +134,7 @@ def _cycle(graph: dict[str, set[str]], component: set[str]) -> list[str]:
 
 def test_the_package_has_no_import_cycle():
     graph = import_graph()
-    cycles = [
-        " -> ".join(_cycle(graph, c))
-        for c in _components(graph)
-        if frozenset(c) not in KNOWN_CYCLES
-    ]
+    cycles = [" -> ".join(_cycle(graph, c)) for c in _components(graph)]
     assert not cycles, "import cycles: " + "; ".join(cycles)
 
 

@@ -1,14 +1,12 @@
 """Per-episode facts from recordings: the episode table, effort limits, the robot spec.
 
-Everything is read from the recording's settings (tolerantly: an absent
-optional setting becomes null / "n/a", never a crash).
+Everything is read from the recording's typed settings, its metadata and its robot facts
+(:mod:`pipeline.log.robot_facts`): without settings (a bag we did not write, or settings
+breaking the contract) what they would give is null / "n/a", never a crash.
 """
 
 from __future__ import annotations
 
-import functools
-import json
-import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -16,10 +14,9 @@ import numpy as np
 import polars as pl
 
 from pipeline.analysis.protocol import ProtocolView
-from pipeline.errors import SpecError
 from pipeline.log.reader import Recording
-from pipeline.model.urdf_xml import urdf_effort_limits
-from pipeline.robots import RobotSpec, builtin_robot_names, load_spec, parse_spec
+from pipeline.log.robot_facts import robot_facts
+from pipeline.robots import RobotSpec
 
 EPISODE_COLUMNS = (
     "episode",
@@ -207,106 +204,20 @@ def _protocol_columns(view: ProtocolView | None) -> dict[str, Any]:
     }
 
 
-def _robot_dict_to_yaml_form(data: dict[str, Any]) -> dict[str, Any]:
-    """Accept a spec dumped with ``dataclasses.asdict`` as well as the YAML form."""
-    joints = []
-    for j in data.get("joints", []):
-        if not isinstance(j, dict):
-            return data
-        jj = dict(j)
-        dh = jj.get("dh")
-        if isinstance(dh, dict):
-            jj["dh"] = [dh.get("alpha"), dh.get("a"), dh.get("d"), dh.get("theta_offset")]
-        inertial = jj.get("inertial")
-        if isinstance(inertial, dict) and isinstance(inertial.get("inertia"), list | tuple):
-            m = inertial["inertia"]
-            if len(m) == 3 and all(isinstance(r, list | tuple) for r in m):
-                inertial = dict(inertial)
-                inertial["inertia"] = [m[0][0], m[1][1], m[2][2], m[0][1], m[0][2], m[1][2]]
-                jj["inertial"] = inertial
-        if "collision_radius" in jj:
-            jj["collision"] = {"radius": jj.pop("collision_radius")}
-        joints.append(jj)
-    out = {k: v for k, v in data.items() if k in ("name", "convention", "angle_unit")}
-    out["joints"] = joints
-    return out
-
-
-@functools.lru_cache(maxsize=64)
-def _parsed_spec(text: str) -> RobotSpec | None:
-    data = json.loads(text)
-    for candidate in (data, _robot_dict_to_yaml_form(data)):
-        try:
-            return parse_spec(candidate, source="settings.robot")
-        except (SpecError, TypeError, ValueError):
-            continue
-    return None
-
-
 def robot_spec(rec: Recording) -> RobotSpec | None:
-    """The robot as recorded in settings.robot; else the built-in robot of that name.
-
-    Returns None when neither is available (the report then skips what needs it), and
-    for a bag without our metadata: a URDF that names its robot ``ur5`` is not our ur5.
-    """
-    if not rec.armlab_metadata:
-        return None
-    data = rec.settings.get("robot")
-    if isinstance(data, dict):
-        # a campaign's episodes carry the same robot: parse it once
-        return _parsed_spec(json.dumps(data, sort_keys=True))
-    name = data if isinstance(data, str) else rec.robot
-    if name in builtin_robot_names():
-        return load_spec(name)
-    return None
-
-
-def effort_limits(rec: Recording, spec: RobotSpec | None) -> dict[str, float | None]:
-    """Effort limit [N m] per joint of the recording (None where unknown): from ``spec``,
-    else settings.robot; a bag without our metadata only from its own URDF."""
-    limits: dict[str, float | None] = dict.fromkeys(rec.joint_names)
-    data = rec.settings.get("robot")
-    if not rec.armlab_metadata or (spec is None and data is None):
-        # a bag we did not write (or ours without its robot): the limits its
-        # /robot_description (URDF) declares, never a built-in robot's of the same name
-        for name, urdf_limit in urdf_effort_limits(rec.robot_description or "").items():
-            if name in limits:
-                limits[name] = urdf_limit
-        return limits
-    if spec is not None:
-        for j in spec.joints:
-            if j.name in limits:
-                limits[j.name] = j.limits.effort
-        return limits
-    joints = data.get("joints") if isinstance(data, dict) else None
-    for j in joints if isinstance(joints, list) else []:
-        if not isinstance(j, dict):
-            continue
-        lim = j.get("limits")
-        value = lim.get("effort") if isinstance(lim, dict) else None
-        if j.get("name") in limits and isinstance(value, int | float) and math.isfinite(value):
-            limits[str(j["name"])] = float(value)
-    return limits
+    """The recording's robot spec (:func:`pipeline.log.robot_facts.robot_facts`); None when
+    it gives none (the report then skips what needs it)."""
+    return robot_facts(rec).spec
 
 
 def limits_table(recordings: Sequence[Recording]) -> pl.DataFrame:
     """Effort limit per episode and joint (null where unknown)."""
     rows = []
     for rec in recordings:
-        for joint, limit in effort_limits(rec, robot_spec(rec)).items():
+        for joint, limit in robot_facts(rec).effort_limits_nm.items():
             rows.append({"episode": rec.episode, "joint": joint, "effort_limit_nm": limit})
     return pl.DataFrame(
         rows,
         schema={"episode": pl.String, "joint": pl.String, "effort_limit_nm": pl.Float64},
         orient="row",
     )
-
-
-def setting(settings: dict[str, Any], *path: str, default: Any = "n/a") -> Any:
-    """A nested setting (``setting(s, "planner", "planner")``) or ``default``."""
-    node: Any = settings
-    for key in path:
-        if not isinstance(node, dict) or key not in node:
-            return default
-        node = node[key]
-    return default if node is None or node == "" else node

@@ -18,10 +18,10 @@ import numpy as np
 import polars as pl
 
 from pipeline.analysis.catalog import SETTLING_TOLERANCE_RAD, not_settled
-from pipeline.analysis.episodes import robot_spec
 from pipeline.analysis.protocol import ProtocolView
 from pipeline.control.registry import stiffness_gains
 from pipeline.log.reader import Recording
+from pipeline.log.robot_facts import robot_facts
 from pipeline.robots.spec import RobotSpec
 from pipeline.settings import EpisodeSettings
 
@@ -143,7 +143,7 @@ def physical_checks(
                 )
                 for c in st.safety.contacts
             ]
-        stiffness = stiffness_nm_per_rad(st, robot_spec(rec)) if st is not None else None
+        stiffness = stiffness_nm_per_rad(st, robot_facts(rec).spec) if st is not None else None
         for j, joint in enumerate(rec.joint_names):
             m = rows.get((rec.episode, joint), {})
             sat = m.get("saturation_fraction")

@@ -21,7 +21,7 @@ import numpy as np
 import polars as pl
 
 from pipeline.log.reader import Recording
-from pipeline.settings import EpisodeSettings, SettingsError
+from pipeline.settings import EpisodeSettings
 
 ERROR_SOURCE_TRUE = "true plant state"
 ERROR_SOURCE_MEASURED = "measured"
@@ -33,7 +33,8 @@ class ProtocolView:
 
     Attributes:
         recording: frames cut at the motion start, time from it, true state where recorded.
-        settings: the typed settings (None: absent or not following the contract).
+        settings: the recording's typed settings (None: absent or not following the
+            contract; the reader's notes say which).
         error_source: :data:`ERROR_SOURCE_TRUE` or :data:`ERROR_SOURCE_MEASURED`.
         motion_start_s: the pre-roll cut from the recording's start [s] (0 if none).
         start_abs_error_rad: max over joints of |e| at the motion start (None if unknown).
@@ -46,16 +47,6 @@ class ProtocolView:
     motion_start_s: float
     start_abs_error_rad: float | None
     start_abs_effort_nm: float | None
-
-
-def typed_settings(rec: Recording) -> tuple[EpisodeSettings | None, str]:
-    """The recording's settings under the contract, or None and why (a note; "" if absent)."""
-    if not rec.settings:
-        return None, ""
-    try:
-        return EpisodeSettings.from_dict(rec.settings), ""
-    except SettingsError as err:
-        return None, f"settings do not follow the recording contract ({err}): settings are n/a"
 
 
 def _true_state(frame: pl.DataFrame, *, error: bool) -> pl.DataFrame:
@@ -130,12 +121,13 @@ class Protocol:
 
 
 def protocol_of(rec: Recording) -> tuple[Protocol, EpisodeSettings | None, list[str]]:
-    """The protocol for ``rec``, its typed settings and the notes about them.
+    """The protocol for ``rec``, its typed settings and the notes the protocol adds (none:
+    the reader already noted settings that break the contract).
 
     The control period is the recording's (``rec.control_period_s``) where the reader
     gives it (a long recording read in windows), else the frames' median step.
     """
-    settings, note = typed_settings(rec)
+    settings = rec.settings
     start_s = settings.protocol.motion_start_s if settings is not None else 0.0
     if rec.control_period_s is not None:
         eps_s = 0.5 * rec.control_period_s if rec.control_period_s > 0 else 1e-9
@@ -143,7 +135,7 @@ def protocol_of(rec: Recording) -> tuple[Protocol, EpisodeSettings | None, list[
         n = max(len(rec.joint_names), 1)
         times = rec.controller_states.get_column("time_s").to_numpy()[::n]
         eps_s = 0.5 * float(np.median(np.diff(times))) if times.size > 1 else 1e-9
-    return Protocol(start_s, eps_s), settings, [note] if note else []
+    return Protocol(start_s, eps_s), settings, []
 
 
 def start_state(

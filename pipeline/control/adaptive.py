@@ -36,7 +36,7 @@ What is implemented, precisely:
   estimated inertia (positive definite, triangle inequality) is not enforced.
 
 ``estimates()`` returns ``theta_hat``; ``estimate_history()`` every ``HISTORY_EVERY``-th
-control step's; ``settings()`` adds the final per-link mass and armature estimates
+control step's; ``gains_in_effect()`` adds the final per-link mass and armature estimates
 (``estimates``), so a recording holds where the adaptation ended.
 """
 
@@ -54,8 +54,8 @@ from pipeline.control.base import (
     DEFAULT_ZETA,
     F64,
     GainSpec,
+    gains_as_json,
     resolve_tuned_gains,
-    settings_of,
 )
 from pipeline.errors import ParamsError
 from pipeline.model.urdf import build_pinocchio_model
@@ -117,7 +117,7 @@ class AdaptiveController:
 
     NAME = NAME
     GAINS = GAINS
-    REPORTS = ("estimates",)  # settings() also holds the final estimates (not a gain)
+    REPORTS = ("estimates",)  # gains_in_effect() also holds the final estimates (not a gain)
     DEFAULT_GAINS = staticmethod(default_gains)
 
     def __init__(
@@ -157,13 +157,17 @@ class AdaptiveController:
     def name(self) -> str:
         return NAME
 
-    def settings(self) -> dict[str, Any]:
+    def gains_in_effect(self) -> dict[str, Any]:
         n, p = self._n, PARAMS_PER_LINK
         estimates = {
             "mass_kg": [float(x) for x in self._theta[0 : n * p : p]],
             "armature_kg_m2": [float(x) for x in self._theta[n * p :]],
         }
-        return {**self._tuning.settings(), **settings_of(self._gains), "estimates": estimates}
+        return {
+            **self._tuning.knobs_in_effect(),
+            **gains_as_json(self._gains),
+            "estimates": estimates,
+        }
 
     def reset(self) -> None:
         """Back to the nominal parameters; forget the history."""

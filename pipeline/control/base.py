@@ -3,7 +3,7 @@
 A controller maps the measured state and the reference at one control instant
 to a commanded joint torque (before saturation). Gains come from
 ``params.yaml`` as scalars (all joints) or per-joint lists; they are checked
-once, here, and every controller reports all of them through ``settings()``
+once, here, and every controller reports all of them through ``gains_in_effect()``
 so a recording holds exactly what ran.
 """
 
@@ -44,7 +44,7 @@ class Controller(Protocol):
         """Registry name, e.g. ``"pid"``."""
         ...
 
-    def settings(self) -> dict[str, Any]:
+    def gains_in_effect(self) -> dict[str, Any]:
         """Every gain, JSON-serializable, per joint (lists) or flags."""
         ...
 
@@ -63,7 +63,7 @@ class GainSpec:
     """One accepted gain key.
 
     Attributes:
-        key: name in ``params.yaml`` and in ``settings()``.
+        key: name in ``params.yaml`` and in ``gains_in_effect()``.
         flag: a boolean switch instead of a per-joint number.
         nonnegative: refuse values < 0 (stiffness, damping, integral gains).
         unit: its unit, e.g. ``N m/rad`` (empty for flags and dimensionless gains).
@@ -164,7 +164,7 @@ class Tuning:
     zeta: float = DEFAULT_ZETA
     used: bool = True  # False when explicit gains overrode every tuned default
 
-    def settings(self) -> dict[str, float]:
+    def knobs_in_effect(self) -> dict[str, float]:
         """The knobs, if they chose any gain in effect (else they would mislead)."""
         return {"omega_n_rad_s": self.omega_n_rad_s, "zeta": self.zeta} if self.used else {}
 
@@ -211,7 +211,7 @@ def resolve_tuned_gains(
     return replace(tuning, used=not overridden), resolved
 
 
-def settings_of(gains: Mapping[str, Any]) -> dict[str, Any]:
+def gains_as_json(gains: Mapping[str, Any]) -> dict[str, Any]:
     """JSON-serializable copy of resolved gains (lists of floats, bools)."""
     return {k: (v if isinstance(v, bool) else [float(x) for x in v]) for k, v in gains.items()}
 
@@ -243,7 +243,7 @@ class NominalPDController:
     """Plumbing of the stateless ``kp``/``kd`` laws on the nominal Pinocchio model.
 
     A subclass names itself (``NAME``), points at its ``default_gains`` and
-    writes ``compute``; gains, settings and the model are handled here.
+    writes ``compute``; gains, ``gains_in_effect()`` and the model are handled here.
     """
 
     NAME: ClassVar[str]
@@ -266,8 +266,8 @@ class NominalPDController:
     def name(self) -> str:
         return self.NAME
 
-    def settings(self) -> dict[str, Any]:
-        return {**self._tuning.settings(), **settings_of(self._gains)}
+    def gains_in_effect(self) -> dict[str, Any]:
+        return {**self._tuning.knobs_in_effect(), **gains_as_json(self._gains)}
 
     def reset(self) -> None:
         """Stateless: nothing to forget."""

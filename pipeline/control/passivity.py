@@ -40,9 +40,9 @@ from pipeline.control.base import (
     F64,
     GainSpec,
     check_tuning,
+    gains_as_json,
     nominal_mass_diagonal,
     resolve_tuned_gains,
-    settings_of,
 )
 from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
@@ -118,8 +118,8 @@ class PassivityController:
     def name(self) -> str:
         return NAME
 
-    def settings(self) -> dict[str, Any]:
-        return {**self._tuning.settings(), **settings_of(self._gains)}
+    def gains_in_effect(self) -> dict[str, Any]:
+        return {**self._tuning.knobs_in_effect(), **gains_as_json(self._gains)}
 
     def reset(self) -> None:
         """Stateless: nothing to forget."""

@@ -27,9 +27,9 @@ from pipeline.control.base import (
     F64,
     GainSpec,
     check_tuning,
+    gains_as_json,
     nominal_mass_diagonal,
     resolve_tuned_gains,
-    settings_of,
 )
 from pipeline.errors import ParamsError
 from pipeline.robots.spec import RobotSpec
@@ -118,8 +118,8 @@ class PidController:
     def name(self) -> str:
         return self.NAME
 
-    def settings(self) -> dict[str, Any]:
-        return {**self._tuning.settings(), **settings_of(self._gains)}
+    def gains_in_effect(self) -> dict[str, Any]:
+        return {**self._tuning.knobs_in_effect(), **gains_as_json(self._gains)}
 
     def reset(self) -> None:
         self._i_term[:] = 0.0

@@ -12,7 +12,7 @@ and the JTC sends ``ff_velocity_scale * qd_ref(t) + command`` (no effort
 feed-forward; the setpoint is sampled at ``t``). With the default ``i_clamp = 0``
 the integral contributes nothing: a Humble JTC left at its defaults is a PD
 controller, and an arm under gravity sags by ``g / kp``. The controller says so
-once (a ``IntegralOffWarning``) and in its settings (``warning``).
+once (a ``IntegralOffWarning``) and in its ``gains_in_effect()`` (``warning``).
 
 The gains ``kp``, ``kd`` and ``ki`` follow ``pid``'s bandwidth design (Humble's own
 defaults are 0 for all three); ``i_clamp`` and the absent anti-windup are Humble's.
@@ -32,8 +32,8 @@ from pipeline.control.base import (
     DEFAULT_ZETA,
     F64,
     GainSpec,
+    gains_as_json,
     resolve_tuned_gains,
-    settings_of,
 )
 from pipeline.robots.spec import RobotSpec
 
@@ -81,7 +81,7 @@ class PidHumbleController:
 
     NAME = NAME
     GAINS = GAINS
-    REPORTS = ("warning",)  # settings() says when the integral is off (not a gain)
+    REPORTS = ("warning",)  # gains_in_effect() says when the integral is off (not a gain)
     DEFAULT_GAINS = staticmethod(default_gains)
 
     def __init__(
@@ -111,8 +111,8 @@ class PidHumbleController:
         """Whether the integral term can act on any joint (``ki != 0`` and ``i_clamp > 0``)."""
         return bool(((self._i_clamp > 0.0) & (self._ki != 0.0)).any())
 
-    def settings(self) -> dict[str, Any]:
-        out = {**self._tuning.settings(), **settings_of(self._gains)}
+    def gains_in_effect(self) -> dict[str, Any]:
+        out = {**self._tuning.knobs_in_effect(), **gains_as_json(self._gains)}
         if self._warning:
             out["warning"] = self._warning
         return out

@@ -9,7 +9,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from pipeline.kinematics.limits import _joints
+from pipeline.kinematics.limits import joint_vector
 from pipeline.model.chain import FLANGE
 from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
@@ -34,7 +34,7 @@ def jacobian(spec: RobotSpec, q: ArrayLike) -> Array:
     velocity [rad/s per rad/s] (Pinocchio ``LOCAL_WORLD_ALIGNED``).
     """
     model, data, fid = _pinocchio(spec)
-    qs = _joints(spec, q)
+    qs = joint_vector(spec, q)
     out: Array = np.array(
         pin.computeFrameJacobian(model, data, qs, fid, pin.LOCAL_WORLD_ALIGNED), dtype=float
     )

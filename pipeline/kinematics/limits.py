@@ -18,13 +18,13 @@ LIMIT_TOL_RAD = 1e-9
 
 def within_limits(spec: RobotSpec, q: ArrayLike, *, tol_rad: float = LIMIT_TOL_RAD) -> bool:
     """True if every joint of ``q`` [rad] is inside [lower - tol, upper + tol]."""
-    arr = _joints(spec, q)
+    arr = joint_vector(spec, q)
     return bool(np.all(arr >= spec.lower - tol_rad) and np.all(arr <= spec.upper + tol_rad))
 
 
 def check_joint_limits(spec: RobotSpec, q: ArrayLike, *, tol_rad: float = LIMIT_TOL_RAD) -> None:
     """Raise KinematicsError naming the first joint outside its limits."""
-    arr = _joints(spec, q)
+    arr = joint_vector(spec, q)
     for joint, value in zip(spec.joints, arr, strict=True):
         lim = joint.limits
         if not lim.lower - tol_rad <= value <= lim.upper + tol_rad:
@@ -75,7 +75,12 @@ def nearest_representative(q: Array, seed: Array, lower: Array, upper: Array) ->
     return np.array(out)
 
 
-def _joints(spec: RobotSpec, q: ArrayLike) -> Array:
+def joint_vector(spec: RobotSpec, q: ArrayLike) -> Array:
+    """``q`` as a flat float array of one value per joint [rad].
+
+    Raises:
+        KinematicsError: ``q`` does not hold exactly one value per joint of ``spec``.
+    """
     arr = np.asarray(q, dtype=float).reshape(-1)
     if arr.shape[0] != spec.dof:
         raise KinematicsError(

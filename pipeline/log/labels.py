@@ -1,11 +1,12 @@
 """A recording's labels: our ``armlab.episode`` metadata (else labels from the options or
-the bag's name), its settings, its URDF and the notes about them.
+the bag's name), its settings under the recording contract, its URDF and the notes about them.
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -13,8 +14,43 @@ from pipeline.constants import METADATA_EPISODE, TOPIC_ROBOT_DESCRIPTION
 from pipeline.log.collect import Collector, robot_description
 from pipeline.log.recording import ReadOptions
 from pipeline.model.urdf_xml import urdf_effort_limits, urdf_robot_name
+from pipeline.settings import EpisodeSettings, SettingsError
 
-__all__ = ["read_labels"]
+__all__ = ["Labels", "read_labels", "typed_settings"]
+
+
+@dataclass(frozen=True)
+class Labels:
+    """What a recording says about itself.
+
+    Attributes:
+        metadata: our metadata record (string key/values), else labels from the options
+            or the bag's name (and the robot name its URDF declares).
+        settings: the settings under the recording contract; None when absent (a bag we
+            did not write), unparseable or breaking the contract (``settings_notes`` says).
+        urdf: the URDF on the robot description topic, if recorded.
+        notes: what the labels, the URDF and the settings JSON gave rise to.
+        settings_notes: why settings that are there do not follow the contract (the
+            recording's last notes).
+        ours: the bag carries our ``armlab.episode`` metadata record.
+    """
+
+    metadata: dict[str, str]
+    settings: EpisodeSettings | None
+    urdf: str | None
+    notes: tuple[str, ...]
+    settings_notes: tuple[str, ...]
+    ours: bool
+
+
+def typed_settings(data: dict[str, Any]) -> tuple[EpisodeSettings | None, str]:
+    """Parsed settings JSON under the contract, or None and why (a note; "" if empty)."""
+    if not data:
+        return None, ""
+    try:
+        return EpisodeSettings.from_dict(data), ""
+    except SettingsError as err:
+        return None, f"settings do not follow the recording contract ({err}): settings are n/a"
 
 
 def read_labels(
@@ -23,9 +59,9 @@ def read_labels(
     options: ReadOptions,
     chosen: dict[str, str | None],
     names: Sequence[str],
-) -> tuple[dict[str, str], dict[str, Any], str | None, list[str], bool]:
-    """Metadata (ours, else labels), settings, the URDF, the notes about them and whether
-    the bag carries our metadata."""
+) -> Labels:
+    """Metadata (ours, else labels), typed settings, the URDF, the notes about them and
+    whether the bag carries our metadata."""
     notes: list[str] = []
     raw_meta = dict(collector.metadata.get(METADATA_EPISODE, {}))
     ours = METADATA_EPISODE in collector.metadata
@@ -67,7 +103,8 @@ def read_labels(
             + ("the command line" if any(labels.values()) else "the bag's name")
             + "; settings (gains, plant, planner, motion start) are n/a"
         )
-    return raw_meta, settings, urdf, notes, ours
+    typed, why = typed_settings(settings)
+    return Labels(raw_meta, typed, urdf, tuple(notes), (why,) if why else (), ours)
 
 
 def _limits_note(urdf: str | None, joints: Sequence[str], topic: str | None) -> str:

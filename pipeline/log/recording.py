@@ -16,6 +16,8 @@ import numpy as np
 import polars as pl
 from numpy.typing import NDArray
 
+from pipeline.settings import ControllerSettings, EpisodeSettings
+
 __all__ = [
     "CONTROLLER_STATE_COLUMNS",
     "F64",
@@ -117,7 +119,9 @@ class Recording:
         sha256: SHA-256 of the MCAP file (hex).
         size_bytes: size of the MCAP file.
         metadata: the ``armlab.episode`` metadata record (string key/values).
-        settings: ``metadata["settings"]`` parsed from JSON ({} if absent).
+        settings: ``metadata["settings"]`` under the recording contract; None when absent
+            (a bag we did not write), unparseable or breaking the contract (a note says
+            which): everything taken from it is then n/a.
         joint_names: joint order, as in ``/joint_states``.
         samples: tidy frame, columns :data:`SAMPLE_COLUMNS`, sorted by time then joint order:
             one row per ``/joint_states`` message and joint, with the ``/controller_state``
@@ -146,7 +150,10 @@ class Recording:
         sample_count: ``/joint_states`` messages with a controller state (the rows of an
             undecimated ``samples`` frame per joint); None: count the frame.
         controller_sample_count: ``/controller_state`` messages; None: count the frame.
-        end_s: the last control-rate ``time_s`` of the recording [s]; None: from the frames.
+        end_s: the last control-rate ``time_s`` of the recording [s], on the frames' time
+            axis (from the first control-rate stamp as read; from the motion start once
+            :func:`pipeline.analysis.protocol.protocol_view` cut the pre-roll); None: from
+            the frames.
         control_period_s: median ``/controller_state`` period [s]; None: from the frames.
     """
 
@@ -155,7 +162,7 @@ class Recording:
     sha256: str
     size_bytes: int
     metadata: dict[str, str]
-    settings: dict[str, Any]
+    settings: EpisodeSettings | None
     joint_names: tuple[str, ...]
     samples: pl.DataFrame
     controller_states: pl.DataFrame
@@ -180,12 +187,15 @@ class Recording:
         return episode_name(self.metadata, self.source)
 
     def meta(self, key: str, default: str = "n/a") -> str:
-        """A metadata value, falling back to settings, else ``default``."""
+        """A metadata value, falling back to the settings field of that name (a
+        controller's, scenario's or robot's name), else ``default``."""
         value = self.metadata.get(key)
         if value:
             return value
-        sv = self.settings.get(key)
-        if isinstance(sv, dict):
+        sv: Any = getattr(self.settings, key, None) if self.settings is not None else None
+        if isinstance(sv, ControllerSettings):
+            sv = sv.name
+        elif isinstance(sv, Mapping):
             sv = sv.get("name")
         return str(sv) if sv not in (None, "") else default
 
@@ -203,11 +213,14 @@ class Recording:
 
     @property
     def status(self) -> str:
-        return str(self.settings.get("status") or "ok")
+        """The recorded status, "ok" or "diverged"; "ok" without settings (nothing says
+        otherwise)."""
+        return self.settings.status if self.settings is not None else "ok"
 
     @property
     def reason(self) -> str:
-        return str(self.settings.get("reason") or "")
+        """Why the episode diverged ("" if ok or unknown)."""
+        return self.settings.reason if self.settings is not None else ""
 
     @property
     def trajectory_duration_s(self) -> float | None:
@@ -215,13 +228,9 @@ class Recording:
         trajectory's duration (settings.planner.trajectory_duration_s, else the last planned
         point's time_from_start), None if unknown. On the recording's own ``time_s`` axis the
         motion ends this much after ``protocol.motion_start_s`` (the pre-roll), which is what
-        :attr:`pipeline.settings.EpisodeSettings.motion_end_s` gives."""
-        planner = self.settings.get("planner")
-        if isinstance(planner, dict):
-            value = planner.get("trajectory_duration_s")
-            # a negative duration is no motion end (the settings contract flags it)
-            if isinstance(value, int | float) and np.isfinite(value) and value >= 0:
-                return float(value)
+        :attr:`pipeline.settings.EpisodeSettings.motion_end_from_first_sample_s` gives."""
+        if self.settings is not None:
+            return self.settings.planner.trajectory_duration_s
         if self.planned is not None and self.planned.times_s.size:
             return float(self.planned.times_s[-1])
         return None

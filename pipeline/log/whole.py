@@ -48,15 +48,13 @@ def read_whole(
     notes, lost_pct = read_notes(scanned, roles)
     notes += dropped_note(js_t.size - rows_js.size)
     notes += missing_array_notes(js_a, js_topic, JS_OPTIONAL)
-    raw_meta, settings, urdf, label_notes, ours = read_labels(
-        collector, source, options, roles.chosen, names
-    )
-    notes += label_notes
+    labels = read_labels(collector, source, options, roles.chosen, names)
+    notes += labels.notes
 
     # Relative times: wall-clock header stamps (1.7e9 s) would otherwise swamp float64
     # resolution and put the motion end (a duration from the start) 50 years early.
     t0_ns = int(min(js_t[0], cs_t[0]))
-    episode = episode_name(raw_meta, source)
+    episode = episode_name(labels.metadata, source)
     cs_all = cs_a
     error, feedback = error_feedback(cs_all)
     truth = roles.truth
@@ -112,20 +110,20 @@ def read_whole(
         mcap_path=mcap_path,
         sha256=scanned.sha256,
         size_bytes=scanned.size,
-        metadata=raw_meta,
-        settings=settings,
+        metadata=labels.metadata,
+        settings=labels.settings,
         joint_names=names,
         samples=samples,
         controller_states=controller_states,
         planned=planned_trajectory(collector, roles.chosen["planned_trajectory"]),
-        robot_description=urdf,
+        robot_description=labels.urdf,
         topic_counts=dict(collector.topic_counts),
         decoded_messages=roles.js_group.count
         + roles.cs_group.count
         + (truth.count if truth else 0),
-        notes=tuple(notes),
+        notes=(*notes, *labels.settings_notes),
         has_ground_truth=truth is not None,
         salvaged=bool(scanned.salvaged),
         salvage_lost_pct=lost_pct,
-        armlab_metadata=ours,
+        armlab_metadata=labels.ours,
     )

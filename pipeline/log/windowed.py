@@ -534,9 +534,7 @@ def read_windowed(
     gt_stats = first.stats[(str(gt_topic), roles.truth.names)] if roles.truth else None
     if gt_stats is not None:
         _refuse_unordered(gt_stats, str(gt_topic), limit)
-    raw_meta, settings, urdf, label_notes, ours = read_labels(
-        first, source, options, roles.chosen, roles.names
-    )
+    labels = read_labels(first, source, options, roles.chosen, roles.names)
     js_period = js_stats.period_ns()
 
     def scan_js(after: int, reach: float) -> int:
@@ -552,7 +550,7 @@ def read_windowed(
         cs_period_ns=cs_period,
         t0_ns=min(js_stats.first, cs_stats.first),
         end_ns=_end_ns(cs_stats, js_stats, js_period, scan_js),
-        episode=episode_name(raw_meta, source),
+        episode=episode_name(labels.metadata, source),
         decimation=max(1, math.ceil(steps / MAX_KEPT_STEPS)),
         window_steps=options.window_steps if options.window_steps > 0 else WINDOW_STEPS,
     )
@@ -581,20 +579,20 @@ def read_windowed(
         mcap_path=mcap_path,
         sha256=scanned.sha256,
         size_bytes=scanned.size,
-        metadata=raw_meta,
-        settings=settings,
+        metadata=labels.metadata,
+        settings=labels.settings,
         joint_names=roles.names,
         samples=windows._tidy(empty, dict.fromkeys(_SAMPLE_VALUES, no_rows)),
         controller_states=windows._tidy(empty, dict.fromkeys(_CS_VALUES, no_rows)),
         planned=planned_trajectory(first, roles.chosen["planned_trajectory"]),
-        robot_description=urdf,
+        robot_description=labels.urdf,
         topic_counts=dict(first.topic_counts),
         decoded_messages=js_stats.count + cs_stats.count + (gt_stats.count if gt_stats else 0),
-        notes=tuple(header_notes + label_notes),
+        notes=(*header_notes, *labels.notes, *labels.settings_notes),
         has_ground_truth=gt is not None,
         salvaged=bool(scanned.salvaged),
         salvage_lost_pct=lost_pct,
-        armlab_metadata=ours,
+        armlab_metadata=labels.ours,
         decimation=facts.decimation,
         controller_sample_count=cs_stats.count,
         end_s=(facts.end_ns - facts.t0_ns) * 1e-9,
@@ -621,7 +619,7 @@ def read_windowed(
     notes += empty_array_notes(
         {k for k, empty_all in windows.js_empty.items() if empty_all}, js_topic, JS_OPTIONAL
     )
-    notes += label_notes
+    notes += labels.notes
     if gt is not None:
         notes += truth_note(windows.no_truth, cs_topic)
     end_ns = facts.end_ns if windows.end_ns is None else windows.end_ns
@@ -635,7 +633,7 @@ def read_windowed(
         header,
         samples=samples,
         controller_states=states,
-        notes=tuple(notes),
+        notes=(*notes, *labels.settings_notes),
         windows=windows.count,
         sample_count=windows.pairs,
         end_s=(end_ns - facts.t0_ns) * 1e-9,

@@ -253,9 +253,9 @@ def _limit_note(ax: Axes, limit: float, lows: list[float], highs: list[float]) -
 
 
 def _effort_limit(data: ReportData, rec: Recording, joint: str) -> float | None:
-    from pipeline.analysis.episodes import effort_limits, robot_spec
+    from pipeline.log.robot_facts import robot_facts
 
-    return effort_limits(rec, robot_spec(rec)).get(joint)
+    return robot_facts(rec).effort_limits_nm.get(joint)
 
 
 def _position_with_inset(data: ReportData, recs: list[Recording], scenario: str) -> Figure:

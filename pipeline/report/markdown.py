@@ -16,7 +16,7 @@ import polars as pl
 
 from pipeline.analysis import catalog
 from pipeline.analysis.aggregate import CONFIDENCE, MeanCI
-from pipeline.analysis.episodes import setting, shown_status
+from pipeline.analysis.episodes import shown_status
 from pipeline.analysis.findings import (
     SATURATION_WARN_FRACTION,
     physical_checks,
@@ -135,8 +135,9 @@ def _salvaged_summary(data: ReportData) -> list[str]:
 
 def _intro(data: ReportData) -> list[str]:
     recs = data.recordings
-    versions = sorted({md.value(setting(r.settings, "package_version")) for r in recs})
-    commits = sorted({md.value(setting(r.settings, "git_commit")) for r in recs})
+    typed = [r.settings for r in recs]
+    versions = sorted({md.value(s.package_version if s else None) or md.NA for s in typed})
+    commits = sorted({md.value(s.git_commit if s else None) or md.NA for s in typed})
     lines = [
         "# Tracking report",
         "",

@@ -3,10 +3,11 @@ plant and each controller's gains as recorded."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import dataclasses
+import json
+from collections.abc import Mapping, Sequence
 from typing import Any
 
-from pipeline.analysis.episodes import setting
 from pipeline.analysis.findings import nominal_plant
 from pipeline.report import md
 from pipeline.report.inputs import ReportData
@@ -34,6 +35,19 @@ _PLANT_KEYS = (
     "integrator",
     "control_period_s",
 )
+
+
+def _as_recorded(node: Any) -> dict[str, Any]:
+    """A settings dataclass as its recording holds it: plain JSON data, keys sorted."""
+    data: dict[str, Any] = json.loads(json.dumps(dataclasses.asdict(node), sort_keys=True))
+    return data
+
+
+def _given(node: Mapping[str, Any], key: str) -> Any:
+    """A value of a mapping recorded as given (the scenario's params, the robot's YAML
+    form); None when absent or empty."""
+    value = node.get(key)
+    return None if value == "" else value
 
 
 def _settings_line(node: Any, first: Sequence[str], *, skip: Sequence[str] = ()) -> str:
@@ -87,27 +101,26 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
     exact = nominal_plant(recs, data.protocol)
     first = recs[0]
     s = first.settings
-    sc = setting(s, "scenario", default={})
-    planner = setting(s, "planner", default={})
+    sc: Mapping[str, Any] = s.scenario if s is not None else {}
+    planner = _as_recorded(s.planner) if s is not None else {}
+    plant = _as_recorded(s.plant) if s is not None else {}
 
     def pose(key: str) -> str:
-        # The planner records the joint-space start/goal it used; the scenario may hold a
-        # Cartesian goal instead.
-        value = setting(planner, key, default=None)
-        return md.value(value if value is not None else setting(sc, key))
+        # The planner records the joint-space start/goal it used.
+        return md.value(planner.get(key))
 
-    obstacles = setting(sc, "obstacles", default=[])
+    obstacles = sc.get("obstacles") or []
     lines = [
         "### Setup",
         "",
         f"- Robot: **{first.robot}** ({len(first.joint_names)} joints: "
         f"{', '.join(first.joint_names)}), DH convention "
-        f"{md.value(setting(s, 'robot', 'convention'))}.",
+        f"{md.value(_given(s.robot, 'convention') if s is not None else None)}.",
         f"- Start [rad]: {pose('start')}; goal [rad]: {pose('goal')}; "
         f"obstacles: {len(obstacles) if isinstance(obstacles, list) else md.NA}; "
-        f"hold after the motion: {md.value(setting(sc, 'hold_s'))} s.",
+        f"hold after the motion: {md.value(_given(sc, 'hold_s'))} s.",
         f"- Planner: {_planner_line(planner)}.",
-        f"- Plant: {_settings_line(setting(s, 'plant', default={}), _PLANT_KEYS, skip=('links',))}"
+        f"- Plant: {_settings_line(plant, _PLANT_KEYS, skip=('links',))}"
         + (
             "; link masses, centres of mass and inertias (and the armature above) drawn per "
             "episode seed, recorded in each bag's `settings.plant.links`."
@@ -123,9 +136,8 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
     ]
     rows = []
     for rec in recs:
-        ctrl = setting(rec.settings, "controller", default={})
-        gains = setting(ctrl, "gains", default=None)
-        shown = md.value(gains) if gains is not None else _settings_line(ctrl, (), skip=("name",))
+        gains = rec.settings.controller.gains if rec.settings is not None else None
+        shown = md.value(dict(gains)) if gains is not None else md.NA
         rows.append([rec.episode, rec.controller, shown, rec.meta("seed"), rec.status])
     if len(rows) > md.MAX_EPISODE_COLUMNS:
         # one row per controller and gains: seeds and statuses summarised

@@ -221,7 +221,7 @@ def run_episode(
     }
     extra: dict[str, Any] = {
         "controller": controller.name,
-        "controller_settings": controller.settings(),
+        "controller_settings": controller.gains_in_effect(),
         "seed": int(seed),
         "physics_dt_s": float(physics_dt_s),
         "control_period_steps": int(control_period_steps),

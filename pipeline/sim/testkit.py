@@ -1,7 +1,7 @@
 """The controller test kit: what any controller, built-in or plug-in, must do.
 
 ``pipeline check-controller NAME`` and :func:`assert_controller_ok` (for a pytest
-suite) run the same checks: the interface, output shape/dtype/finiteness, settings
+suite) run the same checks: the interface, output shape/dtype/finiteness, the gains in effect
 as JSON naming only declared gains, refusal of an undeclared gain, determinism,
 ``reset()`` forgetting state, and a short closed-loop episode on a small arm that
 stays bounded. It lives in ``sim/`` (not ``control/``) because the last check runs
@@ -42,7 +42,7 @@ class Finding:
     """One check of the kit.
 
     Attributes:
-        check: what was checked (``build``, ``interface``, ``output``, ``settings``,
+        check: what was checked (``build``, ``interface``, ``output``, ``gains_in_effect``,
             ``gains``, ``determinism``, ``reset``, ``closed_loop``).
         ok: whether the controller passed.
         detail: one line; why it failed, or what was measured.
@@ -89,7 +89,7 @@ def check_controller(
     if not out[-1].ok:
         return out
     out.append(_guard("output", lambda: _output(ctl, spec)))
-    out.append(_guard("settings", lambda: _settings(ctl, declared)))
+    out.append(_guard("gains_in_effect", lambda: _gains_in_effect(ctl, declared)))
     out.append(_guard("gains", lambda: _refuses_undeclared(name, spec)))
     out.append(_guard("determinism", lambda: _determinism(build, spec)))
     out.append(_guard("reset", lambda: _reset(build, spec)))
@@ -122,7 +122,7 @@ def _guard(check: str, run: Callable[[], str]) -> Finding:
 
 
 def _interface(ctl: Controller) -> str:
-    for attr in ("settings", "reset", "compute"):
+    for attr in ("gains_in_effect", "reset", "compute"):
         if not callable(getattr(ctl, attr, None)):
             raise _Fail(f"no method {attr}()")
     if not isinstance(getattr(ctl, "name", None), str):
@@ -168,23 +168,23 @@ def _output(ctl: Controller, spec: RobotSpec) -> str:
     return f"({spec.dof},) float64, finite"
 
 
-def _settings(ctl: Controller, declared: set[str]) -> str:
-    settings = ctl.settings()
-    if not isinstance(settings, dict):
-        raise _Fail(f"settings() returned {type(settings).__name__}, expected a dict")
+def _gains_in_effect(ctl: Controller, declared: set[str]) -> str:
+    gains = ctl.gains_in_effect()
+    if not isinstance(gains, dict):
+        raise _Fail(f"gains_in_effect() returned {type(gains).__name__}, expected a dict")
     try:
-        json.dumps(settings, allow_nan=False)
+        json.dumps(gains, allow_nan=False)
     except (TypeError, ValueError) as err:
-        raise _Fail(f"settings() is not JSON-serializable: {err}") from err
+        raise _Fail(f"gains_in_effect() is not JSON-serializable: {err}") from err
     # REPORTS: facts that are not gains (a warning, final estimates), declared by the class
     reports = set(getattr(type(ctl), "REPORTS", ()))
-    undeclared = sorted(set(settings) - declared - reports - set(TUNING_KEYS))
+    undeclared = sorted(set(gains) - declared - reports - set(TUNING_KEYS))
     if undeclared:
         raise _Fail(
-            f"settings() reports gains it does not declare: {', '.join(undeclared)} "
+            f"gains_in_effect() reports gains it does not declare: {', '.join(undeclared)} "
             f"(declared: {', '.join(sorted(declared))})"
         )
-    return f"{len(settings)} keys, JSON"
+    return f"{len(gains)} keys, JSON"
 
 
 def _refuses_undeclared(name: str, spec: RobotSpec) -> str:

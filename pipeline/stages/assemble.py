@@ -106,7 +106,7 @@ def episode_settings(
     Args:
         spec: the nominal robot (the controller's model).
         plant_spec: the robot as simulated (drawn inertials, armature).
-        gains: the controller's gains in effect (``Controller.settings()``).
+        gains: the controller's gains in effect (``Controller.gains_in_effect()``).
         origin: where the controller's code came from
             (:func:`pipeline.control.registry.controller_origin`).
         commit: the recording code's version (:func:`pipeline.stages.provenance.git_commit`).

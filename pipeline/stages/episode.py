@@ -164,7 +164,7 @@ def _run_and_write(
         spec=spec,
         plant_spec=plant_spec,
         uncertainty=uncertainty,
-        gains=controller.settings(),
+        gains=controller.gains_in_effect(),
         origin=controller_origin(episode.controller.type),
         path=path,
         trajectory=trajectory,

@@ -12,7 +12,7 @@ from pathlib import Path
 RECORD_CODE = (
     "__init__.py",
     "__main__.py",
-    "cli.py",
+    "cli",
     "constants.py",
     "errors.py",
     "fsutil.py",

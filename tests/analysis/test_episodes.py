@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.analysis.episodes import effort_limits, episode_table, robot_spec, setting
+from pipeline.analysis.episodes import episode_table, robot_spec
 from pipeline.log.reader import Recording, read_recording
+from pipeline.log.robot_facts import robot_facts
 from pipeline.model.dh import forward_kinematics
 from pipeline.robots import load_spec
 from tests.analysis.bagfactory import default_settings, paper_like, write_bag
@@ -36,7 +37,7 @@ def test_robot_dumped_as_dataclasses_is_understood_too(tmp_path: Path) -> None:
     rec = _recording(tmp_path, settings, "dc")
     spec = robot_spec(rec)
     assert spec is not None
-    assert effort_limits(rec, spec)["wrist_3_joint"] == 28.0
+    assert robot_facts(rec).effort_limits_nm["wrist_3_joint"] == 28.0
 
 
 def test_missing_settings_fall_back_to_metadata_and_na(tmp_path: Path) -> None:
@@ -46,7 +47,7 @@ def test_missing_settings_fall_back_to_metadata_and_na(tmp_path: Path) -> None:
     row = table.row(0, named=True)
     assert (row["controller"], row["scenario"], row["status"]) == ("pid", "paper", "ok")
     assert row["motion_end_s"] == pytest.approx(0.1)  # last planned point
-    assert setting(rec.settings, "planner", "planner") == "n/a"
+    assert rec.settings is None and not rec.notes  # absent: n/a, nothing to note
 
 
 def test_unusable_robot_settings_give_no_spec_and_raw_limits(tmp_path: Path) -> None:
@@ -58,5 +59,16 @@ def test_unusable_robot_settings_give_no_spec_and_raw_limits(tmp_path: Path) -> 
     }
     rec = _recording(tmp_path, settings, "raw")
     assert robot_spec(rec) is None
-    limits = effort_limits(rec, None)
+    limits = robot_facts(rec).effort_limits_nm
     assert limits["shoulder_pan_joint"] == 99.0 and limits["elbow_joint"] is None
+
+
+def test_a_foreign_bag_gives_no_settings_and_its_own_urdf_facts(tmp_path: Path) -> None:
+    ep = paper_like("foreign", "jtc", duration_s=0.2)
+    ep.episode_metadata = False  # a bag we did not write (and without a URDF)
+    rec = read_recording(write_bag(tmp_path, ep))
+    assert rec.settings is None and not rec.armlab_metadata
+    assert any("no 'armlab.episode' metadata record" in n for n in rec.notes)
+    facts = robot_facts(rec)
+    assert (facts.name, facts.source, facts.spec) == (rec.robot, "urdf", None)
+    assert facts.effort_limits_nm == dict.fromkeys(rec.joint_names)  # unknown: no URDF

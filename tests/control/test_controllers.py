@@ -119,7 +119,7 @@ def test_bad_gain_values_are_refused_with_the_key(ur5, gains, match):
 
 def test_scalar_gain_applies_to_every_joint_and_settings_report_every_gain(ur5):
     ctl = make_controller("pid", ur5, {"kp": 100.0, "ff_velocity_scale": [0, 0, 0, 0, 0, 0.5]})
-    settings = ctl.settings()
+    settings = ctl.gains_in_effect()
     assert set(settings) == {
         "kp",
         "ki",
@@ -140,7 +140,7 @@ def test_scalar_gain_applies_to_every_joint_and_settings_report_every_gain(ur5):
 
 @pytest.mark.parametrize("name", ["ctc", "pd_gravity"])
 def test_model_based_settings_are_json_and_complete(ur5, name):
-    settings = make_controller(name, ur5).settings()
+    settings = make_controller(name, ur5).gains_in_effect()
     assert set(settings) == {"kp", "kd", "omega_n_rad_s", "zeta"}
     assert json.loads(json.dumps(settings)) == settings
 
@@ -188,8 +188,8 @@ def test_ctc_makes_the_mujoco_plant_accelerate_exactly_as_commanded(dynamic_robo
     """Eq. 15: with the nominal model equal to the plant, qdd = qdd_r + Kd e' + Kp e."""
     spec = dynamic_robot
     ctl = make_controller("ctc", spec, {"kp": [50.0, 80, 120, 200, 300, 400], "kd": 14.0})
-    kp = np.array(ctl.settings()["kp"])
-    kd = np.array(ctl.settings()["kd"])
+    kp = np.array(ctl.gains_in_effect()["kp"])
+    kd = np.array(ctl.gains_in_effect()["kd"])
     model = build_mujoco_model(spec)
     # random poses put links through the floor and each other: contact forces are
     # not part of eq. 15
@@ -282,13 +282,13 @@ def test_tuning_knobs_choose_the_defaults_and_explicit_gains_override_them(ur5, 
     first, second = [g.key for g in CONTROLLERS[name].gain_specs if not g.flag][:2]
     fast = make_controller(name, ur5, {"omega_n_rad_s": 60.0, "zeta": 0.8})
     expected = default_gains(ur5, name, omega_n_rad_s=60.0, zeta=0.8)
-    settings = fast.settings()
+    settings = fast.gains_in_effect()
     assert settings["omega_n_rad_s"] == 60.0 and settings["zeta"] == 0.8
     for key, value in expected.items():
         assert np.broadcast_to(settings[key], ur5.dof) == pytest.approx(
             np.broadcast_to(value, ur5.dof)
         )
-    override = make_controller(name, ur5, {"omega_n_rad_s": 60.0, first: 5.0}).settings()
+    override = make_controller(name, ur5, {"omega_n_rad_s": 60.0, first: 5.0}).gains_in_effect()
     assert override[first] == [5.0] * ur5.dof
     assert np.broadcast_to(override[second], ur5.dof) == pytest.approx(
         np.broadcast_to(default_gains(ur5, name, omega_n_rad_s=60.0)[second], ur5.dof)
@@ -296,7 +296,7 @@ def test_tuning_knobs_choose_the_defaults_and_explicit_gains_override_them(ur5, 
 
 
 def test_tuning_knobs_are_not_reported_when_explicit_gains_override_them_all(ur5):
-    settings = make_controller("ctc", ur5, {"kp": 900.0, "kd": 60.0}).settings()
+    settings = make_controller("ctc", ur5, {"kp": 900.0, "kd": 60.0}).gains_in_effect()
     assert "omega_n_rad_s" not in settings and "zeta" not in settings
     assert settings["kp"] == [900.0] * ur5.dof
 

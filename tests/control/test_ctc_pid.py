@@ -43,7 +43,7 @@ def test_default_clamp_lets_the_integral_ask_for_half_the_effort_limit(ur5):
 
 
 def test_settings_are_json_complete_and_bad_gains_are_refused(ur5):
-    settings = make_controller("ctc_pid", ur5).settings()
+    settings = make_controller("ctc_pid", ur5).gains_in_effect()
     assert set(settings) == {"kp", "kd", "ki", "i_clamp", "omega_n_rad_s", "zeta"}
     assert json.loads(json.dumps(settings)) == settings
     with pytest.raises(ParamsError, match=r"^gains\.i_clamp: must be >= 0"):
@@ -157,8 +157,8 @@ class _Recording:
         self.name = inner.name
         self.states = []
 
-    def settings(self):
-        return self.inner.settings()
+    def gains_in_effect(self):
+        return self.inner.gains_in_effect()
 
     def reset(self):
         self.inner.reset()
@@ -182,7 +182,11 @@ def test_clamp_limits_windup_while_the_torques_saturate(ur5):
         result = run_episode(ur5, reference=reference, controller=ctl, seed=0, hold_s=1.5)
         assert result.ok, result.reason
         assert result.saturated[:, 0].sum() > 20
-        runs[label] = (result, np.array(ctl.states), np.array(ctl.inner.settings()["i_clamp"]))
+        runs[label] = (
+            result,
+            np.array(ctl.states),
+            np.array(ctl.inner.gains_in_effect()["i_clamp"]),
+        )
     result, states, clamp = runs["clamped"]
     assert (np.abs(states) <= clamp + 1e-15).all()
     assert np.isclose(np.abs(states[:, 0]).max(), clamp[0])  # the clamp was reached

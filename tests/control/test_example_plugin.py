@@ -71,8 +71,9 @@ def _origins(out: Path) -> dict[str, dict[str, str]]:
     recs = {}
     for bag in sorted((out / "c").iterdir()):
         if bag.is_dir() and not bag.name.startswith("."):
-            controller = read_recording(bag).settings["controller"]
-            recs[controller["name"]] = controller["origin"]
+            settings = read_recording(bag).settings
+            assert settings is not None
+            recs[settings.controller.name] = dict(settings.controller.origin)
     return recs
 
 

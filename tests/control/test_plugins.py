@@ -62,7 +62,7 @@ def test_a_built_in_resolves_to_its_registry_entry_with_a_builtin_origin():
 def test_an_installed_entry_point_resolves_and_names_its_distribution(installed, ur5):
     assert {"fake_pd", "fake_broken"} <= set(installed_controllers())
     ctl = make_controller("fake_pd", ur5, {"kp": 10.0})
-    assert ctl.name == "good_pd" and ctl.settings()["kp"] == [10.0] * 6
+    assert ctl.name == "good_pd" and ctl.gains_in_effect()["kp"] == [10.0] * 6
     origin = controller_origin("fake_pd")
     assert origin["kind"] == "entry_point"
     assert (origin["distribution"], origin["version"]) == ("armlab_fake_plugin", "1.2.3")

@@ -90,9 +90,9 @@ def test_pid_ff_adds_mujocos_inverse_dynamics_of_the_next_reference_sample(ur5):
 
 
 def test_pid_ff_pid_part_and_gains_are_the_pids(ur5):
-    settings = make_controller("pid_ff", ur5).settings()
+    settings = make_controller("pid_ff", ur5).gains_in_effect()
     assert settings.pop("ff_at_next_sample") is True
-    assert settings == make_controller("pid", ur5).settings()
+    assert settings == make_controller("pid", ur5).gains_in_effect()
     with pytest.raises(ParamsError, match=r"^gains\.ff_at_next_sample: expected true or false"):
         make_controller("pid_ff", ur5, {"ff_at_next_sample": 1})
 
@@ -108,9 +108,9 @@ def test_pid_humble_integral_is_off_by_default_and_equals_pid_with_ki_zero(ur5, 
         warnings.simplefilter("error")
         make_controller("pid_humble", ur5)  # printed once per process, not per controller
     assert not humble.integral_on
-    assert "integral" in humble.settings()["warning"]
-    assert humble.settings()["i_clamp"] == [0.0] * 6
-    assert humble.settings()["ki"] == make_controller("pid", ur5).settings()["ki"]
+    assert "integral" in humble.gains_in_effect()["warning"]
+    assert humble.gains_in_effect()["i_clamp"] == [0.0] * 6
+    assert humble.gains_in_effect()["ki"] == make_controller("pid", ur5).gains_in_effect()["ki"]
     pid = make_controller("pid", ur5, {"ki": 0.0})
     for state in _random_states(3, count=20):  # the integral state would build up here
         np.testing.assert_array_equal(
@@ -126,7 +126,7 @@ def test_pid_humble_clamps_only_the_integral_output_as_without_antiwindup(ur5):
     pid = make_controller(
         "pid", ur5, {**common, "antiwindup": False, "i_clamp_min": -0.2, "i_clamp_max": 0.2}
     )
-    assert humble.integral_on and "warning" not in humble.settings()
+    assert humble.integral_on and "warning" not in humble.gains_in_effect()
     zero, one = np.zeros(6), np.ones(6)
     for _ in range(30):  # wind up: ki dt e = 0.5 per step
         np.testing.assert_allclose(
@@ -183,7 +183,7 @@ def test_passivity_default_gains_put_the_cascade_poles_at_the_target(ur5):
     mass = np.zeros((6, 6))
     mujoco.mj_fullM(model, data, mass)
     for w, zeta in ((40.0, 1.0), (25.0, 1.5)):
-        g = make_controller("passivity", ur5, {"omega_n_rad_s": w, "zeta": zeta}).settings()
+        g = make_controller("passivity", ur5, {"omega_n_rad_s": w, "zeta": zeta}).gains_in_effect()
         poles = np.sort(np.stack([g["lambda"], np.array(g["kd"]) / np.diag(mass)]), axis=0)
         target = np.sort(-np.real(np.roots([1.0, 2 * zeta * w, w**2])))
         np.testing.assert_allclose(poles, np.repeat(target[:, None], 6, axis=1), rtol=1e-9)

@@ -79,10 +79,10 @@ class ForgetsNothing(GoodPd):
 
 
 class ReportsUndeclared(GoodPd):
-    """Its settings() name a gain it does not declare."""
+    """Its gains_in_effect() name a gain it does not declare."""
 
-    def settings(self) -> dict[str, Any]:
-        return {**super().settings(), "secret_gain": 1.0}
+    def gains_in_effect(self) -> dict[str, Any]:
+        return {**super().gains_in_effect(), "secret_gain": 1.0}
 
 
 class AcceptsAnyGain(GoodPd):
@@ -108,7 +108,8 @@ def test_a_module_object_controller_passes_the_kit():
     findings = check_controller(f"{HERE}:GoodPd")
     assert all(f.ok for f in findings), findings
     assert [f.check for f in findings] == [
-        "build", "interface", "output", "settings", "gains", "determinism", "reset", "closed_loop"
+        "build", "interface", "output", "gains_in_effect", "gains", "determinism", "reset",
+        "closed_loop",
     ]  # fmt: skip
 
 
@@ -119,7 +120,7 @@ def test_a_module_object_controller_passes_the_kit():
         ("NonDeterministic", "determinism", "two fresh instances differ"),
         ("Unstable", "closed_loop", ""),
         ("ForgetsNothing", "reset", "after reset()"),
-        ("ReportsUndeclared", "settings", "gains it does not declare: secret_gain"),
+        ("ReportsUndeclared", "gains_in_effect", "gains it does not declare: secret_gain"),
         ("AcceptsAnyGain", "gains", "accepted a gain it does not declare"),
     ],
 )

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +41,7 @@ def _write(path: Path, result: EpisodeResult, planned: TrajectorySamples, **kw: 
         "controller": "ctc",
         "robot": "ur5",
         "seed": "3",
-        "settings": json.dumps({"status": "ok", "planner": {"trajectory_duration_s": 0.5}}),
+        "settings": "{}",  # none: the writer's round trip, not the recording contract
     }
     write_episode_bag(
         path, spec=load_spec("ur5"), result=result, planned=planned, metadata=meta, **kw

@@ -174,7 +174,7 @@ class _NanAfter:
         self._inner = make_controller("ctc", spec)
         self._t_s, self._joint, self._now = t_s, joint, 0.0
 
-    def settings(self):
+    def gains_in_effect(self):
         return {}
 
     def reset(self):
@@ -334,7 +334,7 @@ def test_reference_without_sample_many_gives_the_same_episode(ur5, reference):
 class _Zero:
     name = "zero"
 
-    def settings(self):
+    def gains_in_effect(self):
         return {}
 
     def reset(self):

@@ -126,7 +126,7 @@ def test_a_swept_tuning_knob_replaces_the_explicit_gains_it_derives():
     ctc = next(e for e in episodes if e.controller_name == "ctc" and e.campaign
                and e.campaign.swept["gains.omega_n_rad_s"] == 30)  # fmt: skip
     assert "kp" not in ctc.controller.gains  # params.yaml gives ctc explicit kp/kd
-    gains = make_controller("ctc", load_spec("ur5"), ctc.controller.gains).settings()
+    gains = make_controller("ctc", load_spec("ur5"), ctc.controller.gains).gains_in_effect()
     assert gains["kp"] == pytest.approx([30.0**2] * 6)  # CTC's poles: kp = w^2, kd = 2 zeta w
     assert gains["kd"] == pytest.approx([2 * 30.0] * 6)
 

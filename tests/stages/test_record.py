@@ -258,11 +258,11 @@ def test_a_soft_pid_landing_on_a_shelf_is_flagged_in_summary_recording_and_repor
     assert run.returncode == 0, run.stderr
     assert "warning: shelf-soft: contact during execution: touched shelf" in run.stderr
 
-    from pipeline.analysis.protocol import typed_settings
     from pipeline.log.reader import read_recording
 
-    settings, note = typed_settings(read_recording(out / "shelf-soft"))
-    assert settings is not None, note
+    rec = read_recording(out / "shelf-soft")
+    settings = rec.settings
+    assert settings is not None, rec.notes
     (contact,) = [c for c in settings.safety.contacts if c.bodies == ("elbow_link", "shelf")]
     assert contact.kind == "obstacle" and 1e-4 < contact.max_depth_m < 0.02
     assert contact.first_ns < settings.protocol.motion_start_s * 1e9  # while holding the start

@@ -1,0 +1,92 @@
+"""The ``pipeline`` command: a thin Typer app. Parse, call, print, exit code.
+
+Errors that are the user's input (:class:`PipelineError`) print one
+``error: ...`` line and exit 1; ``--debug`` shows the traceback instead.
+
+Each command group is a module registered on the one Typer app (:mod:`pipeline.cli.root`):
+:mod:`~pipeline.cli.kinematics` (``robots``, ``fk``, ``ik``, ``ik-check``),
+:mod:`~pipeline.cli.teach`, :mod:`~pipeline.cli.controllers` (``check-controller``),
+:mod:`~pipeline.cli.record` (``record``, ``campaigns``) and :mod:`~pipeline.cli.report`.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+from typing import NoReturn
+
+from pipeline.cli.root import app, console
+
+# isort: off
+# the command modules register their commands on ``app``; `pipeline --help` lists them in
+# this order
+from pipeline.cli import kinematics, teach, controllers, record, report
+
+# isort: on
+from pipeline.errors import (
+    EXIT_INTERRUPTED,
+    EXIT_TERMINATED,
+    PipelineError,
+    handle_sigterm,
+    interrupt_exit,
+)
+
+__all__ = ["app", "console", "controllers", "kinematics", "main", "record", "report", "teach"]
+
+
+def _interrupt_in_chain(err: BaseException) -> KeyboardInterrupt | None:
+    """The KeyboardInterrupt (Ctrl-C, or :class:`Terminated` for SIGTERM) anywhere in the
+    exception's cause chain, or None."""
+    seen: set[int] = set()
+    cause: BaseException | None = err
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return cause
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return None
+
+
+def _stop(err: BaseException) -> NoReturn:
+    """One line (``interrupted`` or ``terminated``) and 130 or 143."""
+    word, code = interrupt_exit(err)
+    sys.stderr.write(f"{word}\n")
+    sys.exit(code)
+
+
+def main() -> None:
+    """Console-script entry point."""
+    debug = "--debug" in sys.argv[1:]
+    if debug:  # accepted anywhere on the line, not only before the command
+        sys.argv = [sys.argv[0], "--debug", *(a for a in sys.argv[1:] if a != "--debug")]
+    # A job started in the background by a non-interactive shell inherits SIGINT ignored;
+    # `kill -INT` must still stop a run (and say what it finished).
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    handle_sigterm()  # SIGTERM takes Ctrl-C's path: the same cleanup, then 143
+    try:
+        app()
+    except SystemExit as exit_:
+        if exit_.code == EXIT_INTERRUPTED:  # typer ends a command's Ctrl-C silently with 130
+            _stop(_interrupt_in_chain(exit_) or KeyboardInterrupt())
+        raise
+    except KeyboardInterrupt as err:
+        if debug:
+            raise
+        _stop(err)
+    except ImportError as err:
+        # Ctrl-C inside a C extension's module init surfaces as "initialization failed"
+        interrupt = _interrupt_in_chain(err)
+        if debug or interrupt is None:
+            raise
+        _stop(interrupt)
+    except PipelineError as err:
+        if debug:
+            raise
+        code = getattr(err, "exit_code", 1)
+        if code in (EXIT_INTERRUPTED, EXIT_TERMINATED):  # record's Interrupted
+            sys.stderr.write(f"{err}\n")
+            sys.exit(code)
+        sys.stderr.write(f"error: {err}\n")
+        sys.exit(1)

@@ -1,0 +1,322 @@
+"""``pipeline record`` and ``pipeline campaigns``: plan, simulate and record episodes and
+campaigns, and list the campaigns of a params file."""
+
+from __future__ import annotations
+
+import sys
+from typing import Annotated, Any, Literal
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from pipeline.cli.root import app, console, print_json
+from pipeline.errors import (
+    PipelineError,
+)
+
+
+@app.command("record")
+def record_cmd(
+    params: Annotated[
+        str, typer.Option("--params", help="Scenarios, controllers and episodes (YAML).")
+    ] = "params.yaml",
+    out: Annotated[
+        str, typer.Option("--out", help="Directory that receives one ROS 2 bag per episode.")
+    ] = "recordings",
+    only: Annotated[
+        list[str] | None,
+        typer.Option("--only", help="Run only this episode (repeatable). Default: all."),
+    ] = None,
+    jobs: Annotated[
+        int, typer.Option("--jobs", "-j", min=1, help="Episodes run in parallel (processes).")
+    ] = 1,
+    force: Annotated[
+        bool, typer.Option("--force", help="Overwrite recordings that already exist.")
+    ] = False,
+    ros_distro: Annotated[
+        str | None,
+        typer.Option(
+            "--ros-distro",
+            help="Write the message definitions and metadata of this ROS 2 distribution "
+            "(jazzy or humble) so its subscribers decode every topic. Default: sim.ros_distro "
+            "in PARAMS (jazzy).",
+        ),
+    ] = None,
+    campaign: Annotated[
+        str | None,
+        typer.Option(
+            "--campaign",
+            help="Run this campaign of PARAMS into OUT/<campaign>/ (see `pipeline campaigns`); "
+            "a re-run skips the episodes already recorded.",
+        ),
+    ] = None,
+    executor: Annotated[
+        str,
+        typer.Option("--executor", help="local (processes, --jobs) or ray (a Ray instance)."),
+    ] = "local",
+    address: Annotated[
+        str | None,
+        typer.Option("--address", help="Ray cluster to join (e.g. auto); default: start one."),
+    ] = None,
+) -> None:
+    """Plan, simulate and record every episode in PARAMS as a ROS 2 bag (MCAP).
+
+    Each scenario is planned once (OMPL RRTConnect, seeded), time-parameterized
+    (TOPP-RA), then run in MuJoCo under each controller. Each episode's bag is
+    written atomically to OUT/<episode>/ (the episode's key in PARAMS). If a
+    selected episode's bag already exists, nothing runs unless --force (or pick
+    others with --only). Exits 1 if any episode failed, after writing the others.
+    Episodes that would not fit in memory (or run over 2 h) are refused before any
+    work. One run per OUT at a time; Ctrl-C exits 130 and says which episodes were
+    recorded.
+    With --campaign, runs that campaign instead of the hand-listed episodes.
+    """
+    from pathlib import Path
+
+    if ros_distro is not None:
+        _ros_distro(ros_distro)  # refused before any work
+    from pipeline.stages.executors import EXECUTORS
+
+    if executor not in EXECUTORS:
+        raise PipelineError(f"--executor: expected {' or '.join(EXECUTORS)}, got '{executor}'")
+    if address is not None and executor != "ray":
+        raise PipelineError("--address: only with --executor ray")
+    if campaign is not None:
+        if only:
+            raise PipelineError("--only: not with --campaign (a campaign runs whole)")
+        _record_campaign(params, campaign, out=Path(out), jobs=jobs, force=force,
+                         executor=executor, address=address, ros_distro=ros_distro)  # fmt: skip
+        return
+
+    from pipeline.fsutil import OutputLock
+    from pipeline.params import load_params
+    from pipeline.stages.record import check_outputs_free, prepare
+
+    loaded = load_params(params)
+    if not loaded.episodes:
+        names = ", ".join(loaded.campaigns)
+        raise PipelineError(
+            f"{params}: no hand-listed episodes; run a campaign with --campaign NAME ({names})"
+        )
+    if ros_distro is not None:
+        loaded = loaded.with_ros_distro(_ros_distro(ros_distro))
+    # every input error first: a refused run creates nothing
+    selected = prepare(loaded, out_dir=Path(out), only=only, force=force, jobs=jobs)
+    # One run per --out at a time: two runs would mix episodes of two params files.
+    with OutputLock(Path(out), command="`pipeline record`"):
+        check_outputs_free(selected, Path(out), force=force)  # again, now that we own it
+        outcomes = _record_with_progress(loaded, selected, out=Path(out), jobs=jobs,
+                                         force=force, executor=executor,
+                                         address=address)  # fmt: skip
+    table = Table("episode", "status", "max |e| (rad)", "final |e| (rad)", "sim (s)", "wall (s)")
+    for o in outcomes:
+        table.add_row(
+            o.name,
+            o.status if o.status == "ok" else f"[red]{o.status}[/red]",
+            f"{o.max_abs_error_rad:.3e}",
+            f"{o.final_abs_error_rad:.3e}",
+            f"{o.duration_s:.2f}",
+            f"{o.wall_s:.2f}",
+        )
+    console.print(table)
+    for o in outcomes:
+        if o.contact:
+            sys.stderr.write(f"warning: {o.name}: contact during execution: {o.contact}\n")
+    failed = [o for o in outcomes if o.status != "ok"]
+    for o in failed:
+        sys.stderr.write(f"error: {o.name}: {o.reason}\n")
+    if failed:
+        raise typer.Exit(1)
+    console.print(f"wrote {len(outcomes)} recording(s) to {out}/")
+
+
+def _record_with_progress(
+    loaded: Any, selected: Any, *, out: Any, jobs: int, force: bool, executor: str = "local",
+    address: str | None = None,
+) -> list[Any]:  # fmt: skip
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from pipeline.stages.record import record
+
+    with Progress(
+        TextColumn("{task.description:<32}"),
+        BarColumn(),
+        TextColumn("{task.percentage:>5.1f}%"),
+        TimeElapsedColumn(),
+        console=Console(stderr=True),
+        transient=False,
+        disable=not sys.stderr.isatty(),  # no bar spam in logs (dvc repro, CI)
+    ) as bars:
+        tasks = {e.name: bars.add_task(e.name, total=1.0) for e in selected}
+        plan_task = bars.add_task("planning", total=len({e.scenario_name for e in selected}))
+
+        def on_event(kind: str, name: str, value: float) -> None:
+            if kind == "plan":
+                bars.advance(plan_task, 1)
+            elif name in tasks:
+                bars.update(tasks[name], completed=value)
+
+        return record(loaded, selected, out_dir=out, jobs=jobs, force=force, on_event=on_event,
+                      executor=executor, address=address)  # fmt: skip
+
+
+def _run_campaign(
+    loaded: Any, run: Any, *, jobs: int, executor: str, address: str | None
+) -> list[Any] | None:
+    """Run a planned campaign under one progress bar with ETA (None: nothing to run)."""
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    from pipeline.stages.campaign_run import completion_marker
+    from pipeline.stages.record import record
+
+    err = Console(stderr=True)
+    name = run.name
+    if run.skipped:
+        err.print(f"{name}: {len(run.skipped)} of {len(run.episodes)} episode(s) already "
+                  f"recorded with these settings and code; running {len(run.pending)}")  # fmt: skip
+    if run.stray:
+        more = f" (and {len(run.stray) - 1} more)" if len(run.stray) > 1 else ""
+        err.print(f"warning: {run.out_dir}: {run.stray[0]}{more} is not an episode of "
+                  f"campaign {name} (left in place; the report will read it)")  # fmt: skip
+    if not run.pending:
+        console.print(f"campaign {name}: all {len(run.episodes)} episode(s) recorded in "
+                      f"{run.out_dir}/")  # fmt: skip
+        return None
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+        console=err,
+        disable=not err.is_terminal,  # no bar spam in logs (dvc repro, CI)
+    ) as bars:
+        task = bars.add_task(f"{name}", total=len(run.pending))
+        running: dict[str, float] = {}
+        finished = [0]
+
+        def on_event(kind: str, episode: str, value: float) -> None:
+            if kind == "episode":
+                running[episode] = value
+            elif kind == "done":
+                running.pop(episode, None)
+                finished[0] += 1
+            elif kind == "plan":
+                return
+            bars.update(task, completed=finished[0] + sum(running.values()))
+
+        outcomes: list[Any] = record(
+            loaded, run.pending, out_dir=run.out_dir, jobs=jobs, force=True,
+            on_event=completion_marker(run, on_event), executor=executor, address=address,
+            commit=run.commit,
+        )  # fmt: skip
+    return outcomes
+
+
+def _ros_distro(name: str) -> Literal["jazzy", "humble"]:
+    if name not in ("jazzy", "humble"):
+        from pipeline.errors import ParamsError
+
+        raise ParamsError(f"--ros-distro: {name!r}, expected jazzy or humble")
+    return "humble" if name == "humble" else "jazzy"
+
+
+SUMMARY_TABLE_MAX = 30  # larger campaigns: counts and the failures, not a row per episode
+
+
+def _record_campaign(
+    params: str, name: str, *, out: Any, jobs: int, force: bool, executor: str,
+    address: str | None, ros_distro: str | None = None,
+) -> None:  # fmt: skip
+    """``pipeline record --campaign NAME``: one progress bar with ETA over the campaign."""
+    from pipeline.fsutil import OutputLock, ensure_dir
+    from pipeline.params import load_params
+    from pipeline.stages.campaign_run import check_campaign_size, distinct_settings, plan_run
+    from pipeline.stages.record import check_outputs_free, validate_episodes
+
+    loaded = load_params(params)
+    if ros_distro is not None:
+        loaded = loaded.with_ros_distro(_ros_distro(ros_distro))
+    run = plan_run(loaded, name, out=out, force=force)
+    # every input error first: a refused run creates nothing
+    validate_episodes(loaded, distinct_settings(run.pending))
+    check_campaign_size(loaded, run, motion_s=0.0, jobs=jobs)
+    ensure_dir(run.out_dir)
+    # one run per campaign folder at a time (two would write the same episodes)
+    with OutputLock(run.out_dir, command=f"`pipeline record --campaign {name}`"):
+        run = plan_run(loaded, name, out=out, force=force)  # what is done now that we own it
+        check_outputs_free(run.pending, run.out_dir, force=True)  # sweeps dead runs' work
+        outcomes = _run_campaign(loaded, run, jobs=jobs, executor=executor, address=address)
+    if outcomes is None:
+        return
+    failed = [o for o in outcomes if o.status != "ok"]
+    if len(outcomes) <= SUMMARY_TABLE_MAX:
+        table = Table("episode", "status", "max |e| (rad)", "final |e| (rad)", "wall (s)")
+        for o in outcomes:
+            table.add_row(
+                o.name, o.status if o.status == "ok" else f"[red]{o.status}[/red]",
+                f"{o.max_abs_error_rad:.3e}", f"{o.final_abs_error_rad:.3e}", f"{o.wall_s:.2f}",
+            )  # fmt: skip
+        console.print(table)
+    counts: dict[str, int] = {}
+    for o in outcomes:
+        counts[o.status] = counts.get(o.status, 0) + 1
+    touched = sum(1 for o in outcomes if o.contact)
+    console.print(
+        f"campaign {name}: {', '.join(f'{n} {s}' for s, n in sorted(counts.items()))}"
+        + (f", {len(run.skipped)} skipped (already recorded)" if run.skipped else "")
+        + (f", {touched} with contact" if touched else "")
+        + f" -> {run.out_dir}/"
+    )
+    for o in failed:
+        sys.stderr.write(f"error: {name}/{o.name}: {o.status}: {o.reason}\n")
+    if failed:
+        raise typer.Exit(1)
+
+
+@app.command("campaigns")
+def campaigns_cmd(
+    params: Annotated[
+        str, typer.Option("--params", help="Scenarios, controllers and campaigns (YAML).")
+    ] = "params.yaml",
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """List the campaigns in PARAMS: size, base scenario, and what each sweeps."""
+    from pipeline.params import load_params
+    from pipeline.stages.campaign import campaign_axes
+
+    loaded = load_params(params)
+    rows: list[dict[str, Any]] = []
+    for name in loaded.campaigns:
+        c = campaign_axes(loaded, name)
+        axes = [
+            {"axis": "controller", "values": list(c.controllers), "drawn": False},
+            *({"axis": a.path, "values": list(a.texts), "drawn": a.drawn} for a in c.axes),
+            {"axis": "seed", "values": list(c.seeds), "drawn": False},
+        ]
+        rows.append({"campaign": name, "scenario": c.scenario_name, "episodes": c.size,
+                     "axes": axes})  # fmt: skip
+    if as_json:
+        print_json({"campaigns": rows})
+        return
+    table = Table("campaign", "scenario", "episodes", "sweeps (values)")
+    for row in rows:
+        parts = []
+        for a in row["axes"]:
+            vals = [str(v) for v in a["values"]]
+            shown = ", ".join(vals) if len(vals) <= 6 else f"{', '.join(vals[:3])}, ... {vals[-1]}"
+            tag = " drawn" if a["drawn"] else ""
+            parts.append(f"{a['axis']} ({len(vals)}{tag}): {shown}")
+        table.add_row(row["campaign"], row["scenario"], f"{row['episodes']:,}", "\n".join(parts))
+    console.print(table)
+    if not rows:
+        console.print(f"{params}: no campaigns")

@@ -1,0 +1,43 @@
+"""The root of the ``pipeline`` command: the Typer app every command group registers on,
+its ``--debug`` option, the console and the JSON printer the commands share."""
+
+from __future__ import annotations
+
+import json
+import sys
+from typing import Annotated, Any
+
+import typer
+from rich.console import Console
+
+app = typer.Typer(
+    help=(
+        "armlab pipeline: plan a motion for a robot arm (OMPL), run it in MuJoCo under "
+        "PID and computed-torque control, record ROS 2 bags (MCAP) and report tracking "
+        "error. Robots are YAML files (DH parameters + inertias): built-in ones are "
+        "listed by `pipeline robots`; any command taking ROBOT also accepts a path."
+    ),
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+console = Console()
+STATE = {"debug": False}
+"""Options of the root command the commands read (``--debug``)."""
+
+
+@app.callback()
+def _root(
+    debug: Annotated[
+        bool, typer.Option("--debug", help="Show Python tracebacks for errors.")
+    ] = False,
+) -> None:
+    STATE["debug"] = debug
+
+
+def print_json(obj: Any) -> None:
+    """Print one JSON object on stdout."""
+    sys.stdout.write(json.dumps(obj, indent=2) + "\n")
+
+
+ROBOT_HELP = "Built-in robot name (see `pipeline robots`) or path to a robot YAML file."
