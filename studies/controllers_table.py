@@ -25,7 +25,7 @@ def _ci(values: list[float], digits: int = 0) -> str:
     ci = mean_ci(values)
     if ci.mean is None or ci.half_width is None:
         return "n/a"
-    return f"{ci.mean:+.{digits}f} ± {ci.half_width:.{digits}f}"
+    return f"{ci.mean:+.{digits}f} ± {ci.half_width:.{digits + 1}f}"
 
 
 def main() -> None:
