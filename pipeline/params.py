@@ -132,6 +132,20 @@ class PlantParams(_Strict):
     velocity_noise_std_rad_s: float = Field(default=0.0, ge=0, le=100.0)
 
 
+MAX_LOOP_DELAY_S = 0.1  # a 100 ms actuation delay is a broken loop, not a setting
+
+
+class LoopParams(_Strict):
+    """The loop between plant and controller, the same for every law (``LoopSettings``;
+    the defaults are the ideal loop: no delay, exact position, the plant's velocity)."""
+
+    delay_s: float = Field(default=0.0, ge=0, le=MAX_LOOP_DELAY_S)  # whole physics steps
+    jitter_s: float = Field(default=0.0, ge=0, le=MAX_LOOP_DELAY_S)  # extra, per period
+    encoder_counts_per_rev: int = Field(default=0, ge=0, le=2**40)  # 0: not quantised
+    velocity: Literal["plant", "encoder"] = "plant"  # encoder: differenced, low-passed
+    velocity_cutoff_hz: float = Field(default=0.0, ge=0, le=1e6)  # 0: unfiltered
+
+
 class ScenarioParams(_Strict):
     robot: str = Field(min_length=1)
     start: list[float]
@@ -140,6 +154,7 @@ class ScenarioParams(_Strict):
     planner: PlannerParams = PlannerParams()
     timing: TimingParams = TimingParams()
     plant: PlantParams = PlantParams()
+    loop: LoopParams = LoopParams()
     hold_s: float = Field(default=1.0, ge=0, le=MAX_HOLD_S)
     # the controller holds the start pose this long before the motion (settled start)
     preroll_s: float = Field(default=2.0, ge=0, le=MAX_PREROLL_S)
@@ -156,6 +171,12 @@ class ScenarioParams(_Strict):
         if reserved:
             raise ValueError(
                 f"obstacles: name '{reserved[0]}' is reserved for the plant's own geometry"
+            )
+        if self.loop.velocity == "encoder" and self.plant.velocity_noise_std_rad_s > 0:
+            raise ValueError(
+                "loop.velocity: 'encoder' differentiates the measured position, so "
+                f"plant.velocity_noise_std_rad_s ({self.plant.velocity_noise_std_rad_s:g}) "
+                "would not be used: set it to 0"
             )
         return self
 

@@ -335,6 +335,50 @@ class PlantSettings(_Contract):
     friction_model: Text = LEGACY_FRICTION
 
 
+VelocitySource = Literal["plant", "encoder"]
+VELOCITY_SOURCES: tuple[VelocitySource, ...] = ("plant", "encoder")
+
+
+@dataclass(frozen=True)
+class LoopSettings(_Contract):
+    """The loop between the plant and the controller (the defaults: an ideal loop).
+
+    Attributes:
+        delay_s: pure actuation delay: a command reaches the motors this long after
+            the instant it was computed for [s] (a whole number of physics steps).
+        jitter_s: most extra delay per control period, drawn uniformly in whole
+            physics steps ``{0, .., jitter_s / physics_dt_s}`` from the episode seed [s].
+        encoder_counts_per_rev: encoder resolution; the measured position is rounded
+            to the nearest count (0: not quantised).
+        velocity: ``plant``: the plant's velocity plus the independent velocity noise;
+            ``encoder``: the measured position differenced over the control period, then
+            low-passed (first order, ``velocity_cutoff_hz``).
+        velocity_cutoff_hz: the low-pass cutoff for ``encoder`` velocity (0: unfiltered).
+    """
+
+    _where = "loop"
+
+    delay_s: NonNegative = 0.0
+    jitter_s: NonNegative = 0.0
+    encoder_counts_per_rev: Count = 0
+    velocity: Annotated[
+        VelocitySource,
+        _rule(f"one of {', '.join(VELOCITY_SOURCES)}", lambda v: v in VELOCITY_SOURCES),
+    ] = "plant"
+    velocity_cutoff_hz: NonNegative = 0.0
+
+    @property
+    def ideal(self) -> bool:
+        """No delay, no jitter, no quantisation, the plant's velocity (the loop before
+        issue 18; ``velocity_cutoff_hz`` then plays no part)."""
+        return (
+            self.delay_s == 0
+            and self.jitter_s == 0
+            and self.encoder_counts_per_rev == 0
+            and self.velocity == "plant"
+        )
+
+
 @dataclass(frozen=True)
 class ProtocolSettings(_Contract):
     """How the episode was run (the fair-comparison protocol).
@@ -542,10 +586,13 @@ class EpisodeSettings(_Contract):
         mujoco_warnings: MuJoCo warning counters (non-zero only).
         package_version, git_commit: provenance.
         campaign: the campaign and condition the episode belongs to (None: hand-listed).
+        loop: delay, jitter, encoder and velocity estimate between plant and controller
+            (bags written before it existed: the ideal loop they ran).
         version: settings layout version.
     """
 
     _where = ""
+    _may_be_absent = frozenset({"loop"})  # bags written before issue 18: the ideal loop
 
     episode: Text
     robot: Plain
@@ -564,6 +611,7 @@ class EpisodeSettings(_Contract):
         default_factory=dict
     )
     campaign: CampaignInfo | None = None
+    loop: LoopSettings = field(default_factory=LoopSettings)
     version: Version = SETTINGS_VERSION
 
     def to_dict(self) -> dict[str, Any]:

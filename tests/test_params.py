@@ -144,3 +144,65 @@ def test_repeated_only_runs_the_episode_once():
 def test_params_path_that_is_a_directory_says_so(tmp_path):
     with pytest.raises(ParamsError, match=r"is a directory, expected a params YAML file"):
         load_params(tmp_path)
+
+
+def test_a_scenario_loop_is_validated_and_defaults_to_the_ideal_loop(tmp_path):
+    params = load_params(REPO / "params.yaml")
+    assert params.scenarios["paper"].loop.model_dump() == {
+        "delay_s": 0.0,
+        "jitter_s": 0.0,
+        "encoder_counts_per_rev": 0,
+        "velocity": "plant",
+        "velocity_cutoff_hz": 0.0,
+    }
+    data = _default()
+    data["scenarios"]["paper"]["loop"] = {"delay_s": 0.001, "velocity": "observer"}
+    with pytest.raises(ParamsError, match=r"scenarios\.paper\.loop\.velocity: Input should be"):
+        load_params(_write(tmp_path, data))
+
+
+def test_encoder_velocity_beside_independent_velocity_noise_is_refused(tmp_path):
+    data = _default()
+    data["scenarios"]["paper-realistic"]["loop"] = {"velocity": "encoder"}
+    with pytest.raises(
+        ParamsError, match=r"scenarios\.paper-realistic: .*plant\.velocity_noise_std_rad_s"
+    ):
+        load_params(_write(tmp_path, data))
+
+
+def test_a_delay_off_the_physics_step_grid_is_refused_before_any_work(tmp_path):
+    from pipeline.stages.record import validate_episodes
+
+    data = _default()
+    data["scenarios"]["paper"]["loop"] = {"delay_s": 0.0005}
+    params = load_params(_write(tmp_path, data))
+    with pytest.raises(
+        ParamsError,
+        match=r"scenarios\.paper\.loop\.delay_s: 0\.0005 s is not a whole number of physics "
+        r"steps of 0\.001 s",
+    ):
+        validate_episodes(params, params.episodes)
+
+
+def test_the_delay_can_be_swept_by_a_campaign(tmp_path):
+    from pipeline.stages.campaign import expand
+
+    data = _default()
+    data["campaigns"]["paper-realistic"]["sweep"] = {"loop.delay_s": [0.0, 0.002]}
+    params = load_params(_write(tmp_path, data))
+    episodes = expand(params, "paper-realistic")
+    assert {e.scenario.loop.delay_s for e in episodes} == {0.0, 0.002}
+    assert "delay_s-0.002.pid.s0" in {e.name for e in episodes}
+
+
+def test_the_controller_study_is_a_valid_params_file_outside_the_demo():
+    """studies/controllers.yaml: the six laws x 20 seeds x {0, 1 ms}; not in params.yaml,
+    whose campaigns are all DVC stages of `make demo`."""
+    from pipeline.stages.campaign import expand
+    from pipeline.stages.record import validate_episodes
+
+    study = load_params(REPO / "studies" / "controllers.yaml")
+    episodes = expand(study, "controllers-delay")
+    assert len(episodes) == 6 * 20 * 2
+    validate_episodes(study, episodes[::20])
+    assert "controllers-delay" not in load_params(REPO / "params.yaml").campaigns

@@ -12,6 +12,7 @@ from pipeline.settings import (
     SETTINGS_VERSION,
     EpisodeSettings,
     LinkInertial,
+    LoopSettings,
     SettingsError,
 )
 from tests.analysis.bagfactory import default_settings, paper_like
@@ -93,6 +94,18 @@ def _set(path: str, value: Any) -> dict[str, Any]:
         ("status", "crashed", "status: expected 'ok' or 'diverged', got 'crashed'"),
         ("episode", KeyError, "episode: missing (required by the contract)"),
         ("version", 1, f"version: expected settings version {SETTINGS_VERSION}, got 1"),
+        ("loop.delay_s", -0.001, "loop.delay_s: expected a finite number >= 0, got -0.001"),
+        (
+            "loop.encoder_counts_per_rev",
+            4096.5,
+            "loop.encoder_counts_per_rev: expected an integer >= 0, got 4096.5",
+        ),
+        (
+            "loop.velocity",
+            "observer",
+            "loop.velocity: expected one of plant, encoder, got 'observer'",
+        ),
+        ("loop.jitter_s", KeyError, "loop.jitter_s: missing (required by the contract)"),
     ],
 )
 def test_from_dict_names_the_field_path_of_what_it_refuses(
@@ -114,6 +127,32 @@ def test_unknown_keys_are_ignored_and_a_later_field_may_be_absent_from_older_bag
     data["planner"]["from_a_newer_recorder"] = 1
     back = EpisodeSettings.from_dict(copy.deepcopy(data))
     assert back.safety.skip_within_m == 0.0
+
+
+def test_a_bag_written_before_the_loop_settings_reads_as_the_ideal_loop() -> None:
+    data = _settings()
+    assert data["loop"] == {
+        "delay_s": 0.0,
+        "jitter_s": 0.0,
+        "encoder_counts_per_rev": 0,
+        "velocity": "plant",
+        "velocity_cutoff_hz": 0.0,
+    }
+    data.pop("loop")
+    back = EpisodeSettings.from_dict(data)
+    assert back.loop == LoopSettings()
+    assert back.loop.ideal
+
+
+def test_a_loop_with_delay_or_encoder_is_not_ideal_but_a_cutoff_alone_is() -> None:
+    assert not LoopSettings(delay_s=0.001).ideal
+    assert not LoopSettings(jitter_s=0.001).ideal
+    assert not LoopSettings(encoder_counts_per_rev=4096).ideal
+    assert not LoopSettings(velocity="encoder").ideal
+    assert LoopSettings(velocity_cutoff_hz=100.0).ideal  # only read for encoder velocity
+    data = _settings()
+    data["loop"] = {**data["loop"], "delay_s": 0.001, "velocity": "encoder"}
+    assert EpisodeSettings.from_dict(data).loop == LoopSettings(delay_s=0.001, velocity="encoder")
 
 
 def test_a_part_validated_alone_names_the_path_given() -> None:

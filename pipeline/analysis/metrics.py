@@ -131,7 +131,13 @@ def _prepared_joint_states(samples: pl.DataFrame, limits: pl.DataFrame | None) -
     cmd = pl.col("commanded_effort_nm")
     limit = pl.col("effort_limit_nm")
     at_limit = limit.is_not_null() & (eff.abs() >= limit * (1 - SATURATION_REL_TOL))
-    clipped = cmd.is_not_null() & (cmd.abs() > eff.abs() * (1 + SATURATION_REL_TOL) + 1e-9)
+    # clipped: beyond the limit when it is known (with an actuation delay the effort of a
+    # row is an earlier command, so |commanded| > |effort| is no sign of clipping)
+    clipped = cmd.is_not_null() & (
+        pl.when(limit.is_not_null())
+        .then(cmd.abs() > limit * (1 + SATURATION_REL_TOL))
+        .otherwise(cmd.abs() > eff.abs() * (1 + SATURATION_REL_TOL) + 1e-9)
+    )
     return (
         _time_sorted(samples)
         .join(limits, on=_KEY, how="left", maintain_order="left")

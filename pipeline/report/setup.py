@@ -11,6 +11,7 @@ from typing import Any
 from pipeline.analysis.findings import nominal_plant
 from pipeline.report import md
 from pipeline.report.inputs import ReportData
+from pipeline.settings import LoopSettings, SettingsError
 
 # Settings shown first, in this order, when present; any others follow as recorded.
 _PLANNER_KEYS = (
@@ -94,6 +95,19 @@ def _planner_line(planner: Any) -> str:
     return head if rest == md.NA else f"{head}; {rest}"
 
 
+def _loop_lines(loop: Any) -> list[str]:
+    """The loop between plant and controller, when it is not the ideal one (``loop:``)."""
+    if not isinstance(loop, dict):
+        return []
+    try:
+        ideal = LoopSettings.from_dict(loop).ideal
+    except SettingsError:
+        ideal = False
+    if ideal:
+        return []
+    return [f"- Loop (the same for every law): {_settings_line(loop, ())}."]
+
+
 def setup_section(data: ReportData, scenario: str) -> list[str]:
     """The ``### Setup`` section of a scenario (or campaign condition): its first
     episode's settings, and one row per episode (per controller and gains when many)."""
@@ -130,6 +144,7 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
             if exact
             else "."
         ),
+        *_loop_lines(setting(s, "loop", default=None)),
         "",
         "Controllers:",
         "",

@@ -37,6 +37,8 @@ from pipeline.errors import SimulationError
 from pipeline.model.mjcf import PlantOptions, build_mujoco_model
 from pipeline.model.scene import Box
 from pipeline.robots.spec import RobotSpec
+from pipeline.settings import LoopSettings
+from pipeline.sim.loop import Actuator, Sensor, check_loop
 from pipeline.sim.result import F64, EpisodeResult, Reference
 
 DIVERGENCE_SPEED_FACTOR = 10.0
@@ -77,6 +79,7 @@ def run_episode(
     position_noise_std_rad: float = 0.0,
     velocity_noise_std_rad_s: float = 0.0,
     divergence_speed_factor: float = DIVERGENCE_SPEED_FACTOR,
+    loop: LoopSettings | None = None,
     progress: ProgressFn | None = None,
 ) -> EpisodeResult:
     """Run ``controller`` on the MuJoCo plant along ``reference``, then hold the goal.
@@ -108,6 +111,8 @@ def run_episode(
         velocity_noise_std_rad_s: Gaussian noise on measured velocity [rad/s].
         divergence_speed_factor: end the episode when a joint exceeds this many
             times its velocity limit.
+        loop: actuation delay and jitter, encoder quantisation, encoder velocity
+            (``pipeline.sim.loop``); None = the ideal loop.
         progress: called with the completed fraction in [0, 1] about every 1 %.
 
     Raises:
@@ -126,6 +131,8 @@ def run_episode(
         velocity_noise_std_rad_s=velocity_noise_std_rad_s,
         divergence_speed_factor=divergence_speed_factor,
     )
+    loop = loop or LoopSettings()
+    check_loop(loop, physics_dt_s=physics_dt_s, velocity_noise_std_rad_s=velocity_noise_std_rad_s)
     plant = plant or PlantOptions()
     plant_spec = plant_spec or spec
     plant_spec.require_dynamics("simulation")
@@ -171,6 +178,19 @@ def run_episode(
         noise_qd = rng.standard_normal((n, dof)) * velocity_noise_std_rad_s
         q_meas = np.empty((n, dof))
         qd_meas = np.empty((n, dof))
+    sensor: Sensor | None = None
+    actuator: Actuator | None = None
+    if not loop.ideal:  # pipeline.sim.loop; the ideal loop keeps the lines above
+        sensor = Sensor(
+            loop,
+            control_dt_s=control_dt_s,
+            noise_q=noise_q if noisy else None,
+            noise_qd=noise_qd if noisy else None,
+        )
+        actuator = Actuator(
+            loop, rows=n, nstep=control_period_steps, physics_dt_s=physics_dt_s, seed=seed
+        )
+        q_meas, qd_meas = np.empty((n, dof)), np.empty((n, dof))
     tau_cmd = np.empty((n, dof))
     tau_app = np.empty((n, dof))
 
@@ -179,7 +199,7 @@ def run_episode(
     mujoco.mj_forward(model, data)
     controller.reset()
 
-    loop = _Loop(
+    control_loop = _Loop(
         spec=spec,
         model=model,
         data=data,
@@ -188,9 +208,11 @@ def run_episode(
         control_dt_s=control_dt_s,
         nstep=control_period_steps,
         speed_factor=divergence_speed_factor,
+        sensor=sensor,
+        actuator=actuator,
     )
     with _captured_mujoco_warnings() as warning_texts:
-        rows, reason = loop.run(
+        rows, reason = control_loop.run(
             q_true, qd_true, q_meas, qd_meas, noise_q, noise_qd if noisy else None,
             q_ref, qd_ref, qdd_ref, tau_cmd, tau_app, progress or _no_progress,
         )  # fmt: skip
@@ -212,7 +234,8 @@ def run_episode(
         progress(1.0)
 
     effort = spec.effort_limits
-    np.clip(tau_cmd[:rows], -effort, effort, out=tau_app[:rows])
+    applied = tau_cmd if actuator is None else actuator.applied(tau_cmd, rows)
+    np.clip(applied[:rows], -effort, effort, out=tau_app[:rows])
     saturated = np.abs(tau_cmd[:rows]) > effort
     warnings = {
         name: int(count)
@@ -236,6 +259,7 @@ def run_episode(
         "position_noise_std_rad": float(position_noise_std_rad),
         "velocity_noise_std_rad_s": float(velocity_noise_std_rad_s),
         "divergence_speed_factor": float(divergence_speed_factor),
+        "loop": asdict(loop),
         "plant": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(plant).items()},
         "obstacles": [asdict(b) for b in obstacles],
         "saturation_counts": saturated.sum(axis=0).astype(int).tolist(),
@@ -284,6 +308,8 @@ class _Loop:
         control_dt_s: float,
         nstep: int,
         speed_factor: float,
+        sensor: Sensor | None = None,
+        actuator: Actuator | None = None,
     ) -> None:
         self.spec = spec
         self.model = model
@@ -294,6 +320,8 @@ class _Loop:
         self.nstep = nstep
         self.speed_factor = speed_factor
         self.speed_limits = spec.velocity_limits
+        self.sensor = sensor
+        self.actuator = actuator
 
     def run(
         self,
@@ -327,6 +355,11 @@ class _Loop:
         next_tick = tick
         noisy = noise_qd is not None
         shape = (self.spec.dof,)
+        sensor, actuator = self.sensor, self.actuator
+
+        def physics(steps: int) -> None:
+            step(model, data, steps)
+
         for k in range(n):
             qt = q_true[k]
             qt[:] = qpos
@@ -336,7 +369,10 @@ class _Loop:
                 reason = self._diagnose(k, qt, vt)
                 if reason:
                     return k, reason
-            if noisy:
+            if sensor is not None:
+                qm, vm = q_meas[k], qd_meas[k]
+                sensor.measure(k, qt, vt, qm, vm)
+            elif noisy:
                 qm = np.add(qt, noise_q[k], out=q_meas[k])
                 vm = np.add(vt, noise_qd[k], out=qd_meas[k])  # type: ignore[index]
             else:
@@ -356,7 +392,10 @@ class _Loop:
             ctrl[:] = tc
             if k == last:
                 break
-            step(model, data, nstep)
+            if actuator is None:
+                step(model, data, nstep)
+            else:
+                actuator.advance(k, tau_cmd, ctrl, physics)
             if k == next_tick:
                 progress(k / last)
                 next_tick += tick

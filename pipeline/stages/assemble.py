@@ -22,6 +22,7 @@ from pipeline.settings import (
     ControllerSettings,
     EpisodeSettings,
     ExecutionSafety,
+    LoopSettings,
     PlannerSettings,
     PlantSettings,
     ProtocolSettings,
@@ -75,8 +76,14 @@ def param_values(value: float | list[float]) -> tuple[float, ...]:
     return tuple(value) if isinstance(value, list) else (float(value),)
 
 
+def loop_settings(scenario: ScenarioParams) -> LoopSettings:
+    """The scenario's loop (delay, jitter, encoder, velocity estimate) as recorded."""
+    return LoopSettings(**scenario.loop.model_dump())
+
+
 def _plant_is_exact(spec: RobotSpec, plant_spec: RobotSpec, scenario: ScenarioParams) -> bool:
-    """The nominal model is the plant: nothing drawn, no friction, damping, payload, noise."""
+    """The nominal model is the plant: nothing drawn, no friction, damping, payload, noise,
+    and the loop is ideal (no delay, no quantisation, the plant's velocity)."""
     p = scenario.plant
     zero = (
         param_values(p.damping),
@@ -84,7 +91,11 @@ def _plant_is_exact(spec: RobotSpec, plant_spec: RobotSpec, scenario: ScenarioPa
         (p.payload_kg,),
         (p.position_noise_std_rad, p.velocity_noise_std_rad_s),
     )
-    return plant_spec == spec and all(x == 0 for group in zero for x in group)
+    return (
+        plant_spec == spec
+        and all(x == 0 for group in zero for x in group)
+        and loop_settings(scenario).ideal
+    )
 
 
 def episode_settings(
@@ -185,6 +196,7 @@ def episode_settings(
         package_version=__version__,
         git_commit=commit,
         campaign=episode.campaign,
+        loop=loop_settings(scenario),
     )
 
 

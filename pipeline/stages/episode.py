@@ -22,7 +22,12 @@ from pipeline.params import Episode
 from pipeline.planning import PlannedPath, TimedTrajectory
 from pipeline.robots.spec import load_spec
 from pipeline.settings import Uncertainty, per_joint
-from pipeline.stages.assemble import bag_metadata, episode_settings, param_values
+from pipeline.stages.assemble import (
+    bag_metadata,
+    episode_settings,
+    loop_settings,
+    param_values,
+)
 from pipeline.stages.plans import ScenarioPlan, obstacle_boxes
 
 
@@ -145,6 +150,7 @@ def _run_and_write(
         preroll_s=scenario.preroll_s,
         position_noise_std_rad=p.position_noise_std_rad,
         velocity_noise_std_rad_s=p.velocity_noise_std_rad_s,
+        loop=loop_settings(scenario),
         seed=episode.seed,
         progress=progress,
     )

@@ -14,7 +14,7 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from pipeline.errors import ParamsError, PipelineError
+from pipeline.errors import ParamsError, PipelineError, SimulationError
 from pipeline.fsutil import ensure_dir
 from pipeline.params import Episode, Params
 from pipeline.robots.spec import load_spec
@@ -74,12 +74,28 @@ def validate_episodes(params: Params, episodes: Sequence[Episode]) -> None:
                     f"{params.source}: {where}.plant.{key}: "
                     f"expected 1 or {spec.dof} values, got {len(value)}"
                 )
+        _check_loop(params, episode, where)
         make_controller(
             episode.controller.type,
             spec,
             episode.controller.gains,
             source=f"{params.source}: controllers.{episode.controller_name}",
         )
+
+
+def _check_loop(params: Params, episode: Episode, where: str) -> None:
+    """The scenario's loop against the physics step (a delay is whole physics steps)."""
+    from pipeline.sim.loop import check_loop
+    from pipeline.stages.assemble import loop_settings
+
+    try:
+        check_loop(
+            loop_settings(episode.scenario),
+            physics_dt_s=episode.sim.physics_dt_s,
+            velocity_noise_std_rad_s=episode.scenario.plant.velocity_noise_std_rad_s,
+        )
+    except SimulationError as err:
+        raise ParamsError(f"{params.source}: {where}.{err}") from err
 
 
 def prepare(

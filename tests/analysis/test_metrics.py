@@ -94,6 +94,19 @@ def test_saturation_fraction_counts_samples_at_the_limit_or_clipped(tmp_path: Pa
     assert _value(m, "sat", 4, "rms_effort") == pytest.approx(27.9)
 
 
+def test_an_effort_that_lags_its_command_is_not_saturation(tmp_path: Path) -> None:
+    """With an actuation delay (``loop.delay_s``) a row's effort is an earlier command:
+    a growing command then exceeds it without any clipping."""
+    stamp = time_grid(0.999, period_s=1e-3)
+    cmd = np.tile(np.linspace(0.0, 20.0, stamp.size)[:, None], (1, N_JOINTS))
+    effort = np.vstack([np.zeros((1, N_JOINTS)), cmd[:-1]])  # one row late
+    rec = read_recording(
+        write_bag(tmp_path, _episode("late", "pid", stamp, effort=effort, effort_cmd=cmd))
+    )
+    m = _metrics([rec])
+    assert all(_value(m, "late", j, "saturation_fraction") == 0.0 for j in range(N_JOINTS))
+
+
 def test_final_error_and_settling_time_after_the_motion_end(tmp_path: Path) -> None:
     stamp = time_grid(2.0, period_s=1e-3)
     t = stamp / 1e9
