@@ -174,12 +174,12 @@ def test_a_delay_off_the_physics_step_grid_is_refused_before_any_work(tmp_path):
     from pipeline.stages.record import validate_episodes
 
     data = _default()
-    data["scenarios"]["paper"]["loop"] = {"delay_s": 0.0005}
+    data["scenarios"]["paper"]["loop"] = {"delay_s": 0.00025}
     params = load_params(_write(tmp_path, data))
     with pytest.raises(
         ParamsError,
-        match=r"scenarios\.paper\.loop\.delay_s: 0\.0005 s is not a whole number of physics "
-        r"steps of 0\.001 s",
+        match=r"scenarios\.paper\.loop\.delay_s: 0\.00025 s is not a whole number of physics "
+        r"steps of 0\.0005 s",
     ):
         validate_episodes(params, params.episodes)
 

@@ -11,7 +11,7 @@ from typing import Any
 from pipeline.analysis.findings import nominal_plant
 from pipeline.report import md
 from pipeline.report.inputs import ReportData
-from pipeline.settings import LoopSettings, SettingsError
+from pipeline.settings import LoopSettings
 
 # Settings shown first, in this order, when present; any others follow as recorded.
 _PLANNER_KEYS = (
@@ -95,17 +95,11 @@ def _planner_line(planner: Any) -> str:
     return head if rest == md.NA else f"{head}; {rest}"
 
 
-def _loop_lines(loop: Any) -> list[str]:
+def _loop_lines(loop: LoopSettings | None) -> list[str]:
     """The loop between plant and controller, when it is not the ideal one (``loop:``)."""
-    if not isinstance(loop, dict):
+    if loop is None or loop.ideal:
         return []
-    try:
-        ideal = LoopSettings.from_dict(loop).ideal
-    except SettingsError:
-        ideal = False
-    if ideal:
-        return []
-    return [f"- Loop (the same for every law): {_settings_line(loop, ())}."]
+    return [f"- Loop (the same for every law): {_settings_line(_as_recorded(loop), ())}."]
 
 
 def setup_section(data: ReportData, scenario: str) -> list[str]:
@@ -144,7 +138,7 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
             if exact
             else "."
         ),
-        *_loop_lines(setting(s, "loop", default=None)),
+        *_loop_lines(s.loop if s is not None else None),
         "",
         "Controllers:",
         "",
