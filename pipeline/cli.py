@@ -82,6 +82,8 @@ def robots_cmd(
     console.print(table)
 
 
+# ik-check rounds trips one configuration at a time: a bound keeps a typo from running for days
+MAX_IK_CHECK_SAMPLES = 1_000_000
 _ROBOT_HELP = "Built-in robot name (see `pipeline robots`) or path to a robot YAML file."
 
 
@@ -305,6 +307,11 @@ def ik_check_cmd(
     from pipeline.kinematics.check import run_ik_check
     from pipeline.robots import load_spec
 
+    if samples > MAX_IK_CHECK_SAMPLES:
+        raise PipelineError(
+            f"--samples {samples:,}: at most {MAX_IK_CHECK_SAMPLES:,} random configurations "
+            "(the error statistics settle long before)"
+        )
     spec = load_spec(robot)
     ensure_dir(Path(out))  # before the work: a bad --out fails in a second, not after it
     with Progress(
@@ -548,9 +555,11 @@ def record_cmd(
                          executor=executor, address=address, ros_distro=ros_distro)  # fmt: skip
         return
 
-    from pipeline.fsutil import OutputLock
+    from pipeline.fsutil import OutputLock, check_out_dir
     from pipeline.params import load_params
     from pipeline.stages.record import check_outputs_free, prepare
+
+    check_out_dir(out)  # not "" nor the working folder: record removes folders in --out
 
     loaded = load_params(params)
     if not loaded.episodes:
@@ -873,9 +882,11 @@ def report_cmd(
 
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
+    from pipeline.fsutil import check_out_dir
     from pipeline.log.reader import ReadOptions
     from pipeline.stages.report import run_report
 
+    check_out_dir(out)  # "" is the working folder to Path; say what was given
     progress_console = Console(stderr=True)
     with Progress(
         TextColumn("{task.description:<24}"),
