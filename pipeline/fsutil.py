@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import ctypes.util
 import errno
 import os
 import re
@@ -231,12 +230,34 @@ def _read_pid(fd: int) -> int:
         return 0
 
 
-_RENAME_EXCHANGE = 2  # linux/fs.h
+RENAME_NOREPLACE = 1  # linux/fs.h
+RENAME_EXCHANGE = 2
+_AT_FDCWD = -100
+
+
+def renameat2(src: Path, dst: Path, flags: int) -> bool:
+    """Linux ``renameat2(2)``; False (nothing done) where the platform or file system does
+    not support ``flags``.
+
+    Raises:
+        OSError: the rename itself failed (e.g. ``EEXIST``, ``EXDEV``, ``EBUSY``).
+    """
+    try:
+        fn = ctypes.CDLL(None, use_errno=True).renameat2
+    except (AttributeError, OSError):  # pragma: no cover - not glibc >= 2.28
+        return False
+    rc = fn(_AT_FDCWD, os.fsencode(src), _AT_FDCWD, os.fsencode(dst), ctypes.c_uint(flags))
+    if rc == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.ENOSYS, errno.EINVAL, errno.ENOTSUP):
+        return False
+    raise OSError(err, os.strerror(err), str(src), None, str(dst))
 
 
 def exchange(a: Path, b: Path) -> bool:
-    """Swap the two existing paths ``a`` and ``b`` in one atomic step (Linux ``renameat2``
-    with ``RENAME_EXCHANGE``): every observer sees either both old names or both new.
+    """Swap the two existing paths ``a`` and ``b`` in one atomic step
+    (``RENAME_EXCHANGE``): every observer sees either both old names or both new.
 
     Returns:
         False where the system or file system cannot do it (then nothing changed and the
@@ -245,24 +266,4 @@ def exchange(a: Path, b: Path) -> bool:
     Raises:
         OSError: the swap itself failed (e.g. ``EXDEV``, ``EBUSY`` for a mount point).
     """
-    libc_name = ctypes.util.find_library("c")
-    try:
-        libc = ctypes.CDLL(libc_name, use_errno=True)
-        renameat2 = libc.renameat2
-    except (OSError, AttributeError):  # pragma: no cover - not glibc >= 2.28
-        return False
-    at_fdcwd = -100
-    renameat2.argtypes = [
-        ctypes.c_int,
-        ctypes.c_char_p,
-        ctypes.c_int,
-        ctypes.c_char_p,
-        ctypes.c_uint,
-    ]
-    rc = renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE)
-    if rc == 0:
-        return True
-    code = ctypes.get_errno()
-    if code in (errno.EINVAL, errno.ENOSYS, errno.ENOTSUP):
-        return False
-    raise OSError(code, os.strerror(code), str(a), None, str(b))
+    return renameat2(a, b, RENAME_EXCHANGE)
