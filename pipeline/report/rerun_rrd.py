@@ -16,6 +16,10 @@ spawned or served: the stream goes to a file sink only.
 
 from __future__ import annotations
 
+import errno
+import os
+import threading
+import time
 import uuid
 from collections.abc import Callable
 from pathlib import Path
@@ -43,6 +47,15 @@ SPACING_M = 1.6
 # Groups (scenarios, campaign conditions) drawn; the rest are in the CSV/Parquet files.
 MAX_RRD_GROUPS = 12
 BAND_LEVELS = (("p05", 5.0), ("p50", 50.0), ("p95", 95.0))
+
+# The writer runs in a thread the caller waits on (so Ctrl-C and SIGTERM are handled while it
+# writes) and is abandoned, with one line, when the disk has been full this long [s] ...
+DISK_FULL_GRACE_S = 3.0
+# ... or when the file has not grown for this long [s] (a stuck sink; logging sends data
+# every few milliseconds, so a working writer never pauses nearly this long)
+STALL_S = 120.0
+# how long a flush may wait for the file sink [s] (rerun waits forever by default)
+FLUSH_TIMEOUT_S = 60.0
 
 _COLUMNS = {
     "position": "position_rad",
@@ -337,7 +350,91 @@ def write_rrd(data: ReportData, path: Path) -> list[str]:
 
     Every stream it opens is flushed, disconnected and freed before it returns, so a
     process calling it many times (a service, a notebook) does not accumulate threads.
+
+    The writing runs in a thread this one waits on: Ctrl-C and SIGTERM are handled while
+    it writes, and a writer that cannot finish is abandoned within a bound (rerun-sdk's
+    file sink can block for good once the disk is full): when the file system has had no
+    free space for :data:`DISK_FULL_GRACE_S`, or the file has not grown for
+    :data:`STALL_S`. Rerun's exit-time flush is then skipped, so the process can end.
+
+    Raises:
+        OSError: the disk is full (``ENOSPC``), the writer stopped or stalled (``EIO``).
     """
+    outcome: dict[str, object] = {}
+
+    def run() -> None:
+        try:
+            outcome["value"] = _write_rrd(data, path)
+        except BaseException as err:  # handed to the waiting thread
+            outcome["error"] = err
+
+    worker = threading.Thread(target=run, name="rrd-writer", daemon=True)
+    worker.start()
+    try:
+        _wait(worker, path)
+    finally:
+        if worker.is_alive():  # abandoned (or interrupted): its flush at exit would block
+            rr.unregister_shutdown()
+    err = outcome.get("error")
+    if isinstance(err, RuntimeError) and _sink_failure(err):
+        raise _disk_error(path, f"the Rerun file writer stopped ({err})") from err
+    if isinstance(err, BaseException):
+        raise err
+    value = outcome["value"]
+    assert isinstance(value, list)
+    return value
+
+
+def _wait(worker: threading.Thread, path: Path) -> None:
+    """Wait for the writer; raise OSError when it is to be abandoned."""
+    full_since: float | None = None
+    size, grew_at = -1, time.monotonic()
+    while True:
+        worker.join(0.2)
+        if not worker.is_alive():
+            return
+        now = time.monotonic()
+        if _disk_full(path.parent):
+            full_since = full_since if full_since is not None else now
+            if now - full_since > DISK_FULL_GRACE_S:
+                raise _disk_error(path, "the Rerun file writer could not finish")
+        else:
+            full_since = None
+        try:
+            current = os.stat(path).st_size
+        except OSError:
+            current = -1
+        if current != size:
+            size, grew_at = current, now
+        elif now - grew_at > STALL_S:
+            raise OSError(
+                errno.EIO, f"the Rerun file writer made no progress for {STALL_S:.0f} s", str(path)
+            )
+
+
+def _disk_full(folder: Path) -> bool:
+    try:
+        st = os.statvfs(folder)
+    except OSError:
+        return False
+    return st.f_bavail * st.f_frsize < 4096
+
+
+def _sink_failure(err: RuntimeError) -> bool:
+    """Whether rerun-sdk's error is its file sink failing (a full disk, an I/O error)."""
+    text = str(err).lower()
+    return "file-writer" in text or "flush" in text or "os error" in text
+
+
+def _disk_error(path: Path, what: str) -> OSError:
+    if _disk_full(path.parent):
+        return OSError(errno.ENOSPC, f"{os.strerror(errno.ENOSPC)}; {what}", str(path))
+    return OSError(errno.EIO, what, str(path))
+
+
+def _write_rrd(data: ReportData, path: Path) -> list[str]:
+    """:func:`write_rrd`'s work, in the calling thread (flushes wait at most
+    :data:`FLUSH_TIMEOUT_S`)."""
     layout = _layout(data)
     n = sum(len(recs) for _, recs in layout)
     reach = _reach_m(data)
@@ -349,7 +446,7 @@ def write_rrd(data: ReportData, path: Path) -> list[str]:
     try:
         return _log_all(stream, data, layout)
     finally:
-        stream.flush()
+        stream.flush(timeout_sec=FLUSH_TIMEOUT_S)
         stream.disconnect()
         close_blueprint()
         del stream
