@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 import subprocess
 import sys
@@ -325,3 +326,25 @@ def test_reader_warnings_are_printed_on_stderr(
     err = capsys.readouterr().err
     (line,) = [x for x in err.splitlines() if x.startswith("warning: ")]
     assert line.startswith("warning: odd_settings: ") and "not valid JSON" in line
+
+
+def test_reports_through_a_symlinked_out_take_the_target_s_lock(tmp_path: Path) -> None:
+    """A run holding the lock of reports/ makes a second one through a symlink to it refuse
+    (the lock is taken on the resolved path); the symlink stays a symlink after a run."""
+    from pipeline.fsutil import OutputLock
+
+    _good(tmp_path / "recordings")
+    real = tmp_path / "reports"
+    real.mkdir()
+    (tmp_path / "link").symlink_to(real, target_is_directory=True)
+    with OutputLock(real, command="`pipeline report`"):
+        done = subprocess.run(
+            [sys.executable, "-m", "pipeline", "report", "--out", "link"],
+            cwd=tmp_path, capture_output=True, text=True, timeout=300,
+            env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])},
+        )  # fmt: skip
+    assert done.returncode == 1
+    assert "another `pipeline report`" in done.stderr and f"pid {os.getpid()}" in done.stderr
+    assert list(real.iterdir()) == []
+    report_stage.run_report(recordings_dir=tmp_path / "recordings", out_dir=tmp_path / "link")
+    assert (tmp_path / "link").is_symlink() and (real / "report.md").is_file()
