@@ -36,6 +36,7 @@ from pipeline.model.chain import chain
 from pipeline.model.dh import link_frames
 from pipeline.report import entities as ent
 from pipeline.report.colors import REFERENCE_RGB, hex_color
+from pipeline.report.figures import MAX_FIGURE_JOINTS
 from pipeline.report.inputs import ReportData, cs_times_s, cs_wide, times_s, wide
 from pipeline.robots import RobotSpec
 
@@ -66,10 +67,15 @@ _COLUMNS = {
 
 
 def _joints(data: ReportData) -> list[str]:
+    """The joints drawn (at most :data:`MAX_FIGURE_JOINTS`, as in the figures)."""
     joints: list[str] = []
     for rec in data.sample():
-        joints += [j for j in rec.joint_names if j not in joints]
-    return joints
+        joints += [j for j in _drawn(rec.joint_names) if j not in joints]
+    return joints[:MAX_FIGURE_JOINTS]
+
+
+def _drawn(names: tuple[str, ...]) -> tuple[str, ...]:
+    return names[:MAX_FIGURE_JOINTS]
 
 
 def blueprint(
@@ -255,7 +261,7 @@ def _send_bands(stream: rr.RecordingStream, data: ReportData, group: str) -> Non
         stack = np.stack([e[:n] for _, e in series])  # (E, n, J)
         levels = np.nanpercentile(stack, [p for _, p in BAND_LEVELS], axis=0)
         color = data.controller_color(ctrl)
-        for j, joint in enumerate(recs[0].joint_names):
+        for j, joint in enumerate(_drawn(recs[0].joint_names)):
             for (name, _), values in zip(BAND_LEVELS, levels, strict=True):
                 _send_series(
                     stream,
@@ -464,7 +470,7 @@ def _log_all(
         ref = recs[0]
         t_ref = cs_times_s(ref)
         q_ref = cs_wide(ref, "reference_position_rad")
-        for j, joint in enumerate(ref.joint_names):
+        for j, joint in enumerate(_drawn(ref.joint_names)):
             _send_series(
                 stream,
                 ent.reference_path(joint, group),
@@ -487,7 +493,7 @@ def _log_all(
                 # The error at the /controller_state rate, as the metrics use it.
                 full_rate = quantity == "error"
                 values = cs_wide(rec, column) if full_rate else wide(rec, column)
-                for j, joint in enumerate(rec.joint_names):
+                for j, joint in enumerate(_drawn(rec.joint_names)):
                     _send_series(
                         stream,
                         ent.series_path(joint, quantity, rec.episode),
