@@ -67,6 +67,8 @@ from pipeline.report.markdown import REPORT_FILE, render_report
 from pipeline.report.metrics_json import write_episode_csvs, write_metrics, write_series_csvs
 from pipeline.report.rerun_rrd import RRD_FILE, write_rrd
 
+# the baseline when none is named; recordings of one other controller are fine with it
+DEFAULT_BASELINE = "pid"
 # progress(step, done, total): called as work advances (for a progress bar).
 Progress = Callable[[str, int, int], None]
 
@@ -285,7 +287,7 @@ def run_report(
     *,
     recordings_dir: Path,
     out_dir: Path,
-    baseline: str = "pid",
+    baseline: str = DEFAULT_BASELINE,
     skip_bad: bool = False,
     progress: Progress = _noop,
     options: ReadOptions | None = None,
@@ -375,7 +377,14 @@ def _run_report_locked(
         sink=measured,
     )
     episodes = pl.concat([measured.rows[r.episode] for r in recordings], how="vertical")
-    check_baseline(episodes, baseline)
+    if not check_baseline(episodes, baseline) and baseline != DEFAULT_BASELINE:
+        # one controller: nothing to compare, but a baseline the user named that is not
+        # in the recordings is a typo, not a choice
+        present = ", ".join(sorted(set(episodes.get_column("controller").to_list())))
+        raise ReportError(
+            f"--baseline '{baseline}': no such controller in the recordings (they hold "
+            f"{present}); with one controller there is nothing to compare, so leave it out"
+        )
     metrics = pl.concat([measured.metrics[r.episode] for r in recordings], how="vertical_relaxed")
     first = ReportData(
         recordings=tuple(recordings),

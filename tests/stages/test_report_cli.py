@@ -137,6 +137,19 @@ def test_unknown_baseline_lists_controllers_present(
     assert not (tmp_path / "reports").exists()
 
 
+def test_a_baseline_naming_no_recorded_controller_is_refused_with_one_controller(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    write_bag(tmp_path / "recordings", paper_like("ctc_ok", "ctc", duration_s=1.5))
+    assert _run(monkeypatch, tmp_path, "--baseline", "nope") == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert err.startswith("error: --baseline 'nope': no such controller in the recordings")
+    assert not (tmp_path / "reports").exists()
+    # the default baseline with one other controller: nothing to compare, no error
+    assert _run(monkeypatch, tmp_path) == 0
+
+
 def test_failure_while_writing_leaves_earlier_reports_and_no_temporary_files(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
