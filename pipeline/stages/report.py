@@ -278,7 +278,13 @@ def _recover(out_dir: Path) -> None:
         for path in reversed(aside):
             match = pattern.fullmatch(path.name)
             if match is not None and not pid_alive(int(match["pid"])):
-                os.rename(path, out_dir)
+                try:
+                    os.rename(path, out_dir)
+                except OSError as err:
+                    raise ReportError(
+                        f"{out_dir}: missing, and the earlier report a killed run left at "
+                        f"{path} cannot be put back ({err.strerror}); rename it yourself"
+                    ) from err
                 break
     remove_stale(out_dir.parent, pattern)
 
