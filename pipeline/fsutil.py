@@ -6,11 +6,15 @@
   releases it when the holder dies, however it dies).
 - :func:`remove_stale` deletes the hidden work folders (``.<name>.partial-<pid>``,
   ``.reports.tmp-<pid>-...``) that a killed process left behind, once their process is gone.
+- :func:`check_out_dir` refuses an ``--out`` the pipeline cannot own (``""``, the current
+  working folder or one holding it).
+- :func:`exchange` swaps two folders in one atomic step (a commit that is whole or absent).
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import errno
 import os
 import re
@@ -78,6 +82,35 @@ def remove_stale(
     return removed
 
 
+def check_out_dir(text: str | Path, *, option: str = "--out") -> Path:
+    """The resolved ``--out`` folder, refusing one the pipeline cannot own.
+
+    An empty string is the current working folder to :class:`~pathlib.Path`; a stage that
+    sweeps or swaps its output folder must never do that to the user's working folder (or
+    a folder holding it, whose swap would leave the shell in a deleted directory).
+
+    Raises:
+        PipelineError: empty, the current working folder, or an ancestor of it.
+    """
+    if not str(text).strip():
+        raise PipelineError(
+            f"{option}: empty; name a folder for the outputs (e.g. {option} reports)"
+        )
+    resolved = Path(os.path.realpath(text))
+    cwd = Path(os.path.realpath(os.getcwd()))
+    if resolved == cwd or resolved in cwd.parents:
+        what = (
+            "the current working folder"
+            if resolved == cwd
+            else "a folder holding the current working folder"
+        )
+        raise PipelineError(
+            f"{text}: {option} is {what} ({resolved}); name a folder of its own "
+            f"(e.g. {option} reports), whose contents the pipeline manages"
+        )
+    return resolved
+
+
 def ensure_dir(path: Path, *, option: str = "--out") -> Path:
     """Create ``path`` (and parents) as a writable folder.
 
@@ -113,7 +146,8 @@ class OutputLock:
     """
 
     def __init__(self, folder: Path, *, command: str) -> None:
-        self.folder = Path(os.path.abspath(folder))  # "--out ." has a name too
+        # resolved: two runs through a symlink and its target take one lock
+        self.folder = Path(os.path.realpath(folder))
         self.command = command
         self.path = self.folder.parent / f".{self.folder.name}.lock"
         self._fd: int | None = None
@@ -151,8 +185,16 @@ class OutputLock:
             except FileNotFoundError:
                 same = False
             if same:
-                os.ftruncate(fd, 0)
-                os.write(fd, f"{os.getpid()}\n".encode())
+                try:
+                    os.ftruncate(fd, 0)
+                    os.write(fd, f"{os.getpid()}\n".encode())
+                except OSError as err:  # a full disk: leave no empty lock file behind
+                    with contextlib.suppress(OSError):
+                        os.unlink(self.path)
+                    os.close(fd)
+                    raise PipelineError(
+                        f"{self.path}: cannot write the lock file ({err.strerror or err})"
+                    ) from err
                 self._fd = fd
                 return
             os.close(fd)  # the holder released and removed it meanwhile: take the new one
@@ -186,3 +228,42 @@ def _read_pid(fd: int) -> int:
         return int(text) if text.isdigit() else 0
     except OSError:
         return 0
+
+
+RENAME_NOREPLACE = 1  # linux/fs.h
+RENAME_EXCHANGE = 2
+_AT_FDCWD = -100
+
+
+def renameat2(src: Path, dst: Path, flags: int) -> bool:
+    """Linux ``renameat2(2)``; False (nothing done) where the platform or file system does
+    not support ``flags``.
+
+    Raises:
+        OSError: the rename itself failed (e.g. ``EEXIST``, ``EXDEV``, ``EBUSY``).
+    """
+    try:
+        fn = ctypes.CDLL(None, use_errno=True).renameat2
+    except (AttributeError, OSError):  # pragma: no cover - not glibc >= 2.28
+        return False
+    rc = fn(_AT_FDCWD, os.fsencode(src), _AT_FDCWD, os.fsencode(dst), ctypes.c_uint(flags))
+    if rc == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.ENOSYS, errno.EINVAL, errno.ENOTSUP):
+        return False
+    raise OSError(err, os.strerror(err), str(src), None, str(dst))
+
+
+def exchange(a: Path, b: Path) -> bool:
+    """Swap the two existing paths ``a`` and ``b`` in one atomic step
+    (``RENAME_EXCHANGE``): every observer sees either both old names or both new.
+
+    Returns:
+        False where the system or file system cannot do it (then nothing changed and the
+        caller falls back to two renames).
+
+    Raises:
+        OSError: the swap itself failed (e.g. ``EXDEV``, ``EBUSY`` for a mount point).
+    """
+    return renameat2(a, b, RENAME_EXCHANGE)

@@ -11,6 +11,8 @@ Each command group is a module registered on the one Typer app (:mod:`pipeline.c
 
 from __future__ import annotations
 
+import errno
+import os
 import signal
 import sys
 import threading
@@ -55,6 +57,9 @@ def _stop(err: BaseException) -> NoReturn:
     sys.exit(code)
 
 
+_DISK_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS, errno.EFBIG})
+
+
 def main() -> None:
     """Console-script entry point."""
     debug = "--debug" in sys.argv[1:]
@@ -65,6 +70,9 @@ def main() -> None:
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.default_int_handler)
     handle_sigterm()  # SIGTERM takes Ctrl-C's path: the same cleanup, then 143
+    # rerun-sdk's own log lines (a failing .rrd file sink prints three) would follow our
+    # one-line error; RUST_LOG set by the user still wins
+    os.environ.setdefault("RUST_LOG", "off")
     try:
         app()
     except SystemExit as exit_:
@@ -81,6 +89,13 @@ def main() -> None:
         if debug or interrupt is None:
             raise
         _stop(interrupt)
+    except OSError as err:
+        # a full or failing disk on a write path no stage turned into a PipelineError
+        if debug or err.errno not in _DISK_ERRNOS:
+            raise
+        where = f"{err.filename}: " if err.filename else ""
+        sys.stderr.write(f"error: {where}{err.strerror or err}\n")
+        sys.exit(1)
     except PipelineError as err:
         if debug:
             raise

@@ -9,6 +9,10 @@ from rich.console import Console
 from rich.table import Table
 
 from pipeline.cli.root import ROBOT_HELP, app, console, print_json
+from pipeline.errors import PipelineError
+
+# ik-check rounds trips one configuration at a time: a bound keeps a typo from running for days
+MAX_IK_CHECK_SAMPLES = 1_000_000
 
 
 @app.command("robots")
@@ -260,6 +264,11 @@ def ik_check_cmd(
     from pipeline.kinematics.check import run_ik_check
     from pipeline.robots import load_spec
 
+    if samples > MAX_IK_CHECK_SAMPLES:
+        raise PipelineError(
+            f"--samples {samples:,}: at most {MAX_IK_CHECK_SAMPLES:,} random configurations "
+            "(the error statistics settle long before)"
+        )
     spec = load_spec(robot)
     ensure_dir(Path(out))  # before the work: a bad --out fails in a second, not after it
     with Progress(

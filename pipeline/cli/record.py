@@ -89,9 +89,11 @@ def record_cmd(
                          executor=executor, address=address, ros_distro=ros_distro)  # fmt: skip
         return
 
-    from pipeline.fsutil import OutputLock
+    from pipeline.fsutil import OutputLock, check_out_dir
     from pipeline.params import load_params
     from pipeline.stages.record import check_outputs_free, prepare
+
+    check_out_dir(out)  # not "" nor the working folder: record removes folders in --out
 
     loaded = load_params(params)
     if not loaded.episodes:
@@ -240,12 +242,18 @@ def _record_campaign(
     """``pipeline record --campaign NAME``: one progress bar with ETA over the campaign."""
     from pipeline.fsutil import OutputLock, ensure_dir
     from pipeline.params import load_params
-    from pipeline.stages.campaign_run import check_campaign_size, distinct_settings, plan_run
+    from pipeline.stages.campaign_run import (
+        check_campaign_count,
+        check_campaign_size,
+        distinct_settings,
+        plan_run,
+    )
     from pipeline.stages.record import check_outputs_free, validate_episodes
 
     loaded = load_params(params)
     if ros_distro is not None:
         loaded = loaded.with_ros_distro(_ros_distro(ros_distro))
+    check_campaign_count(loaded, name, out=out, jobs=jobs)  # before expanding: counted
     run = plan_run(loaded, name, out=out, force=force)
     # every input error first: a refused run creates nothing
     validate_episodes(loaded, distinct_settings(run.pending))

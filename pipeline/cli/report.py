@@ -104,9 +104,11 @@ def report_cmd(
 
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
+    from pipeline.fsutil import check_out_dir
     from pipeline.log.reader import ReadOptions
     from pipeline.stages.report import run_report
 
+    check_out_dir(out)  # "" is the working folder to Path; say what was given
     progress_console = Console(stderr=True)
     with Progress(
         TextColumn("{task.description:<24}"),

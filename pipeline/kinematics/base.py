@@ -261,8 +261,10 @@ def format_reason(spec: RobotSpec, base_T_flange: Array, what: str) -> str:
     """One-line 'unreachable' message naming the robot and the target."""
     p = base_T_flange[:3, 3]
     roll, pitch, yaw = tf.rpy(base_T_flange[:3, :3])
+    fmt = ".4f" if float(np.abs(p).max()) < 1e6 else ".4g"  # 1e308 m is not 309 digits
     return (
-        f"robot '{spec.name}' cannot reach position [{p[0]:.4f}, {p[1]:.4f}, {p[2]:.4f}] m, "
+        f"robot '{spec.name}' cannot reach position "
+        f"[{p[0]:{fmt}}, {p[1]:{fmt}}, {p[2]:{fmt}}] m, "
         f"rpy [{roll:.4f}, {pitch:.4f}, {yaw:.4f}] rad: {what}"
     )
 

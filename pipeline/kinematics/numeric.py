@@ -70,6 +70,8 @@ class NumericLMSolver:
         self._lower = spec.lower
         self._upper = spec.upper
         self._middle = 0.5 * (spec.lower + spec.upper)
+        # the longest the chain can be: every DH a and d end to end [m]
+        self._reach_m = float(sum(abs(j.dh.a) + abs(j.dh.d) for j in spec.joints))
         self._eye = np.eye(spec.dof)
 
     @property
@@ -89,6 +91,19 @@ class NumericLMSolver:
         target = as_pose(base_T_flange)
         seed = self._middle if seed_q is None else seed_or_middle(self._spec, seed_q)
         opts = self._options
+        # Beyond every link's length end to end no joint vector reaches: say so without
+        # descending (a target at 1e308 m would overflow the error norms)
+        p = target[:3, 3]
+        biggest = float(np.abs(p).max())
+        distance_m = biggest * float(np.linalg.norm(p / biggest)) if biggest > 0 else 0.0
+        if distance_m > self._reach_m * (1 + 1e-9) + opts.tol_m:
+            why = (
+                f"it is {distance_m:.4g} m from the base, beyond the arm's reach of "
+                f"{self._reach_m:.4g} m"
+            )
+            return IKResult(
+                np.empty((0, self._spec.dof)), reason=format_reason(self._spec, target, why)
+            )
         goal = pin.SE3(target[:3, :3].copy(), target[:3, 3].copy())
         start = np.minimum(np.maximum(seed, self._lower), self._upper)
         rng: np.random.Generator | None = None

@@ -244,11 +244,56 @@ def time_value(stamp_ns: int) -> dict[str, int]:
 # --- reading --------------------------------------------------------------------------------
 
 
+def min_bytes(types: MsgTypes, type_name: str, cache: dict[str, int] | None = None) -> int:
+    """The fewest bytes a ``type_name`` value takes in CDR (padding aside): what bounds a
+    count read from a file, since n elements need at least n times this many bytes.
+
+    A string takes 4 (its length; the NUL is not counted, for encoders that omit it), a
+    sequence 4 (its count), a fixed array its length times its element's.
+    """
+    cache = {} if cache is None else cache
+    known = cache.get(type_name)
+    if known is not None:
+        return known
+    cache[type_name] = 0  # (ROS types are not recursive; this only ends a malformed loop)
+    total = 0
+    for f in types[type_name].fields:
+        total += (
+            4
+            if f.array is not None and f.array < 0
+            else (f.array or 1) * _element_bytes(types, f, cache)
+        )
+    cache[type_name] = total
+    return total
+
+
+def _element_bytes(types: MsgTypes, f: MsgField, cache: dict[str, int]) -> int:
+    """The fewest bytes one element of ``f`` takes, at least 1 (an empty ROS 2 message
+    still carries one placeholder byte; a zero would let any count through)."""
+    if f.is_primitive:
+        return int(PRIMITIVES[f.base][1])
+    if f.is_string:
+        return 4
+    return max(1, min_bytes(types, f.base, cache))
+
+
+def _too_many(path: str, count: int, each: int, left: int) -> ValueError:
+    return ValueError(
+        f"field {path}: a count of {count:,} needs at least {count * each:,} bytes, "
+        f"{max(left, 0):,} remain in the message"
+    )
+
+
 class _Walk:
-    """Walks one CDR message, recording where each numeric leaf and string sits."""
+    """Walks one CDR message, recording where each numeric leaf and string sits.
+
+    Every element count of a string or message array is checked against the bytes left
+    (:func:`min_bytes`) before anything loops over it.
+    """
 
     __slots__ = (
-        "align", "buf", "check", "end", "endian", "leaves", "pos", "repeat", "texts", "types"
+        "align", "buf", "check", "end", "endian", "leaves", "mins", "pos", "repeat", "texts",
+        "types",
     )  # fmt: skip
 
     def __init__(self, types: MsgTypes, buf: bytes | memoryview, *, repeat: bool = True) -> None:
@@ -267,6 +312,7 @@ class _Walk:
         self.check: list[tuple[int, int]] = []
         self.align = 1  # the largest alignment applied so far [bytes]
         self.repeat = repeat
+        self.mins: dict[str, int] = {}
 
     def _sub(self, pos: int) -> _Walk:
         """A walker over the same bytes from ``pos``, with its own (empty) records."""
@@ -275,6 +321,7 @@ class _Walk:
             self.endian, self.types, self.buf, self.end, pos
         )  # fmt: skip
         sub.leaves, sub.texts, sub.check, sub.align, sub.repeat = {}, {}, [], 1, self.repeat
+        sub.mins = self.mins
         return sub
 
     def _u32(self, structural: bool = True) -> int:
@@ -302,6 +349,10 @@ class _Walk:
         for f in self.types[type_name].fields:
             path = f"{prefix}{f.name}"
             count = 1 if f.array is None else (self._u32() if f.array < 0 else f.array)
+            if not f.is_primitive and f.array is not None and count:
+                each = _element_bytes(self.types, f, self.mins)
+                if count * each > self.end - self.pos:
+                    raise _too_many(path, count, each, self.end - self.pos)
             if f.is_primitive:
                 dtype = PRIMITIVES[f.base]
                 size = int(dtype[1])
@@ -457,7 +508,8 @@ class _ManyWalk:
     """The :class:`_Walk` over N messages in lockstep: numpy per field, not per message.
 
     Bounds: the count of a string or message sequence is checked to lie inside its message
-    before it is read (loops run over it); the fields, strings and the counts of primitive
+    before it is read (loops run over it), and then that its elements fit in the bytes left
+    (at least :func:`min_bytes` each); the fields, strings and the counts of primitive
     sequences are checked once, at the end (:func:`walk_many`): positions only grow, so one
     past its message's end shows there (or sends a read off the buffer: IndexError).
     """
@@ -478,6 +530,7 @@ class _ManyWalk:
         # header) while walking; alignments it implies are skipped. See :meth:`_align`.
         self.known = 8
         self.consts: dict[int, NDArray[np.int64]] = {}
+        self.mins: dict[str, int] = {}
         self.leaves: dict[str, tuple[NDArray[np.int64], str, NDArray[np.int64]]] = {}
         self.regions: dict[str, tuple[NDArray[np.int64], NDArray[np.int64]]] = {}
 
@@ -539,6 +592,8 @@ class _ManyWalk:
                 count = self._u32(rel, path, live, check=not f.is_primitive)
                 rel = pick(rel + 4, rel)
                 self.known = min(self.known, 4)
+            if not f.is_primitive and f.array is not None:
+                self._fits(f, path, count, rel)
             if f.is_primitive:
                 dtype = PRIMITIVES[f.base]
                 size = int(dtype[1])
@@ -577,6 +632,18 @@ class _ManyWalk:
                     has = k < count
                     rel = self.walk(f.base, rel, None if has.all() else has, f"{path}[{k}].")
         return rel
+
+    def _fits(
+        self, f: MsgField, path: str, count: NDArray[np.int64], rel: NDArray[np.int64]
+    ) -> None:
+        """Refuse counts whose elements cannot fit in the bytes left of their message (before
+        a loop runs over them: a corrupted count would loop billions of times)."""
+        each = _element_bytes(self.types, f, self.mins)
+        left = self.size - rel
+        over = (count > 0) & (count * each > left)
+        if over.any():
+            k = int(np.argmax(over))
+            raise _too_many(path, int(count[k]), each, int(left[k]))
 
     def _align(self, rel: NDArray[np.int64], size: int) -> NDArray[np.int64]:
         """``rel`` aligned for a ``size``-byte primitive; free when it is known to be."""

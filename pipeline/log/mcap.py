@@ -17,6 +17,7 @@ import contextlib
 import enum
 import hashlib
 import itertools
+import stat
 import struct
 import zlib
 from collections.abc import Mapping, Sequence
@@ -51,6 +52,10 @@ CHUNK_BYTES = 256 * 1024
 # rosbags); zstd compresses these repetitive CDR records much better and at level 1 still runs
 # at several hundred MB/s. Output is deterministic for a given zstd version and level.
 ZSTD_LEVEL = 1
+
+
+# zstd's largest expansion: a 128 KiB block stored as one repeated byte takes 4 bytes
+_ZSTD_MAX_RATIO = 32 * 1024 + 1
 
 
 class Op(enum.IntEnum):
@@ -408,6 +413,19 @@ class Salvage:
     lost_after_ns: int | None = None
 
 
+def not_regular(mode: int) -> str:
+    """Why a path with this ``st_mode`` cannot be read as a recording file."""
+    kind = (
+        "a FIFO" if stat.S_ISFIFO(mode)
+        else "a character device" if stat.S_ISCHR(mode)
+        else "a block device" if stat.S_ISBLK(mode)
+        else "a socket" if stat.S_ISSOCK(mode)
+        else "a directory" if stat.S_ISDIR(mode)
+        else "not a file"
+    )  # fmt: skip
+    return f"not a regular file ({kind}); expected an MCAP or sqlite3 recording file"
+
+
 class StorageScan:
     """What a scan of one storage file (MCAP or sqlite3) collects, and how it hands on
     messages: subclasses receive them through :meth:`on_messages`.
@@ -466,7 +484,10 @@ class McapScan(StorageScan):
     # ---- the record loop
     def run(self) -> None:
         try:
-            self.size = self.path.stat().st_size
+            info = self.path.stat()
+            if not stat.S_ISREG(info.st_mode):  # a FIFO blocks, /dev/zero never ends
+                raise self._fail(not_regular(info.st_mode))
+            self.size = info.st_size
             fh = open(self.path, "rb")  # noqa: SIM115 - closed in finally below
         except OSError as err:
             raise self._fail(f"cannot read ({err.strerror})") from err
@@ -520,6 +541,13 @@ class McapScan(StorageScan):
                 raise self._fail(
                     f"truncated: record at byte {pos} claims {length} bytes but the file "
                     f"ends at byte {self.size}"
+                )
+            # Opcode 0 is invalid and a file starts with its Header: zeros (a preallocated
+            # or wiped file) are refused here at once, not walked 9 bytes at a time.
+            if op == 0 or (pos == 8 and op != Op.HEADER):
+                raise self._fail(
+                    f"corrupt: record at byte {pos} has opcode {op:#04x}"
+                    + (", expected the Header record (0x01)" if pos == 8 else " (invalid)")
                 )
             if op != Op.MESSAGE_INDEX:
                 self._flush()
@@ -630,6 +658,14 @@ class McapScan(StorageScan):
             raise self._fail(f"corrupt: chunk header at byte {pos} ({err})") from err
         if off + clen > len(body):
             raise self._fail(f"corrupt: chunk at byte {pos} is shorter than it claims")
+        # the uncompressed size is allocated before decompressing: bound it by what the
+        # compressed bytes can expand to
+        most = {"": clen, "lz4": 256 * clen + 64, "zstd": _ZSTD_MAX_RATIO * clen + 1024}
+        if compression in most and usize > most[compression]:
+            raise self._fail(
+                f"corrupt: chunk at byte {pos} claims {usize:,} uncompressed bytes, more than "
+                f"its {clen:,} {compression or 'uncompressed'} bytes can hold"
+            )
         raw = body[off : off + clen]
         try:
             if compression == "zstd":
@@ -782,6 +818,8 @@ class McapScan(StorageScan):
         name, off = self._str(body, 2)
         encoding, off = self._str(body, off)
         (n,) = struct.unpack_from("<I", body, off)
+        if off + 4 + n > len(body):
+            raise ValueError(f"schema {sid}: its data claims {n} bytes, past its record")
         self.schemas[sid] = McapSchema(sid, name, encoding, body[off + 4 : off + 4 + n])
 
     def _channel(self, body: bytes) -> None:

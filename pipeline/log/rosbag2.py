@@ -5,7 +5,6 @@ bags and their storage files, and publishing a new bag atomically.
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import errno
 import json
 import os
@@ -19,7 +18,9 @@ from typing import Any
 import yaml
 
 from pipeline.errors import RecordingError
-from pipeline.fsutil import remove_stale
+from pipeline.fsutil import RENAME_EXCHANGE, RENAME_NOREPLACE, remove_stale
+from pipeline.fsutil import renameat2 as _renameat2
+from pipeline.log.mcap import not_regular
 from pipeline.log.schemas import MESSAGE_ENCODING, RosDistro
 
 METADATA_FILE = "metadata.yaml"
@@ -156,25 +157,6 @@ def _json_quotable(custom_data: Mapping[str, str]) -> bool:
 
 # --- atomic publish ----------------------------------------------------------------
 
-_AT_FDCWD = -100
-_RENAME_NOREPLACE = 1
-_RENAME_EXCHANGE = 2
-
-
-def _renameat2(src: Path, dst: Path, flags: int) -> bool:
-    """``renameat2(2)``; False when the platform or file system does not support ``flags``."""
-    try:
-        fn = ctypes.CDLL(None, use_errno=True).renameat2
-    except (AttributeError, OSError):
-        return False
-    rc = fn(_AT_FDCWD, os.fsencode(src), _AT_FDCWD, os.fsencode(dst), ctypes.c_uint(flags))
-    if rc == 0:
-        return True
-    err = ctypes.get_errno()
-    if err in (errno.ENOSYS, errno.EINVAL, errno.ENOTSUP):
-        return False
-    raise OSError(err, os.strerror(err), str(dst))
-
 
 def _fsync_dir(path: Path) -> None:
     fd = os.open(path, os.O_RDONLY)
@@ -187,7 +169,7 @@ def _fsync_dir(path: Path) -> None:
 def _publish(tmp: Path, final: Path, *, force: bool) -> None:
     """Move the finished ``tmp`` directory to ``final`` (replacing it only with ``force``)."""
     if not os.path.lexists(final):
-        if _renameat2(tmp, final, _RENAME_NOREPLACE):
+        if _renameat2(tmp, final, RENAME_NOREPLACE):
             return
         if os.path.lexists(final):  # pragma: no cover - lost a race without renameat2
             raise FileExistsError(errno.EEXIST, "exists", str(final))
@@ -195,7 +177,7 @@ def _publish(tmp: Path, final: Path, *, force: bool) -> None:
         return
     if not force:
         raise RecordingError(f"{final}: recording already exists; use --force to overwrite it")
-    if _renameat2(tmp, final, _RENAME_EXCHANGE):
+    if _renameat2(tmp, final, RENAME_EXCHANGE):
         shutil.rmtree(tmp)  # now holds the old recording
         return
     old = final.with_name(f".{final.name}.old-{os.getpid()}")
@@ -251,15 +233,33 @@ def find_recordings(root: Path) -> list[Path]:
     under ``root``.
 
     Hidden files and folders (temporary names of a writer at work) are ignored.
-    A ``root`` that is itself a recording is returned alone.
+    A ``root`` that is itself a recording is returned alone. Symlinked folders are
+    followed (each real folder once, so a link to an ancestor ends).
+
+    Raises:
+        RecordingError: a folder that cannot be listed (permission denied): the
+            recordings in it would be missing from the report without a word.
     """
     root = Path(root)
     if root.is_file():
         return [root]
     if (root / METADATA_FILE).is_file():
         return [root]
+
+    def unlisted(err: OSError) -> None:
+        raise RecordingError(
+            f"{err.filename}: cannot list this folder ({err.strerror}); the recordings in it "
+            "would be left out (fix its permissions or point --recordings elsewhere)"
+        ) from err
+
     found: list[Path] = []
-    for dirpath, dirnames, filenames in os.walk(root):
+    seen: set[str] = set()
+    for dirpath, dirnames, filenames in os.walk(root, onerror=unlisted, followlinks=True):
+        real = os.path.realpath(dirpath)
+        if real in seen:  # a symlink back to a folder already walked
+            dirnames[:] = []
+            continue
+        seen.add(real)
         dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
         here = Path(dirpath)
         if here != root and METADATA_FILE in filenames:
@@ -285,6 +285,8 @@ def storage_files(source: Path) -> list[Path]:
         raise RecordingError(f"{source}: no such file or directory")
     if source.is_file():
         return [source]
+    if not source.is_dir():  # a FIFO or a device named .mcap
+        raise RecordingError(f"{source}: {not_regular(source.stat().st_mode)}")
     meta = source / METADATA_FILE
     names: list[str] = []
     if meta.is_file():

@@ -31,6 +31,9 @@ MAX_PLOT_POINTS = 4000
 DPI = 100
 # Figures are drawn for at most this many scenarios (the report says which are left out).
 MAX_FIGURE_SCENARIOS = 6
+# Joints drawn per figure (and per .rrd): a panel each; a bag of 10,000 joints would take
+# hours to draw. The rest are in the CSV files and metrics.json; the caption says so.
+MAX_FIGURE_JOINTS = 32
 
 
 @dataclass(frozen=True)
@@ -168,24 +171,28 @@ def _joint_grid_figure(
     limits: bool = False,
     controller_state: bool = False,
 ) -> Figure:
-    joints = recs[0].joint_names
+    joints = recs[0].joint_names[:MAX_FIGURE_JOINTS]
     rows, cols = subplot_grid(len(joints))
     fig = Figure(figsize=(4.2 * cols, 2.6 * rows + 0.4))
     axes = fig.subplots(rows, cols, squeeze=False, sharex=True)
     log = column == "error_rad" and _log_error(recs)
+    # each recording's (times, samples x joints) once, not once per joint
+    series = [
+        (cs_times_s(rec), cs_wide(rec, column))
+        if controller_state
+        else (times_s(rec), wide(rec, column))
+        for rec in recs
+    ]
     for k, joint in enumerate(joints):
         ax = axes[k // cols][k % cols]
         lows: list[float] = []
         highs: list[float] = []
         smallest: list[float] = []  # the smallest positive value (log axes)
-        for rec in recs:
+        for rec, (times, values) in zip(recs, series, strict=True):
             if joint not in rec.joint_names:
                 continue
             j = rec.joint_names.index(joint)
-            if controller_state:
-                t, y = _thin(cs_times_s(rec), cs_wide(rec, column)[:, j])
-            else:
-                t, y = _thin(times_s(rec), wide(rec, column)[:, j])
+            t, y = _thin(times, values[:, j])
             if log:
                 y = np.abs(y)
             if np.isfinite(y).any():
@@ -394,15 +401,22 @@ def scenario_figures(
             True,
         ),
     )
+    n = len(recs[0].joint_names)
+    cut = (
+        f" (the first {MAX_FIGURE_JOINTS} of {n:,} joints; all are in the CSV files)"
+        if n > MAX_FIGURE_JOINTS
+        else ""
+    )
     for column, ylabel, title, name, caption, limits in panels:
         fig = _joint_grid_figure(
             data,
             recs,
             column,
             ylabel,
-            f"{scenario}: {title}",
+            f"{scenario}: {title}{cut}",
             limits=limits,
             controller_state=column == "error_rad",
         )
+        caption += cut
         out.append(FigureFile(save_figure(fig, out_dir, f"{stem}_{name}.png"), caption))
     return out

@@ -16,6 +16,10 @@ spawned or served: the stream goes to a file sink only.
 
 from __future__ import annotations
 
+import errno
+import os
+import threading
+import time
 import uuid
 from collections.abc import Callable
 from pathlib import Path
@@ -32,6 +36,7 @@ from pipeline.model.chain import chain
 from pipeline.model.dh import link_frames
 from pipeline.report import entities as ent
 from pipeline.report.colors import REFERENCE_RGB, hex_color
+from pipeline.report.figures import MAX_FIGURE_JOINTS
 from pipeline.report.inputs import ReportData, cs_times_s, cs_wide, times_s, wide
 from pipeline.robots import RobotSpec
 
@@ -44,6 +49,15 @@ SPACING_M = 1.6
 MAX_RRD_GROUPS = 12
 BAND_LEVELS = (("p05", 5.0), ("p50", 50.0), ("p95", 95.0))
 
+# The writer runs in a thread the caller waits on (so Ctrl-C and SIGTERM are handled while it
+# writes) and is abandoned, with one line, when the disk has been full this long [s] ...
+DISK_FULL_GRACE_S = 3.0
+# ... or when the file has not grown for this long [s] (a stuck sink; logging sends data
+# every few milliseconds, so a working writer never pauses nearly this long)
+STALL_S = 120.0
+# how long a flush may wait for the file sink [s] (rerun waits forever by default)
+FLUSH_TIMEOUT_S = 60.0
+
 _COLUMNS = {
     "position": "position_rad",
     "error": "error_rad",
@@ -53,10 +67,15 @@ _COLUMNS = {
 
 
 def _joints(data: ReportData) -> list[str]:
+    """The joints drawn (at most :data:`MAX_FIGURE_JOINTS`, as in the figures)."""
     joints: list[str] = []
     for rec in data.sample():
-        joints += [j for j in rec.joint_names if j not in joints]
-    return joints
+        joints += [j for j in _drawn(rec.joint_names) if j not in joints]
+    return joints[:MAX_FIGURE_JOINTS]
+
+
+def _drawn(names: tuple[str, ...]) -> tuple[str, ...]:
+    return names[:MAX_FIGURE_JOINTS]
 
 
 def blueprint(
@@ -242,7 +261,7 @@ def _send_bands(stream: rr.RecordingStream, data: ReportData, group: str) -> Non
         stack = np.stack([e[:n] for _, e in series])  # (E, n, J)
         levels = np.nanpercentile(stack, [p for _, p in BAND_LEVELS], axis=0)
         color = data.controller_color(ctrl)
-        for j, joint in enumerate(recs[0].joint_names):
+        for j, joint in enumerate(_drawn(recs[0].joint_names)):
             for (name, _), values in zip(BAND_LEVELS, levels, strict=True):
                 _send_series(
                     stream,
@@ -336,7 +355,91 @@ def write_rrd(data: ReportData, path: Path) -> list[str]:
 
     Every stream it opens is flushed, disconnected and freed before it returns, so a
     process calling it many times (a service, a notebook) does not accumulate threads.
+
+    The writing runs in a thread this one waits on: Ctrl-C and SIGTERM are handled while
+    it writes, and a writer that cannot finish is abandoned within a bound (rerun-sdk's
+    file sink can block for good once the disk is full): when the file system has had no
+    free space for :data:`DISK_FULL_GRACE_S`, or the file has not grown for
+    :data:`STALL_S`. Rerun's exit-time flush is then skipped, so the process can end.
+
+    Raises:
+        OSError: the disk is full (``ENOSPC``), the writer stopped or stalled (``EIO``).
     """
+    outcome: dict[str, object] = {}
+
+    def run() -> None:
+        try:
+            outcome["value"] = _write_rrd(data, path)
+        except BaseException as err:  # handed to the waiting thread
+            outcome["error"] = err
+
+    worker = threading.Thread(target=run, name="rrd-writer", daemon=True)
+    worker.start()
+    try:
+        _wait(worker, path)
+    finally:
+        if worker.is_alive():  # abandoned (or interrupted): its flush at exit would block
+            rr.unregister_shutdown()
+    err = outcome.get("error")
+    if isinstance(err, RuntimeError) and _sink_failure(err):
+        raise _disk_error(path, f"the Rerun file writer stopped ({err})") from err
+    if isinstance(err, BaseException):
+        raise err
+    value = outcome["value"]
+    assert isinstance(value, list)
+    return value
+
+
+def _wait(worker: threading.Thread, path: Path) -> None:
+    """Wait for the writer; raise OSError when it is to be abandoned."""
+    full_since: float | None = None
+    size, grew_at = -1, time.monotonic()
+    while True:
+        worker.join(0.2)
+        if not worker.is_alive():
+            return
+        now = time.monotonic()
+        if _disk_full(path.parent):
+            full_since = full_since if full_since is not None else now
+            if now - full_since > DISK_FULL_GRACE_S:
+                raise _disk_error(path, "the Rerun file writer could not finish")
+        else:
+            full_since = None
+        try:
+            current = os.stat(path).st_size
+        except OSError:
+            current = -1
+        if current != size:
+            size, grew_at = current, now
+        elif now - grew_at > STALL_S:
+            raise OSError(
+                errno.EIO, f"the Rerun file writer made no progress for {STALL_S:.0f} s", str(path)
+            )
+
+
+def _disk_full(folder: Path) -> bool:
+    try:
+        st = os.statvfs(folder)
+    except OSError:
+        return False
+    return st.f_bavail * st.f_frsize < 4096
+
+
+def _sink_failure(err: RuntimeError) -> bool:
+    """Whether rerun-sdk's error is its file sink failing (a full disk, an I/O error)."""
+    text = str(err).lower()
+    return "file-writer" in text or "flush" in text or "os error" in text
+
+
+def _disk_error(path: Path, what: str) -> OSError:
+    if _disk_full(path.parent):
+        return OSError(errno.ENOSPC, f"{os.strerror(errno.ENOSPC)}; {what}", str(path))
+    return OSError(errno.EIO, what, str(path))
+
+
+def _write_rrd(data: ReportData, path: Path) -> list[str]:
+    """:func:`write_rrd`'s work, in the calling thread (flushes wait at most
+    :data:`FLUSH_TIMEOUT_S`)."""
     layout = _layout(data)
     n = sum(len(recs) for _, recs in layout)
     reach = _reach_m(data)
@@ -348,7 +451,7 @@ def write_rrd(data: ReportData, path: Path) -> list[str]:
     try:
         return _log_all(stream, data, layout)
     finally:
-        stream.flush()
+        stream.flush(timeout_sec=FLUSH_TIMEOUT_S)
         stream.disconnect()
         close_blueprint()
         del stream
@@ -366,7 +469,7 @@ def _log_all(
         ref = recs[0]
         t_ref = cs_times_s(ref)
         q_ref = cs_wide(ref, "reference_position_rad")
-        for j, joint in enumerate(ref.joint_names):
+        for j, joint in enumerate(_drawn(ref.joint_names)):
             _send_series(
                 stream,
                 ent.reference_path(joint, group),
@@ -389,7 +492,7 @@ def _log_all(
                 # The error at the /controller_state rate, as the metrics use it.
                 full_rate = quantity == "error"
                 values = cs_wide(rec, column) if full_rate else wide(rec, column)
-                for j, joint in enumerate(rec.joint_names):
+                for j, joint in enumerate(_drawn(rec.joint_names)):
                     _send_series(
                         stream,
                         ent.series_path(joint, quantity, rec.episode),

@@ -20,7 +20,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.errors import ParamsError
-from pipeline.params import Episode, Params
+from pipeline.params import (
+    CampaignParams,
+    Episode,
+    Params,
+    RandomAxis,
+    RandomGoals,
+    SimParams,
+)
 from pipeline.stages.campaign import episode_fingerprint, expand
 from pipeline.stages.provenance import git_commit
 
@@ -140,6 +147,87 @@ def distinct_settings(episodes: Sequence[Episode]) -> list[Episode]:
     return list(seen.values())
 
 
+# per physics step and joint, measured 4-6 us (rounded up)
+_PER_STEP_WALL_S = 1e-5
+
+
+def _episode_cost(*, dof: int, duration_s: float, sim: SimParams) -> tuple[int, float]:
+    """(bag bytes, wall seconds) of one episode of ``duration_s`` [s]."""
+    control_s = sim.physics_dt_s * sim.control_period_steps
+    steps = int(duration_s / control_s) + 1
+    n_bytes = steps * dof * BAG_BYTES_PER_JOINT_STEP // sim.joint_state_decimation
+    return n_bytes, steps * sim.control_period_steps * dof * _PER_STEP_WALL_S
+
+
+def _refuse_too_big(
+    params: Params, name: str, out_dir: Path, *, count: int, n_bytes: int, wall_s: float,
+    jobs: int,
+) -> None:  # fmt: skip
+    probe = out_dir if out_dir.exists() else out_dir.parent
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    free = shutil.disk_usage(probe).free
+    where = f"{params.source}: campaigns.{name}"
+    if n_bytes > DISK_SHARE * free:
+        raise ParamsError(
+            f"{where}: {count:,} episodes would write about {n_bytes / 1e9:.3g} GB, "
+            f"more than the {DISK_SHARE * free / 1e9:.3g} GB free on {probe}; sweep fewer "
+            "values or seeds, or raise sim.joint_state_decimation"
+        )
+    if wall_s > MAX_CAMPAIGN_WALL_S:
+        raise ParamsError(
+            f"{where}: {count:,} episodes would run for about "
+            f"{wall_s / 86400:.3g} days on {jobs} job(s); split the campaign or add jobs"
+        )
+
+
+def campaign_count(campaign: CampaignParams) -> int:
+    """How many episodes a campaign has, counted from its params (nothing drawn or built)."""
+    n = len(campaign.controllers) * len(campaign.seed_list)
+    for spec in campaign.sweep.values():
+        n *= spec.n if isinstance(spec, RandomAxis) else len(spec)
+    if isinstance(campaign.goals, RandomGoals):
+        n *= campaign.goals.random
+    elif campaign.goals is not None:
+        n *= len(campaign.goals)
+    return n
+
+
+def check_campaign_count(params: Params, name: str, *, out: Path, jobs: int) -> int:
+    """Refuse a campaign too big for the disk or a week *before* it is expanded: its
+    episodes counted from the params, each costed at its cheapest (the scenario's robot,
+    the smallest swept ``hold_s`` / ``preroll_s``, no motion). Expanding 300,000 episodes
+    takes a minute and 400 MB; counting them takes nothing. Returns the count.
+
+    Raises:
+        ParamsError: unknown campaign, or a lower bound already too big.
+    """
+    from pipeline.robots.spec import load_spec
+
+    if name not in params.campaigns:
+        return 0  # expand() names the known ones
+    campaign = params.campaigns[name]
+    scenario = params.scenarios.get(campaign.scenario)
+    if scenario is None:
+        return 0  # expand() says what is wrong
+    least = {"hold_s": scenario.hold_s, "preroll_s": scenario.preroll_s}
+    for path, spec in campaign.sweep.items():
+        if path in least:
+            low = spec.uniform[0] if isinstance(spec, RandomAxis) else min(spec)
+            least[path] = min(least[path], max(low, 0.0))
+    count = campaign_count(campaign)
+    n_bytes, wall_s = _episode_cost(
+        dof=load_spec(scenario.robot).dof,
+        duration_s=least["hold_s"] + least["preroll_s"],
+        sim=params.sim,
+    )
+    _refuse_too_big(
+        params, name, out / name, count=count, n_bytes=n_bytes * count,
+        wall_s=wall_s * count / max(1, jobs), jobs=jobs,
+    )  # fmt: skip
+    return count
+
+
 def check_campaign_size(
     params: Params, run: CampaignRun, *, motion_s: float, jobs: int
 ) -> tuple[int, float]:
@@ -153,31 +241,20 @@ def check_campaign_size(
 
     n_bytes = 0
     wall_s = 0.0
-    per_step_wall_s = 1e-5  # per physics step and joint, measured 4-6 us (rounded up)
+    dofs: dict[str, int] = {}
     for e in run.pending:
-        dof = load_spec(e.scenario.robot).dof
+        dof = dofs.get(e.scenario.robot)
+        if dof is None:
+            dof = dofs[e.scenario.robot] = load_spec(e.scenario.robot).dof
         duration_s = e.scenario.preroll_s + motion_s + e.scenario.hold_s
-        control_s = e.sim.physics_dt_s * e.sim.control_period_steps
-        steps = int(duration_s / control_s) + 1
-        n_bytes += steps * dof * BAG_BYTES_PER_JOINT_STEP // e.sim.joint_state_decimation
-        wall_s += steps * e.sim.control_period_steps * dof * per_step_wall_s
+        b, w = _episode_cost(dof=dof, duration_s=duration_s, sim=e.sim)
+        n_bytes += b
+        wall_s += w
     wall_s /= max(1, jobs)
-    probe = run.out_dir if run.out_dir.exists() else run.out_dir.parent
-    while not probe.exists() and probe != probe.parent:
-        probe = probe.parent
-    free = shutil.disk_usage(probe).free
-    where = f"{params.source}: campaigns.{run.name}"
-    if n_bytes > DISK_SHARE * free:
-        raise ParamsError(
-            f"{where}: {len(run.pending):,} episodes would write about {n_bytes / 1e9:.3g} GB, "
-            f"more than the {DISK_SHARE * free / 1e9:.3g} GB free on {probe}; sweep fewer "
-            "values or seeds, or raise sim.joint_state_decimation"
-        )
-    if wall_s > MAX_CAMPAIGN_WALL_S:
-        raise ParamsError(
-            f"{where}: {len(run.pending):,} episodes would run for about "
-            f"{wall_s / 86400:.3g} days on {jobs} job(s); split the campaign or add jobs"
-        )
+    _refuse_too_big(
+        params, run.name, run.out_dir, count=len(run.pending), n_bytes=n_bytes,
+        wall_s=wall_s, jobs=jobs,
+    )  # fmt: skip
     return n_bytes, wall_s
 
 

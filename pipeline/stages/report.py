@@ -1,16 +1,15 @@
 """The report stage: recordings -> metrics.json, plot CSVs, figures, report.md, recording.rrd.
 
-Everything is written into a fresh staging folder beside ``out`` and moved into
-place only when all of it succeeded, so a failed or killed run never leaves a
-half-written file under a final name or destroys an earlier report. Moving in
-replaces files one by one inside the existing folders: files the report does not
-produce (``plots/.gitignore``, notes) stay; only stale figures (``figures/*.png``
-of an earlier run) are removed.
+Everything is written into a fresh staging folder beside ``out``; when all of it
+succeeded, the files of ``out`` that the previous report did not write (``plots/.gitignore``,
+notes) are linked into it and the two folders swap names in one atomic step
+(:func:`_commit`), so a failed or killed run never leaves a half-written file under a
+final name, a mix of two reports, or a damaged earlier report. Only files a previous
+report listed in its manifest (:data:`MANIFEST`) are ever removed.
 """
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import os
 import re
@@ -48,7 +47,7 @@ from pipeline.analysis.protocol import (
 )
 from pipeline.constants import TOPIC_CONTROLLER_STATE, TOPIC_JOINT_STATES
 from pipeline.errors import PipelineError, RecordingError, ReportError
-from pipeline.fsutil import OutputLock, remove_stale
+from pipeline.fsutil import OutputLock, check_out_dir, exchange, pid_alive, remove_stale
 from pipeline.log.reader import (
     ReadOptions,
     Recording,
@@ -58,7 +57,6 @@ from pipeline.log.reader import (
 )
 from pipeline.report.campaigns import CampaignSection, campaign_section
 from pipeline.report.figures import (
-    FIGURES_DIR,
     MAX_FIGURE_SCENARIOS,
     FigureFile,
     scenario_figures,
@@ -69,6 +67,8 @@ from pipeline.report.markdown import REPORT_FILE, render_report
 from pipeline.report.metrics_json import write_episode_csvs, write_metrics, write_series_csvs
 from pipeline.report.rerun_rrd import RRD_FILE, write_rrd
 
+# the baseline when none is named; recordings of one other controller are fine with it
+DEFAULT_BASELINE = "pid"
 # progress(step, done, total): called as work advances (for a progress bar).
 Progress = Callable[[str, int, int], None]
 
@@ -160,85 +160,140 @@ def read_all(
 
 
 CAMPAIGN_INDEX = f"{TABLE_DIR}/index.csv"
-# Earlier outputs a run removes when it does not produce them again: folder -> suffixes.
-_OWNED = {FIGURES_DIR: (".png",), TABLE_DIR: (".parquet", ".csv")}
+# The files the last report wrote into --out, one relative path a line: the only files a
+# later report removes (when it does not write them again). Everything else is the user's.
+MANIFEST = ".pipeline-outputs"
+# The commit's steps, in order; PIPELINE_FAULT_COMMIT=<step> dies there (tests only).
+COMMIT_STEPS = ("staged", "carried", "listed", "half-swapped", "swapped")
 
 
-def _stale(out_dir: Path, produced: set[str]) -> list[str]:
-    """Earlier outputs this run does not produce and that would mislead: figures and
-    campaign tables only.
+def _fault(step: str) -> None:
+    """Test hook: end the process as SIGKILL would, right at commit ``step``."""
+    if os.environ.get("PIPELINE_FAULT_COMMIT") == step:
+        os._exit(137)
 
-    Hidden files and anything that is not a ``.png`` directly in ``figures/`` (or a
-    ``.parquet`` / ``.csv`` directly in ``campaigns/``) are not ours to delete
-    (``.gitignore``, a README someone put there).
-    """
+
+def _manifest(out_dir: Path) -> set[str]:
+    """The files the previous report wrote into ``out_dir`` (none without a manifest: a
+    report from before manifests, or a folder the pipeline never wrote, is left alone)."""
+    try:
+        text = (out_dir / MANIFEST).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return set()
+    return {line for line in text.splitlines() if line and not line.startswith("#")}
+
+
+def _tree_files(root: Path) -> list[str]:
+    """Files (and symlinks) under ``root``, relative, sorted."""
     out = []
-    for name, suffixes in _OWNED.items():
-        folder = out_dir / name
-        if not folder.is_dir():
-            continue
-        out += [
-            f"{name}/{p.name}"
-            for p in sorted(folder.iterdir())
-            if p.is_file()
-            and p.suffix in suffixes
-            and not p.name.startswith(".")
-            and f"{name}/{p.name}" not in produced
-        ]
-    return out
+    for folder, dirs, names in os.walk(root):
+        rel = Path(folder).relative_to(root)
+        out += [(rel / n).as_posix() for n in names]
+        out += [(rel / d).as_posix() for d in dirs if (Path(folder) / d).is_symlink()]
+    return sorted(out)
 
 
-def _commit(staging: Path, out_dir: Path, files: list[str]) -> None:
-    """Move the staged ``files`` (paths relative to ``staging``) into ``out_dir``.
+def _carry(out_dir: Path, staging: Path, *, ours: set[str]) -> None:
+    """Copy into ``staging`` what ``out_dir`` holds that is not ours to replace or remove:
+    the user's files (hard links, so nothing is duplicated on disk), symlinks and folders."""
+    for folder, dirs, names in os.walk(out_dir):
+        src_dir = Path(folder)
+        rel_dir = src_dir.relative_to(out_dir)
+        for name in [*dirs, *names]:
+            src = src_dir / name
+            rel = (rel_dir / name).as_posix()
+            dst = staging / rel
+            if rel in ours or dst.exists() or dst.is_symlink():
+                continue
+            if src.is_symlink():
+                os.symlink(os.readlink(src), dst)
+            elif src.is_dir():
+                dst.mkdir()
+                shutil.copystat(src, dst)
+            else:
+                try:
+                    os.link(src, dst)
+                except OSError:  # no hard links here (a FUSE mount, a link limit)
+                    shutil.copy2(src, dst)
+        dirs[:] = [d for d in dirs if not (src_dir / d).is_symlink()]
 
-    Each file replaces its namesake atomically (``os.replace``; staging is on the same
-    file system); every file it replaces and every stale figure is first moved aside into
-    ``staging``. If any move fails, everything moved so far is put back, so ``out_dir``
-    holds either all of the new outputs or exactly what it held before.
+
+def _commit(staging: Path, out_dir: Path) -> None:
+    """Make the finished ``staging`` folder the report ``out_dir``, in one atomic step.
+
+    ``staging`` gains what ``out_dir`` holds besides the previous report's own files (the
+    user's notes, ``.gitignore`` files), then a manifest of the report's files; then the
+    two folders swap names at once (:func:`exchange`), so ``out_dir`` holds either the
+    whole earlier report or the whole new one at every instant, whatever kills the run.
+    Afterwards ``staging`` holds the earlier folder, which the caller removes. Only files
+    the previous report listed in its manifest disappear (stale figures, tables).
+
+    Where the file system cannot swap, ``out_dir`` is renamed aside to
+    ``.<out>.old-<pid>-<random>`` and the staging folder renamed in: a kill between the two
+    leaves ``out_dir`` missing and the old report whole beside it, which the next run puts
+    back (:func:`_recover`) before anything else.
 
     Raises:
-        OSError: a move failed (after the rollback).
+        OSError: a step failed; ``out_dir`` is as it was.
     """
-    out_dir.mkdir(parents=True, exist_ok=True)
-    backup = staging / ".previous"
-    backup.mkdir()
-    made_dirs: list[Path] = []
-    moved_aside: list[str] = []  # rel paths now in backup/
-    moved_in: list[str] = []  # rel paths now in out_dir (new)
-    try:
-        for rel in [*files, *_stale(out_dir, set(files))]:
-            dst = out_dir / rel
-            if dst.is_file() or dst.is_symlink():
-                (backup / rel).parent.mkdir(parents=True, exist_ok=True)
-                os.replace(dst, backup / rel)
-                moved_aside.append(rel)
-        for rel in files:
-            dst = out_dir / rel
-            for parent in reversed(dst.relative_to(out_dir).parents):
-                folder = out_dir / parent
-                if not folder.exists():
-                    folder.mkdir()
-                    made_dirs.append(folder)
-            os.replace(staging / rel, dst)
-            moved_in.append(rel)
-    except OSError:
-        for rel in reversed(moved_in):
-            with contextlib.suppress(OSError):
-                os.replace(out_dir / rel, staging / rel)
-        for rel in reversed(moved_aside):
-            with contextlib.suppress(OSError):
-                os.replace(backup / rel, out_dir / rel)
-        for folder in reversed(made_dirs):
-            with contextlib.suppress(OSError):
-                folder.rmdir()
-        raise
+    _fault("staged")
+    written = _tree_files(staging)
+    if out_dir.is_dir():
+        _carry(out_dir, staging, ours=_manifest(out_dir) | set(written) | {MANIFEST})
+        shutil.copystat(out_dir, staging)
+    _fault("carried")
+    (staging / MANIFEST).write_text(
+        "# written by `pipeline report`; a later report removes these files only\n"
+        + "".join(f"{rel}\n" for rel in written),
+        encoding="utf-8",
+    )
+    _fault("listed")
+    if not out_dir.exists():
+        os.rename(staging, out_dir)
+    elif not exchange(staging, out_dir):
+        old = out_dir.parent / f".{out_dir.name}.old-{os.getpid()}-{secrets.token_hex(4)}"
+        os.rename(out_dir, old)
+        _fault("half-swapped")
+        os.rename(staging, out_dir)
+        os.rename(old, staging)  # the caller removes the earlier report with the staging
+    _fault("swapped")
+
+
+def _old_pattern(out_dir: Path) -> re.Pattern[str]:
+    return re.compile(rf"\.{re.escape(out_dir.name)}\.old-(?P<pid>\d+)-[a-f0-9]+")
+
+
+def _recover(out_dir: Path) -> None:
+    """Put back an earlier report a killed commit left renamed aside (``out_dir`` missing),
+    then remove such folders of dead runs that are no longer needed."""
+    pattern = _old_pattern(out_dir)
+    if not out_dir.exists():
+        try:
+            aside = sorted(
+                (p for p in out_dir.parent.iterdir() if pattern.fullmatch(p.name)),
+                key=lambda p: p.stat().st_mtime,
+            )
+        except OSError:
+            aside = []
+        for path in reversed(aside):
+            match = pattern.fullmatch(path.name)
+            if match is not None and not pid_alive(int(match["pid"])):
+                try:
+                    os.rename(path, out_dir)
+                except OSError as err:
+                    raise ReportError(
+                        f"{out_dir}: missing, and the earlier report a killed run left at "
+                        f"{path} cannot be put back ({err.strerror}); rename it yourself"
+                    ) from err
+                break
+    remove_stale(out_dir.parent, pattern)
 
 
 def run_report(
     *,
     recordings_dir: Path,
     out_dir: Path,
-    baseline: str = "pid",
+    baseline: str = DEFAULT_BASELINE,
     skip_bad: bool = False,
     progress: Progress = _noop,
     options: ReadOptions | None = None,
@@ -252,7 +307,18 @@ def run_report(
         ReportError / RecordingError: see :func:`read_all`; unknown baseline controller;
             another report is writing ``out_dir``.
     """
-    out_dir = Path(out_dir)
+    shown = Path(out_dir)
+    try:
+        # resolved: the lock, staging and swap act on the real folder behind a symlink
+        out_dir = check_out_dir(out_dir)
+    except PipelineError as err:
+        raise ReportError(str(err)) from err
+    recordings_real = Path(os.path.realpath(recordings_dir))
+    if recordings_real == out_dir or out_dir in recordings_real.parents:
+        raise ReportError(
+            f"{shown}: --out holds the recordings ({recordings_dir}); the report replaces "
+            "its --out folder as a whole, so choose a folder of its own"
+        )
     try:
         out_dir.parent.mkdir(parents=True, exist_ok=True)
     except OSError as err:
@@ -262,7 +328,8 @@ def run_report(
     try:
         with OutputLock(out_dir, command="`pipeline report`"):
             remove_stale(out_dir.parent, _staging_pattern(out_dir))
-            return _run_report_locked(
+            _recover(out_dir)
+            result = _run_report_locked(
                 recordings_dir=recordings_dir,
                 out_dir=out_dir,
                 baseline=baseline,
@@ -270,6 +337,7 @@ def run_report(
                 progress=progress,
                 options=options,
             )
+            return dataclasses.replace(result, out_dir=shown)
     except PipelineError as err:
         if isinstance(err, RecordingError | ReportError):
             raise
@@ -315,7 +383,14 @@ def _run_report_locked(
         sink=measured,
     )
     episodes = pl.concat([measured.rows[r.episode] for r in recordings], how="vertical")
-    check_baseline(episodes, baseline)
+    if not check_baseline(episodes, baseline) and baseline != DEFAULT_BASELINE:
+        # one controller: nothing to compare, but a baseline the user named that is not
+        # in the recordings is a typo, not a choice
+        present = ", ".join(sorted(set(episodes.get_column("controller").to_list())))
+        raise ReportError(
+            f"--baseline '{baseline}': no such controller in the recordings (they hold "
+            f"{present}); with one controller there is nothing to compare, so leave it out"
+        )
     metrics = pl.concat([measured.metrics[r.episode] for r in recordings], how="vertical_relaxed")
     first = ReportData(
         recordings=tuple(recordings),
@@ -359,7 +434,7 @@ def _run_report_locked(
         )
         (staging / REPORT_FILE).write_text(text, encoding="utf-8")
         files.append(REPORT_FILE)
-        _commit(staging, out_dir, files)
+        _commit(staging, out_dir)
     except OSError as err:
         raise ReportError(
             f"{out_dir}: writing the report failed ({err}); earlier reports are untouched"

@@ -9,20 +9,31 @@ and readout to every connected page and flushes.
 
 viser serves its own prebuilt client from its wheel (``viser/client/build``):
 nothing is fetched at run time.
+
+Only the page itself may drive the server: a websocket whose ``Origin`` header is not
+this server's own address (a page on another site, which the user's browser would let
+connect to 127.0.0.1) is refused with 403 before its first message (:func:`own_origin`).
+A handler that cannot act on what a client sent (a NaN pose, a value outside its range,
+a file that cannot be written) tells that client in a notification, instead of printing
+a traceback on the server's terminal.
 """
 
 from __future__ import annotations
 
 import contextlib
 import errno
+import functools
 import html
+import http
 import io
+import ipaddress
 import math
 import socket
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any, cast
+from urllib.parse import urlsplit
 
 import numpy as np
 import trimesh
@@ -53,10 +64,107 @@ ARM_ROOT = "/arm"
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8080
 DEFAULT_MAP_SAMPLES = 300
+MAX_MAP_SAMPLES = 20000
 OK_RGB = (46, 160, 67)
 BAD_RGB = (218, 54, 51)
 _LINK_RGB = ((77, 128, 204), (204, 204, 204))
 _OK_HTML, _BAD_HTML = "#2ea043", "#da3633"
+
+
+_LOOPBACK_NAMES = frozenset({"localhost", "127.0.0.1", "::1"})
+_WILDCARD_HOSTS = frozenset({"", "0.0.0.0", "::"})
+
+
+def own_origin(origin: str, *, host: str, port: int) -> bool:
+    """Whether a websocket's ``Origin`` is the teach page's own: ``http(s)://`` the
+    server's host (or a loopback name; any IP address when it listens on all
+    interfaces) and its port. A host *name* other than ``localhost`` is refused even
+    when it resolves here: that is how DNS rebinding reaches 127.0.0.1.
+    """
+    try:
+        parts = urlsplit(origin)
+        origin_port = parts.port or {"http": 80, "https": 443}.get(parts.scheme)
+    except ValueError:
+        return False
+    name = (parts.hostname or "").lower()
+    if parts.scheme not in ("http", "https") or origin_port != port or not name:
+        return False
+    if name in _LOOPBACK_NAMES or name == host.lower().strip("[]"):
+        return True
+    if host in _WILDCARD_HOSTS:
+        try:
+            ipaddress.ip_address(name)
+        except ValueError:
+            return False
+        return True
+    return False
+
+
+# viser builds its websocket server inside a thread it starts; the Origin check is put
+# into that server by wrapping ``websockets.asyncio.server.serve`` while it is built
+_SERVE_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _origin_checked_serve(host: str) -> Iterator[list[bool]]:
+    """While active, websocket servers built in this process refuse foreign Origins.
+
+    Yields a list that gains an entry when a server was built with the check (the
+    caller fails closed when viser built none)."""
+    import websockets.asyncio.server as ws_server
+
+    real = ws_server.serve
+    built: list[bool] = []
+
+    def serve(*args: Any, **kwargs: Any) -> Any:
+        inner = kwargs.get("process_request")
+
+        def process_request(connection: Any, request: Any) -> Any:
+            origin = request.headers.get("Origin")
+            if (
+                request.headers.get("Upgrade", "").lower() == "websocket"
+                and origin is not None
+                and not own_origin(origin, host=host, port=int(connection.local_address[1]))
+            ):
+                return connection.respond(
+                    http.HTTPStatus.FORBIDDEN,
+                    f"armlab teach: a websocket from {origin} is refused; open the page itself\n",
+                )
+            return inner(connection, request) if inner is not None else None
+
+        kwargs["process_request"] = process_request
+        built.append(True)
+        return real(*args, **kwargs)
+
+    with _SERVE_LOCK:
+        setattr(ws_server, "serve", serve)  # noqa: B010 - mypy: serve is a class there
+        try:
+            yield built
+        finally:
+            setattr(ws_server, "serve", real)  # noqa: B010
+
+
+def _told_to_client(handler: Callable[[Any, Any], None]) -> Callable[[Any, Any], None]:
+    """A GUI/scene event handler that turns what it cannot do into a notification to the
+    client that sent the event (a red one on that page), not a traceback on the server."""
+
+    @functools.wraps(handler)
+    def wrapped(self: Any, event: Any) -> None:
+        try:
+            handler(self, event)
+        except Exception as err:  # bad input from a client is the client's to see
+            client = getattr(event, "client", None)
+            text = str(err) or type(err).__name__
+            if client is not None:
+                with contextlib.suppress(Exception):
+                    client.add_notification("armlab teach", text, color="red")
+                    return
+            with contextlib.suppress(Exception):
+                self._readout.content = (
+                    f"<span style='color:{_BAD_HTML}'>{html.escape(text)}</span>"
+                )
+
+    return wrapped
 
 
 def link_node(i: int) -> str:
@@ -213,9 +321,18 @@ class TeachServer:
         self._lock = threading.RLock()
         self._syncing = False
         check_port_free(host, port)
-        with contextlib.redirect_stdout(io.StringIO()):  # viser's banner; we print the URL
+        with (
+            contextlib.redirect_stdout(io.StringIO()),  # viser's banner; we print the URL
+            _origin_checked_serve(host) as built,
+        ):
             self._server = viser.ViserServer(
                 host=host, port=port, label=f"armlab teach: {self._spec.name}", verbose=False
+            )
+        if not built:  # fail closed: a viser that builds its server otherwise is unchecked
+            self.close()
+            raise TeachError(
+                f"viser {viser.__version__} did not build its websocket server as expected; "
+                "cannot check the Origin of connections, so the page is not served"
             )
         if port and self._server.get_port() != port:  # lost a race for the port
             self.close()
@@ -293,17 +410,13 @@ class TeachServer:
                 self._bars.append(gui.add_progress_bar(50.0, color="blue"))
         with gui.add_folder("IK error map", expand_by_default=False):
             self._map_samples = gui.add_number(
-                "samples", initial_value=DEFAULT_MAP_SAMPLES, min=10, max=20000, step=10
+                "samples", initial_value=DEFAULT_MAP_SAMPLES, min=10, max=MAX_MAP_SAMPLES, step=10
             )
             show = gui.add_button("Show error map")
             hide = gui.add_button("Hide error map")
             self._map_status = gui.add_html("")
-
-            @show.on_click
-            def _(_: Any) -> None:
-                self.show_error_map(int(self._map_samples.value))
-
-            hide.on_click(lambda _: self.hide_error_map())
+            show.on_click(self._on_show_map)
+            hide.on_click(self._on_hide_map)
         with gui.add_folder("Use as goal", expand_by_default=False):
             self._goal_path = gui.add_text("params file", initial_value=params_path)
             self._goal_scenario = gui.add_text("scenario", initial_value="taught")
@@ -312,27 +425,50 @@ class TeachServer:
             )
             write = gui.add_button("Write goal")
             self._goal_status = gui.add_html("")
-            write.on_click(lambda _: self._on_write_goal())
+            write.on_click(self._on_write_goal_click)
 
     # ----- events ----------------------------------------------------------------------------
 
+    @_told_to_client
     def _on_gizmo(self, event: Any) -> None:
         if getattr(event, "phase", "update") == "start":
             return
         self.update_target(self._gizmo.position, self._gizmo.wxyz)
 
+    @_told_to_client
     def _on_slider(self, _: Any) -> None:
         if self._syncing:
             return
         self.update_joints([s.value for s in self._sliders])
 
+    @_told_to_client
     def _on_solution(self, _: Any) -> None:
         if self._syncing:
             return
         with self._lock:
-            index = int(self._solutions.value.split()[0]) - 1
-            if index != self.state.selected and self.state.reachable:
+            value = str(self._solutions.value)
+            head = value.split()[0] if value.split() else ""
+            count = self.state.solutions.shape[0] if self.state.reachable else 0
+            if not head.isdigit() or not 1 <= int(head) <= count:
+                raise TeachError(f"IK solution {value!r}: expected one of 1..{count}")
+            index = int(head) - 1
+            if index != self.state.selected:
                 self.render(self.session.select_solution(index), move_target=False)
+
+    @_told_to_client
+    def _on_show_map(self, _: Any) -> None:
+        samples = self._map_samples.value
+        if not isinstance(samples, int | float) or not 10 <= samples <= MAX_MAP_SAMPLES:
+            raise TeachError(f"samples {samples!r}: expected 10..{MAX_MAP_SAMPLES}")
+        self.show_error_map(int(samples))
+
+    @_told_to_client
+    def _on_hide_map(self, _: Any) -> None:
+        self.hide_error_map()
+
+    @_told_to_client
+    def _on_write_goal_click(self, _: Any) -> None:
+        self._on_write_goal()
 
     def _on_write_goal(self) -> None:
         try:
@@ -357,8 +493,21 @@ class TeachServer:
         """A new flange target (position [m], quaternion w x y z): solve IK, draw, send."""
         target = np.eye(4)
         q = np.asarray(wxyz, dtype=float)
+        p = np.asarray(position_m, dtype=float)
+        if (
+            q.shape != (4,)
+            or p.shape != (3,)
+            or not (np.isfinite(q).all() and np.isfinite(p).all())
+        ):
+            raise TeachError(
+                f"target: expected a finite position (3) and quaternion (4), got {p} {q}"
+            )
+        scale = float(np.abs(q).max())
+        if scale == 0.0:
+            raise TeachError("target: a zero quaternion has no orientation")
+        q = q / scale  # (a huge quaternion would overflow the norm)
         target[:3, :3] = tf.quat_to_matrix(q / np.linalg.norm(q))
-        target[:3, 3] = np.asarray(position_m, dtype=float)
+        target[:3, 3] = p
         with self._lock:
             state = self.session.set_target(target)
             self.render(state, move_target=False)

@@ -21,7 +21,7 @@ import msgspec
 import viser
 import zstandard
 from websockets.sync.client import ClientConnection, connect
-from websockets.typing import Subprotocol
+from websockets.typing import Origin, Subprotocol
 
 from pipeline.teach.server import TARGET_NODE
 
@@ -32,12 +32,14 @@ class PageClient:
     Args:
         url: the page URL (``http://127.0.0.1:8080/``) or its ``ws://`` form.
         timeout_s: how long :meth:`pump_until` waits by default [s].
+        origin: the ``Origin`` header to send (a browser sends its page's; None: none).
     """
 
-    def __init__(self, url: str, *, timeout_s: float = 10.0) -> None:
+    def __init__(self, url: str, *, timeout_s: float = 10.0, origin: str | None = None) -> None:
         ws_url = "ws" + url.removeprefix("http") if url.startswith("http") else url
         self._ws: ClientConnection = connect(
             ws_url,
+            origin=Origin(origin) if origin is not None else None,
             subprotocols=[Subprotocol(f"viser-v{viser.__version__}")],
             max_size=None,
             open_timeout=timeout_s,

@@ -132,3 +132,22 @@ def test_every_option_is_explained_with_units(command):
     if command == "ik-check":
         for option in ("--solver", "--samples", "--seed", "--out", "--min-success-rate"):
             assert option in text
+
+
+@pytest.mark.parametrize("solver", ["numeric", "analytic"])
+@pytest.mark.parametrize("position", [["1e308", "0", "0"], ["-1e308", "1e308", "1e308"]])
+def test_a_target_at_1e308_m_is_one_line_without_runtime_warnings(solver, position):
+    proc = _pipeline("ik", "ur5", "--position", *position, "--rpy", "0", "0", "0",
+                     "--solver", solver)  # fmt: skip
+    assert proc.returncode == 1
+    assert proc.stderr.count("\n") == 1, proc.stderr  # no RuntimeWarning lines before it
+    assert proc.stderr.startswith("error: robot 'ur5' cannot reach position [")
+    assert "Warning" not in proc.stderr
+
+
+def test_ik_check_refuses_ten_million_samples_up_front(tmp_path):
+    proc = _pipeline("ik-check", "ur5", "--samples", "10000000", "--out", str(tmp_path / "o"))
+    assert proc.returncode == 1
+    assert proc.stderr.count("\n") == 1
+    assert proc.stderr.startswith("error: --samples 10,000,000: at most 1,000,000 ")
+    assert not (tmp_path / "o").exists()

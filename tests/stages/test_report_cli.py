@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 import subprocess
 import sys
@@ -43,6 +44,8 @@ def _old_reports(root: Path) -> dict[str, bytes]:
     (out / "report.md").write_text("earlier report\n")
     (out / "metrics.json").write_text('{"earlier": true}\n')
     (out / "figures" / "old.png").write_bytes(b"png")
+    # what an earlier `pipeline report` lists as its own (it may remove these, nothing else)
+    (out / report_stage.MANIFEST).write_text("report.md\nmetrics.json\nfigures/old.png\n")
     return _snapshot(out)
 
 
@@ -134,6 +137,19 @@ def test_unknown_baseline_lists_controllers_present(
     assert not (tmp_path / "reports").exists()
 
 
+def test_a_baseline_naming_no_recorded_controller_is_refused_with_one_controller(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    write_bag(tmp_path / "recordings", paper_like("ctc_ok", "ctc", duration_s=1.5))
+    assert _run(monkeypatch, tmp_path, "--baseline", "nope") == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert err.startswith("error: --baseline 'nope': no such controller in the recordings")
+    assert not (tmp_path / "reports").exists()
+    # the default baseline with one other controller: nothing to compare, no error
+    assert _run(monkeypatch, tmp_path) == 0
+
+
 def test_failure_while_writing_leaves_earlier_reports_and_no_temporary_files(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -216,7 +232,7 @@ def test_report_keeps_files_it_does_not_produce_and_removes_stale_figures(
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
 
 
-def test_failure_while_moving_outputs_in_restores_the_earlier_report(
+def test_failure_while_swapping_outputs_in_leaves_the_earlier_report(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     _good(tmp_path / "recordings")
@@ -224,21 +240,60 @@ def test_failure_while_moving_outputs_in_restores_the_earlier_report(
     out = tmp_path / "reports"
     _tracked_extras(out)
     before = _snapshot(out)
-    real_replace = report_stage.os.replace
-    calls = {"n": 0}
 
-    def failing_replace(src: object, dst: object) -> None:
-        calls["n"] += 1
-        if calls["n"] == 9:  # some files moved aside and some new ones in already
-            raise OSError(28, "No space left on device")
-        real_replace(src, dst)  # type: ignore[arg-type]
+    def full_disk(a: Path, b: Path) -> bool:
+        raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(report_stage.os, "replace", failing_replace)
+    monkeypatch.setattr(report_stage, "exchange", full_disk)
     with pytest.raises(ReportError, match="earlier reports are untouched"):
         report_stage.run_report(recordings_dir=tmp_path / "recordings", out_dir=out)
-    assert calls["n"] >= 9
     assert _snapshot(out) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["recordings", "reports"]
+
+
+def test_report_removes_only_files_its_manifest_lists(tmp_path: Path) -> None:
+    """A figure the user put in figures/ survives; one the last report wrote and this one
+    does not write again is removed; a folder without a manifest loses nothing."""
+    _good(tmp_path / "recordings")
+    out = tmp_path / "reports"
+    (out / "figures").mkdir(parents=True)
+    (out / "figures" / "mine.png").write_bytes(b"user's own")
+    (out / "campaigns").mkdir()
+    (out / "campaigns" / "mine.csv").write_bytes(b"a,b\n")
+    report_stage.run_report(recordings_dir=tmp_path / "recordings", out_dir=out)
+    assert (out / "figures" / "mine.png").read_bytes() == b"user's own"
+    assert (out / "campaigns" / "mine.csv").read_bytes() == b"a,b\n"
+    listed = (out / report_stage.MANIFEST).read_text().splitlines()
+    assert "report.md" in listed and "figures/mine.png" not in listed
+    (out / "figures" / "gone.png").write_bytes(b"x")
+    (out / report_stage.MANIFEST).write_text("\n".join([*listed, "figures/gone.png"]) + "\n")
+    report_stage.run_report(recordings_dir=tmp_path / "recordings", out_dir=out)
+    assert not (out / "figures" / "gone.png").exists()
+    assert (out / "figures" / "mine.png").read_bytes() == b"user's own"
+
+
+@pytest.mark.parametrize("out", ["", ".", "..", "{cwd}"])
+def test_out_naming_the_working_folder_is_refused_and_nothing_deleted(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], out: str
+) -> None:
+    work = tmp_path / "work"
+    _good(work / "recordings")
+    (work / "figures").mkdir()
+    (work / "figures" / "mine.png").write_bytes(b"png")
+    (work / "campaigns").mkdir()
+    (work / "campaigns" / "mine.csv").write_bytes(b"a\n")
+    before = _snapshot(tmp_path)
+    out = out.replace("{cwd}", str(work))
+    monkeypatch.chdir(work)
+    monkeypatch.setattr(sys, "argv", ["pipeline", "report", "--out", out])
+    with pytest.raises(SystemExit) as info:
+        main()
+    assert info.value.code == 1
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1, err
+    assert "--out" in err
+    assert _snapshot(tmp_path) == before
+    assert sorted(p.name for p in work.iterdir()) == ["campaigns", "figures", "recordings"]
 
 
 # --- the command line at 80 columns ------------------------------------------------------------
@@ -284,3 +339,25 @@ def test_reader_warnings_are_printed_on_stderr(
     err = capsys.readouterr().err
     (line,) = [x for x in err.splitlines() if x.startswith("warning: ")]
     assert line.startswith("warning: odd_settings: ") and "not valid JSON" in line
+
+
+def test_reports_through_a_symlinked_out_take_the_target_s_lock(tmp_path: Path) -> None:
+    """A run holding the lock of reports/ makes a second one through a symlink to it refuse
+    (the lock is taken on the resolved path); the symlink stays a symlink after a run."""
+    from pipeline.fsutil import OutputLock
+
+    _good(tmp_path / "recordings")
+    real = tmp_path / "reports"
+    real.mkdir()
+    (tmp_path / "link").symlink_to(real, target_is_directory=True)
+    with OutputLock(real, command="`pipeline report`"):
+        done = subprocess.run(
+            [sys.executable, "-m", "pipeline", "report", "--out", "link"],
+            cwd=tmp_path, capture_output=True, text=True, timeout=300,
+            env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])},
+        )  # fmt: skip
+    assert done.returncode == 1
+    assert "another `pipeline report`" in done.stderr and f"pid {os.getpid()}" in done.stderr
+    assert list(real.iterdir()) == []
+    report_stage.run_report(recordings_dir=tmp_path / "recordings", out_dir=tmp_path / "link")
+    assert (tmp_path / "link").is_symlink() and (real / "report.md").is_file()
