@@ -132,6 +132,20 @@ def _states_to_array(path: og.PathGeometric, dof: int) -> F64:
     )
 
 
+def _shorten_rounds(ss: og.SimpleSetup, si: ob.SpaceInformation) -> og.PathGeometric:
+    """The recipe before issue 21, kept for benchmarks (``shortcut="rounds"``): OMPL's
+    ``simplifySolution``, then three subdivide + partial shortcut + reduceVertices
+    rounds (fixed counts), since ``simplifySolution`` leaves detours of radians."""
+    ss.simplifySolution()
+    path = og.PathGeometric(ss.getSolutionPath())
+    simplifier = og.PathSimplifier(si)
+    for _ in range(3):
+        path.subdivide()
+        simplifier.partialShortcutPath(path, 100, 20)
+        simplifier.reduceVertices(path, 100, 20)
+    return path
+
+
 def _shorten(path: og.PathGeometric, simplifier: og.PathSimplifier) -> None:
     """Shorten RRTConnect's path with few collision checks, deterministically.
 
@@ -189,6 +203,7 @@ def plan_path(
     seed: int,
     simplify: bool = True,
     batched: bool = False,
+    shortcut: str = "rope",
 ) -> PlannedPath:
     """Plan a collision-free joint path with RRTConnect within the joint limits.
 
@@ -202,11 +217,15 @@ def plan_path(
             ``_shorten``).
         batched: check each motion with ``BatchChecker`` (whole batches of states in
             numpy) rather than state by state in MuJoCo; same answers, so the same path.
+        shortcut: "rope" (``_shorten``), or "rounds", the slower recipe used before
+            (``_shorten_rounds``), kept for comparison benchmarks.
 
     Raises:
         PlanningError: start/goal out of limits or in collision (names the joint or
             the contact pair), or no path found within the time limit.
     """
+    if shortcut not in ("rope", "rounds"):
+        raise PlanningError(f"shortcut: expected 'rope' or 'rounds', got {shortcut!r}")
     if not (isinstance(time_limit_s, int | float) and math.isfinite(time_limit_s)) or (
         time_limit_s <= 0
     ):
@@ -266,9 +285,12 @@ def plan_path(
             )
         n_raw = ss.getSolutionPath().getStateCount()
         direct, simplified = False, simplify
-        path = og.PathGeometric(ss.getSolutionPath())
-        if simplify:
-            _shorten(path, og.PathSimplifier(si))
+        if simplify and shortcut == "rounds":
+            path = _shorten_rounds(ss, si)
+        else:
+            path = og.PathGeometric(ss.getSolutionPath())
+            if simplify:
+                _shorten(path, og.PathSimplifier(si))
         waypoints = _states_to_array(path, n)
     elapsed = time.perf_counter() - t0
 
