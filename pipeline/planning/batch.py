@@ -51,6 +51,12 @@ def _dot(x: F64, y: F64) -> F64:
     return out
 
 
+def _dot0(x: F64, y: F64) -> F64:
+    """Dot product over the first axis (length 3) of coordinate-first arrays."""
+    out: F64 = x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
+    return out
+
+
 def _quat_mat(quat: F64) -> F64:
     mat = np.zeros(9)
     mujoco.mju_quat2Mat(mat, quat)
@@ -333,7 +339,8 @@ class BatchChecker:
         self.states_checked = 0  # configurations answered, for benchmarks
 
     def segments(self, qs: F64) -> tuple[F64, F64]:
-        """World endpoints of the robot geoms at configurations ``qs`` (m, n): (m, G, 3) each."""
+        """World endpoints of the robot geoms at configurations ``qs`` (m, n):
+        (3, m, G) each, coordinates first (each coordinate a contiguous array)."""
         c, s = np.cos(qs), np.sin(qs)
         steps = (
             self._terms[0]
@@ -344,10 +351,10 @@ class BatchChecker:
         t = np.broadcast_to(self._world_T_root, steps[:, 0].shape)
         for j in range(steps.shape[1]):
             t = frames[:, j] = t @ steps[:, j]
-        f = frames[:, self._frames, :3]  # (m, G, 3, 4)
-        la, lb = self._local_a[:, None], self._local_b[:, None]
-        a = f[..., 0] * la[..., 0] + f[..., 1] * la[..., 1] + f[..., 2] * la[..., 2] + f[..., 3]
-        b = f[..., 0] * lb[..., 0] + f[..., 1] * lb[..., 1] + f[..., 2] * lb[..., 2] + f[..., 3]
+        f = np.moveaxis(frames[:, self._frames, :3], (2, 3), (0, 1))  # (3, 4, m, G)
+        la, lb = self._local_a.T, self._local_b.T  # (3, G)
+        a = f[:, 0] * la[0] + f[:, 1] * la[1] + f[:, 2] * la[2] + f[:, 3]
+        b = f[:, 0] * lb[0] + f[:, 1] * lb[1] + f[:, 2] * lb[2] + f[:, 3]
         return a, b
 
     def clear(self, qs: ArrayLike) -> Bools:
@@ -366,7 +373,7 @@ class BatchChecker:
         padding = self.checker.padding_m
         near = padding + TOLERANCE_M
         far_below = padding - TOLERANCE_M
-        a, b = self.segments(q)
+        a, b = self.segments(q)  # (3, m, G)
         centre = 0.5 * (a + b)
         radius = np.full(len(q), np.inf)
         bad = np.zeros(len(q), dtype=bool)
@@ -374,14 +381,17 @@ class BatchChecker:
 
         # capsules and spheres: bounding spheres first, closest points where they are near
         if len(self._seg1):
-            sa = np.where(self._seg_moving[None, :, None], a[:, self._seg_other], self._seg_fixed_a)
-            sb = np.where(self._seg_moving[None, :, None], b[:, self._seg_other], self._seg_fixed_b)
-            gap = centre[:, self._seg1] - 0.5 * (sa + sb)
-            lower = np.sqrt(_dot(gap, gap)) - self._seg_reach  # (m, P)
+            moving = self._seg_moving
+            sa = np.where(moving, a[:, :, self._seg_other], self._seg_fixed_a.T[:, None])
+            sb = np.where(moving, b[:, :, self._seg_other], self._seg_fixed_b.T[:, None])
+            gap = centre[:, :, self._seg1] - 0.5 * (sa + sb)
+            lower = np.sqrt(_dot0(gap, gap)) - self._seg_reach  # (m, P)
             rows, cols = np.nonzero(lower <= near)
             if len(rows):
                 g = self._seg1[cols]
-                dist = segment_distance_m(a[rows, g], b[rows, g], sa[rows, cols], sb[rows, cols])
+                dist = segment_distance_m(
+                    a[:, rows, g].T, b[:, rows, g].T, sa[:, rows, cols].T, sb[:, rows, cols].T
+                )
                 dist -= self._seg_radii[cols]
                 exact = self._seg_exact[cols]
                 sure_bad = exact & (dist < far_below)
@@ -393,8 +403,8 @@ class BatchChecker:
         # the ground: exact from the endpoints' heights
         if len(self._plane_geom):
             g = self._plane_geom
-            normal = self._plane_normal
-            height = np.minimum(_dot(a[:, g], normal), _dot(b[:, g], normal))
+            normal = self._plane_normal.T[:, None]  # (3, 1, P)
+            height = np.minimum(_dot0(a[:, :, g], normal), _dot0(b[:, :, g], normal))
             dist = height - self._plane_offset - self._radius[g]
             bad |= (dist < far_below).any(axis=1)
             unsure |= ((dist >= far_below) & (dist <= near)).any(axis=1)
@@ -403,37 +413,38 @@ class BatchChecker:
         # cylinders (the pedestal): a lower bound only, the larger of the distances to
         # the slab between its caps and to its infinite side; MuJoCo decides when near
         if len(self._cyl_geom):
-            g, axis = self._cyl_geom, self._cyl_axis
-            pa, pb = a[:, g] - self._cyl_centre, b[:, g] - self._cyl_centre
-            za, zb = _dot(pa, axis), _dot(pb, axis)
+            g, axis = self._cyl_geom, self._cyl_axis.T[:, None]
+            ctr = self._cyl_centre.T[:, None]
+            pa, pb = a[:, :, g] - ctr, b[:, :, g] - ctr
+            za, zb = _dot0(pa, axis), _dot0(pb, axis)
             half_len, cyl_r = self._cyl_size[:, 1], self._cyl_size[:, 0]
             slab = np.maximum(np.minimum(za, zb) - half_len, -half_len - np.maximum(za, zb))
-            ra = pa - za[..., None] * axis
-            rd = (pb - zb[..., None] * axis) - ra
-            rdd = _dot(rd, rd)
-            t = np.clip(-_dot(ra, rd) / np.where(rdd > 0.0, rdd, 1.0), 0.0, 1.0)
-            nearest = ra + t[..., None] * rd
-            side = np.sqrt(_dot(nearest, nearest)) - cyl_r
+            ra = pa - za * axis
+            rd = (pb - zb * axis) - ra
+            rdd = _dot0(rd, rd)
+            t = np.clip(-_dot0(ra, rd) / np.where(rdd > 0.0, rdd, 1.0), 0.0, 1.0)
+            nearest = ra + t * rd
+            side = np.sqrt(_dot0(nearest, nearest)) - cyl_r
             lower = np.maximum(slab, side) - self._radius[g]
             unsure |= (lower <= near).any(axis=1)
             radius = np.minimum(radius, ((lower - near) / self._cyl_rate).min(axis=1))
 
-        # obstacle boxes: bounding spheres first, then the exact capsule-box distance
+        # obstacle boxes: the box centre's distance to the capsule axis first (less both
+        # radii), then the exact capsule-box distance where that is near
         if len(self._box_geom):
             g = self._box_geom
-            # the box centre's distance to the capsule axis, less both radii
-            ga, gd = a[:, g], b[:, g] - a[:, g]
-            to_centre = self._box_centre - ga
-            gdd = _dot(gd, gd)
-            t = np.clip(_dot(to_centre, gd) / np.where(gdd > 0.0, gdd, 1.0), 0.0, 1.0)
-            off = to_centre - t[..., None] * gd
-            lower = np.sqrt(_dot(off, off)) - self._radius[g] - self._box_reach
+            ga, gd = a[:, :, g], b[:, :, g] - a[:, :, g]
+            to_centre = self._box_centre.T[:, None] - ga
+            gdd = _dot0(gd, gd)
+            t = np.clip(_dot0(to_centre, gd) / np.where(gdd > 0.0, gdd, 1.0), 0.0, 1.0)
+            off = to_centre - t * gd
+            lower = np.sqrt(_dot0(off, off)) - self._radius[g] - self._box_reach
             rows, cols = np.nonzero(lower <= near)
             if len(rows):
                 gg = g[cols]
                 rot, ctr = self._box_rot[cols], self._box_centre[cols]
-                pa = (rot * (a[rows, gg] - ctr)[:, :, None]).sum(axis=1)  # box-frame coords
-                pb = (rot * (b[rows, gg] - ctr)[:, :, None]).sum(axis=1)
+                pa = (rot * (a[:, rows, gg].T - ctr)[:, :, None]).sum(axis=1)  # box frame
+                pb = (rot * (b[:, rows, gg].T - ctr)[:, :, None]).sum(axis=1)
                 dist = segment_box_distance_m(pa, pb, self._box_half[cols]) - self._radius[gg]
                 bad[rows[dist < far_below]] = True
                 unsure[rows[(dist >= far_below) & (dist <= near)]] = True

@@ -59,7 +59,7 @@ def test_batched_kinematics_puts_the_geoms_where_mujoco_does(any_robot):
     batch = BatchChecker(checker)
     rng = np.random.default_rng(2)
     qs = rng.uniform(any_robot.lower, any_robot.upper, size=(20, any_robot.dof))
-    a, b = batch.segments(qs)
+    a, b = (np.moveaxis(x, 0, -1) for x in batch.segments(qs))
     robot_geoms = [g for g in range(checker.model.ngeom) if checker.model.geom_bodyid[g] > 1]
     for q, ak, bk in zip(qs, a, b, strict=True):
         checker.data.qpos[:] = q
