@@ -318,7 +318,7 @@ class BatchChecker:
         self._box_rot = np.array(box_rot).reshape(-1, 3, 3)
         self._box_centre = np.array(box_centre).reshape(-1, 3)
         self._box_half = np.array(box_half).reshape(-1, 3)
-        self._box_reach = np.linalg.norm(self._box_half, axis=1)
+        self._box_rot_t = np.moveaxis(self._box_rot, 0, -1).transpose(1, 0, 2)  # [k, i, box]
         # per pair: how fast its distance can change [m/rad] (Lipschitz in q): only the
         # joints between the two bodies move one relative to the other, joint k moving
         # the geometry beyond it by at most R_k per radian (see reach_bound_m)
@@ -429,16 +429,21 @@ class BatchChecker:
             unsure |= (lower <= near).any(axis=1)
             radius = np.minimum(radius, ((lower - near) / self._cyl_rate).min(axis=1))
 
-        # obstacle boxes: the box centre's distance to the capsule axis first (less both
-        # radii), then the exact capsule-box distance where that is near
+        # obstacle boxes: per box axis, how far the capsule axis stays outside the box's
+        # slab (the root of their squares is a lower bound), then the exact capsule-box
+        # distance where that is near
         if len(self._box_geom):
             g = self._box_geom
-            ga, gd = a[:, :, g], b[:, :, g] - a[:, :, g]
-            to_centre = self._box_centre.T[:, None] - ga
-            gdd = _dot0(gd, gd)
-            t = np.clip(_dot0(to_centre, gd) / np.where(gdd > 0.0, gdd, 1.0), 0.0, 1.0)
-            off = to_centre - t * gd
-            lower = np.sqrt(_dot0(off, off)) - self._radius[g] - self._box_reach
+            rot, ctr = self._box_rot_t, self._box_centre.T[:, None]  # (3, 3, B), (3, 1, B)
+            pa, pb = a[:, :, g] - ctr, b[:, :, g] - ctr
+            gap_sq = np.zeros(pa.shape[1:])
+            for k in range(3):
+                ua = rot[k, 0] * pa[0] + rot[k, 1] * pa[1] + rot[k, 2] * pa[2]
+                ub = rot[k, 0] * pb[0] + rot[k, 1] * pb[1] + rot[k, 2] * pb[2]
+                h = self._box_half[:, k]
+                gap = np.maximum(np.maximum(np.minimum(ua, ub) - h, -h - np.maximum(ua, ub)), 0.0)
+                gap_sq += gap * gap
+            lower = np.sqrt(gap_sq) - self._radius[g]
             rows, cols = np.nonzero(lower <= near)
             if len(rows):
                 gg = g[cols]
@@ -452,8 +457,8 @@ class BatchChecker:
             radius = np.minimum(radius, ((lower - near) / self._box_rate).min(axis=1))
 
         radius[bad] = -np.inf
-        for k in np.nonzero(unsure & ~bad)[0]:
-            radius[k] = 0.0 if self.checker.is_clear(q[k]) else -np.inf
+        for row in np.nonzero(unsure & ~bad)[0].tolist():
+            radius[row] = 0.0 if self.checker.is_clear(q[row]) else -np.inf
         return radius
 
     def motion_clear(self, qa: F64, qb: F64, *, step_rad: float) -> bool:

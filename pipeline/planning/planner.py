@@ -35,6 +35,10 @@ from pipeline.robots.spec import RobotSpec
 F64 = NDArray[np.float64]
 
 PLANNER_NAME = "RRTConnect"
+_RRT_RANGE_RAD = 0.5
+"""RRTConnect's longest extension [rad]. OMPL's default, a fifth of the space's extent
+(6.2 rad for six joints of +-2 pi), makes long motions that mostly fail along the box;
+0.5 rad checks fewer configurations per plan and gives shorter detours (issue 21)."""
 _ROPE_DELTAS = (0.2, 0.1)  # rope shortcutting passes (see _shorten)
 _ROPE_TOLERANCE = 0.1  # OMPL's default equivalence tolerance
 
@@ -261,7 +265,9 @@ def plan_path(
     si.setStateValidityCheckingResolution(step / space.getMaximumExtent())
     motions = BatchChecker(checker) if batched else checker
     si.setMotionValidator(_MotionValidator(si, motions, coords, step))
-    ss.setPlanner(og.RRTConnect(si))
+    rrt = og.RRTConnect(si)
+    rrt.setRange(_RRT_RANGE_RAD)
+    ss.setPlanner(rrt)
     # SpaceInformation.allocState hands ownership to Python (freed with the
     # wrapper); StateSpace.allocState would leak, and freeState would double-free.
     s_state, g_state = si.allocState(), si.allocState()
