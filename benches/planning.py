@@ -46,13 +46,13 @@ TARGET_MEDIAN_MS = 50.0
 
 VARIANTS = {
     # name: plan_path keywords
-    "new": {"shortcut": "rope", "batched": False},
-    "new_batched": {"shortcut": "rope", "batched": True},
-    "old": {"shortcut": "rounds", "batched": False},
+    "new": {"batched": False},
+    "new_batched": {"batched": True},
+    "old": {"legacy": True},
 }
 """``new``: the default; ``new_batched``: the same plans, motions checked by
-``BatchChecker``; ``old``: the recipe before issue 21 (OMPL ``simplifySolution`` + three
-shortcut rounds, one MuJoCo call per configuration)."""
+``BatchChecker``; ``old``: the recipe before issue 21 (OMPL's default RRTConnect range,
+``simplifySolution`` + three shortcut rounds; one MuJoCo call per configuration)."""
 
 
 def _count_checks() -> list[int]:

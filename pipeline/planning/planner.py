@@ -137,7 +137,7 @@ def _states_to_array(path: og.PathGeometric, dof: int) -> F64:
 
 
 def _shorten_rounds(ss: og.SimpleSetup, si: ob.SpaceInformation) -> og.PathGeometric:
-    """The recipe before issue 21, kept for benchmarks (``shortcut="rounds"``): OMPL's
+    """The recipe before issue 21, kept for benchmarks (``legacy=True``): OMPL's
     ``simplifySolution``, then three subdivide + partial shortcut + reduceVertices
     rounds (fixed counts), since ``simplifySolution`` leaves detours of radians."""
     ss.simplifySolution()
@@ -155,9 +155,9 @@ def _shorten(path: og.PathGeometric, simplifier: og.PathSimplifier) -> None:
 
     ``reduceVertices`` drops needless vertices (random pairs, OMPL's seeded RNG),
     then two passes of OMPL's rope shortcutting (deterministic: it walks the path
-    in steps of ``delta`` and pulls it taut), a coarse one and a fine one. Against
-    ``simplifySolution`` plus three subdivide + shortcut rounds (the previous
-    recipe) this checks ~5x fewer configurations for paths ~1 % longer
+    in steps of ``delta`` and pulls it taut), a coarse one and a fine one. With the
+    0.5 rad range, against the recipe before (``_shorten_rounds``, default range)
+    this checks ~8x fewer configurations per plan for detours as short
     (docs/BENCHMARKS.md, "Planning").
     """
     simplifier.reduceVertices(path)
@@ -207,7 +207,7 @@ def plan_path(
     seed: int,
     simplify: bool = True,
     batched: bool = False,
-    shortcut: str = "rope",
+    legacy: bool = False,
 ) -> PlannedPath:
     """Plan a collision-free joint path with RRTConnect within the joint limits.
 
@@ -221,15 +221,13 @@ def plan_path(
             ``_shorten``).
         batched: check each motion with ``BatchChecker`` (whole batches of states in
             numpy) rather than state by state in MuJoCo; same answers, so the same path.
-        shortcut: "rope" (``_shorten``), or "rounds", the slower recipe used before
-            (``_shorten_rounds``), kept for comparison benchmarks.
+        legacy: plan as before issue 21 (OMPL's default range, ``_shorten_rounds``),
+            ~8x more configurations checked; kept for comparison benchmarks.
 
     Raises:
         PlanningError: start/goal out of limits or in collision (names the joint or
             the contact pair), or no path found within the time limit.
     """
-    if shortcut not in ("rope", "rounds"):
-        raise PlanningError(f"shortcut: expected 'rope' or 'rounds', got {shortcut!r}")
     if not (isinstance(time_limit_s, int | float) and math.isfinite(time_limit_s)) or (
         time_limit_s <= 0
     ):
@@ -266,7 +264,8 @@ def plan_path(
     motions = BatchChecker(checker) if batched else checker
     si.setMotionValidator(_MotionValidator(si, motions, coords, step))
     rrt = og.RRTConnect(si)
-    rrt.setRange(_RRT_RANGE_RAD)
+    if not legacy:
+        rrt.setRange(_RRT_RANGE_RAD)
     ss.setPlanner(rrt)
     # SpaceInformation.allocState hands ownership to Python (freed with the
     # wrapper); StateSpace.allocState would leak, and freeState would double-free.
@@ -291,7 +290,7 @@ def plan_path(
             )
         n_raw = ss.getSolutionPath().getStateCount()
         direct, simplified = False, simplify
-        if simplify and shortcut == "rounds":
+        if simplify and legacy:
             path = _shorten_rounds(ss, si)
         else:
             path = og.PathGeometric(ss.getSolutionPath())
