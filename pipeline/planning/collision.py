@@ -372,8 +372,10 @@ class CollisionChecker:
             qa = path[k]
             qb = path[k + 1] if k + 1 < len(path) else qa
             n_steps = max(1, math.ceil(float(np.linalg.norm(qb - qa)) / step_rad))
-            for i in range(n_steps):
-                q: F64 = qa + (qb - qa) * (i / n_steps)
-                if not self.within_limits(q) or not self.is_clear(q):
-                    return q
+            qs = qa + np.outer(np.arange(n_steps) / n_steps, qb - qa)
+            inside = np.all((qs >= self._lower) & (qs <= self._upper), axis=1).tolist()
+            for q, ok in zip(qs, inside, strict=True):
+                if not ok or not self.is_clear(q):
+                    bad: F64 = q
+                    return bad
         return None
