@@ -51,6 +51,10 @@ class TeachError(PipelineError):
     """The teach page cannot start (e.g. its port is in use)."""
 
 
+class IdentificationError(PipelineError):
+    """Dynamic identification cannot run: data unfit, unexcited parameters, a bad model file."""
+
+
 class Terminated(KeyboardInterrupt):
     """SIGTERM (``kill``, ``timeout``, a scheduler): raised where Ctrl-C would be.
 
