@@ -20,6 +20,8 @@ from numpy.typing import NDArray
 
 F64 = NDArray[np.float64]
 
+LOG_BOUND = 40.0
+
 # Pinocchio order: m, hx, hy, hz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz (Ibar about the link frame)
 
 
@@ -80,3 +82,30 @@ def to_log_cholesky(params: F64) -> F64:
         [alpha, np.log(v[0, 0]), np.log(v[1, 1]), np.log(v[2, 2]), v[0, 1], v[1, 2], v[0, 2],
          v[0, 3], v[1, 3], v[2, 3]]
     )  # fmt: skip
+
+
+# (row, col) of U's entry each log-Cholesky coordinate after alpha sets, and whether it is
+# exponentiated (d1, d2, d3) or plain (s12, s23, s13, t1, t2, t3)
+_ENTRIES = ((0, 0, True), (1, 1, True), (2, 2, True), (0, 1, False), (1, 2, False),
+            (0, 2, False), (0, 3, False), (1, 3, False), (2, 3, False))  # fmt: skip
+
+
+def log_cholesky_jacobian(phi: F64) -> tuple[F64, F64]:
+    """The 10 dynamic parameters of ``phi`` and their (10, 10) Jacobian with respect to it."""
+    # exponents beyond +-LOG_BOUND are no rigid body worth modelling (e^40 kg m^2); the
+    # clip keeps an optimizer's trial step from overflowing
+    alpha, d1, d2, d3 = np.clip(phi[:4], -LOG_BOUND, LOG_BOUND)
+    s12, s23, s13, t1, t2, t3 = phi[4:]
+    scale = np.exp(alpha)
+    u = np.array(
+        [[np.exp(d1), s12, s13, t1], [0.0, np.exp(d2), s23, t2], [0.0, 0.0, np.exp(d3), t3],
+         [0.0, 0.0, 0.0, 1.0]]
+    ) * scale  # fmt: skip
+    jac = np.empty((10, 10))
+    jac[:, 0] = from_pseudo_inertia(2 * u @ u.T)  # dU/dalpha = U
+    for i, (r, c, exponentiated) in enumerate(_ENTRIES, start=1):
+        du = np.zeros((4, 4))
+        du[r, c] = u[r, c] if exponentiated else scale
+        dj = du @ u.T
+        jac[:, i] = from_pseudo_inertia(dj + dj.T)
+    return from_pseudo_inertia(u @ u.T), jac

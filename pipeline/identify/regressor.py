@@ -18,6 +18,7 @@ samples (Gautier 1990; FloBaRoID): the first ``rank`` pivoted columns are indepe
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,9 +48,7 @@ RANK_TOL = 1e-9
 
 def standard_names(spec: RobotSpec) -> tuple[str, ...]:
     """``joint.parameter`` for every standard parameter, in regressor column order."""
-    return tuple(
-        f"{j}.{p}" for j in spec.joint_names for p in (*INERTIAL_NAMES, *JOINT_NAMES)
-    )
+    return tuple(f"{j}.{p}" for j in spec.joint_names for p in (*INERTIAL_NAMES, *JOINT_NAMES))
 
 
 def standard_parameters(
@@ -164,6 +163,7 @@ def random_samples(spec: RobotSpec, *, n: int, seed: int) -> tuple[F64, F64, F64
     return q, qd, qdd
 
 
+@functools.lru_cache(maxsize=16)
 def base_parameters(spec: RobotSpec, *, samples: int = 200, seed: int = 0) -> BaseParameters:
     """Base parameters by pivoted QR of the regressor stacked over random states.
 
@@ -185,9 +185,7 @@ def base_parameters(spec: RobotSpec, *, samples: int = 200, seed: int = 0) -> Ba
     projection[np.arange(rank), indep] = 1.0
     projection[:, dep] = k
     std = standard_names(spec)
-    names = tuple(
-        std[c] + (" + ..." if np.any(k[i] != 0) else "") for i, c in enumerate(indep)
-    )
+    names = tuple(std[c] + (" + ..." if np.any(k[i] != 0) else "") for i, c in enumerate(indep))
     order = np.argsort(indep)  # report in standard order (joint by joint), not pivot order
     return BaseParameters(
         names=tuple(names[i] for i in order),
