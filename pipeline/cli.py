@@ -38,6 +38,10 @@ app = typer.Typer(
 console = Console()
 _state = {"debug": False}
 
+from pipeline.identify.cli import identify_app  # noqa: E402  (the sub-app; lazy inside)
+
+app.add_typer(identify_app, name="identify")
+
 
 @app.callback()
 def _root(

@@ -30,6 +30,11 @@ from scipy import optimize
 
 from pipeline.errors import IdentificationError
 from pipeline.identify import physical
+from pipeline.identify.blas import one_thread
+from pipeline.identify.defaults import (
+    DEFAULT_MAX_CONDITION,
+    DEFAULT_MIN_SPEED_RAD_S,
+)
 from pipeline.identify.regressor import (
     ARMATURE,
     COULOMB,
@@ -46,9 +51,6 @@ from pipeline.robots.spec import RobotSpec
 
 F64 = NDArray[np.float64]
 
-DEFAULT_CUTOFF_HZ = 5.0
-DEFAULT_MIN_SPEED_RAD_S = 0.02
-DEFAULT_MAX_CONDITION = 1e4
 NULL_SPACE_WEIGHT = 1e-4
 """Weight of the pull towards CAD in the unidentifiable directions (relative)."""
 MIN_ROWS_PER_PARAMETER = 10
@@ -76,9 +78,9 @@ class FitResult:
         residual_rms_nm: (dof,) residual RMS of the consistent model per joint [N m].
         torque_rms_nm: (dof,) RMS of the fitted torque per joint [N m].
         rows: equations used (joint samples above the speed threshold).
-        projection_cost: relative increase of the weighted residual's sum of squares
-            from the WLS estimate to the physically consistent one (0: the WLS estimate
-            is physical).
+        projection_cost: increase of the weighted residual's sum of squares from the WLS
+            estimate to the physically consistent one, as a share of the weighted
+            torque's (0: the WLS estimate is physical).
     """
 
     base: BaseParameters
@@ -166,6 +168,21 @@ def identify(
         IdentificationError: too few equations for the parameters, or parameters the data
             do not excite (named).
     """
+    with one_thread():
+        return _identify(
+            spec, samples, min_speed_rad_s=min_speed_rad_s, max_condition=max_condition,
+            physical_fit=physical_fit,
+        )  # fmt: skip
+
+
+def _identify(
+    spec: RobotSpec,
+    samples: Sequence[JointSamples],
+    *,
+    min_speed_rad_s: float,
+    max_condition: float,
+    physical_fit: bool,
+) -> FitResult:
     base = base_parameters(spec)
     y_std, tau, joint_of = stacked(spec, samples, min_speed_rad_s=min_speed_rad_s)
     y_b = y_std[:, base.columns]
@@ -217,6 +234,7 @@ def identify(
         theta = theta_cad + np.linalg.pinv(base.projection) @ (beta_wls - base.of(theta_cad))
     beta = base.of(theta)
     final = tau - y_b @ beta
+    counts = np.bincount(joint_of, minlength=dof)
     final_w2 = float(np.sum(w2[joint_of] * final**2))
     return FitResult(
         base=base,
@@ -231,7 +249,8 @@ def identify(
         residual_rms_nm=_per_joint_rms(final, joint_of, dof),
         torque_rms_nm=tau_rms,
         rows=int(tau.size),
-        projection_cost=(final_w2 - resid_w2) / max(resid_w2, 1e-300),
+        projection_cost=max(final_w2 - resid_w2, 0.0)
+        / max(float(w2 @ (tau_rms**2 * counts)), 1e-300),
     )
 
 
