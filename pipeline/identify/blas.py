@@ -15,12 +15,13 @@ import contextlib
 import ctypes
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 _PREFIXES = ("scipy_openblas", "openblas")
 _SUFFIXES = ("64_", "")
 
 
-def _openblas_handles() -> list[tuple[ctypes._CFuncPtr, ctypes._CFuncPtr]]:
+def _openblas_handles() -> list[tuple[Any, Any]]:
     maps = Path("/proc/self/maps")
     try:
         lines = maps.read_text().splitlines()

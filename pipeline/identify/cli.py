@@ -149,7 +149,7 @@ def excite_cmd(
     force: Annotated[bool, typer.Option("--force", help="Overwrite the recording.")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
 ) -> None:
-    """Design excitation K (Fourier series, limits and collisions checked), record it on S's plant."""
+    """Design excitation K (Fourier series, within limits, collision-free); record it on S."""
     from pipeline.identify.excitation import record_excitation
 
     s = record_excitation(

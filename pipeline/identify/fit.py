@@ -122,7 +122,7 @@ def unexcited(gram: F64, names: Sequence[str], *, max_condition: float) -> tuple
     first marks its parameter.
     """
     norms = np.sqrt(np.maximum(np.diag(gram), 0.0))
-    zero = [names[i] for i in np.flatnonzero(norms == 0)]
+    zero = [names[int(i)] for i in np.flatnonzero(norms == 0)]
     inv = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
     scaled = gram * inv[:, None] * inv[None, :]
     eig = np.linalg.eigvalsh(scaled)
@@ -131,10 +131,10 @@ def unexcited(gram: F64, names: Sequence[str], *, max_condition: float) -> tuple
     piv = piv - 1  # LAPACK counts from 1
     diag = np.abs(np.diag(factor))
     diag[rank:] = 0.0
-    weak = [names[piv[i]] for i in np.flatnonzero(diag < diag[0] / max_condition)]
+    weak = [names[int(piv[i])] for i in np.flatnonzero(diag < diag[0] / max_condition)]
     out = zero + [w for w in weak if w not in zero]
     if not out and cond > max_condition:
-        out = [names[piv[-1]]]
+        out = [names[int(piv[-1])]]
     return out, cond
 
 
@@ -234,7 +234,7 @@ def _identify(
         theta = theta_cad + np.linalg.pinv(base.projection) @ (beta_wls - base.of(theta_cad))
     beta = base.of(theta)
     final = tau - y_b @ beta
-    counts = np.bincount(joint_of, minlength=dof)
+    tau_w2 = float(w2 @ (tau_rms**2 * np.bincount(joint_of, minlength=dof)))
     final_w2 = float(np.sum(w2[joint_of] * final**2))
     return FitResult(
         base=base,
@@ -249,8 +249,7 @@ def _identify(
         residual_rms_nm=_per_joint_rms(final, joint_of, dof),
         torque_rms_nm=tau_rms,
         rows=int(tau.size),
-        projection_cost=max(final_w2 - resid_w2, 0.0)
-        / max(float(w2 @ (tau_rms**2 * counts)), 1e-300),
+        projection_cost=max(final_w2 - resid_w2, 0.0) / max(tau_w2, 1e-300),
     )
 
 
@@ -338,11 +337,10 @@ def consistent_parameters(
     # the nearest point to the start that fits beta_target exactly: if physical, it is the
     # optimum (zero misfit, zero pull), no search needed
     nearest = theta_start + e_pinv @ (beta_target - e @ theta_start)
-    signed = nearest[_nonnegative_indices(nearest.size)]
+    signed: NDArray[np.intp] = _nonnegative_indices(nearest.size)
+    values = nearest[signed]
     # rounding-level negatives of a zero friction (exact data) are zero
-    nearest[_nonnegative_indices(nearest.size)] = np.where(
-        (signed < 0) & (signed > -ROUNDING_TOL), 0.0, signed
-    )
+    nearest[signed] = np.where((values < 0) & (values > -ROUNDING_TOL), 0.0, values)
     if not violations_of(nearest):
         return nearest
     null = np.eye(theta_start.size) - e_pinv @ e
@@ -354,7 +352,6 @@ def consistent_parameters(
     a_map = np.vstack([r_w @ e, pull * scale[:, None] * null])
     c = np.concatenate([r_w @ beta_target, pull * scale * (null @ theta_start)])
     blocks = [slice(PER_JOINT * j, PER_JOINT * j + 10) for j in range(dof)]
-    signed = _nonnegative_indices(theta_start.size)
     a_blocks = [np.ascontiguousarray(a_map[:, blk]) for blk in blocks]
     a_signed = np.ascontiguousarray(a_map[:, signed])
 

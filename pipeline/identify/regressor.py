@@ -86,7 +86,7 @@ def link_inertial(spec: RobotSpec, joint: int, params: F64) -> Inertial:
     return Inertial(
         mass=float(inertia.mass),
         com=(float(com[0]), float(com[1]), float(com[2])),
-        inertia=tuple(tuple(float(x) for x in row) for row in tensor),
+        inertia=tuple((float(row[0]), float(row[1]), float(row[2])) for row in tensor),
     )
 
 
