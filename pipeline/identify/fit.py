@@ -14,7 +14,8 @@
    minimise ``||Y_w (E theta - beta_wls)||^2`` (the weighted residual's increase over
    the WLS optimum, via the R factor of ``Y_w``), plus a small pull of the
    *unidentifiable* part of ``theta`` (the null space of ``E``) towards the CAD values,
-   which leaves the base parameters alone. Start: the CAD model. Solver: SciPy's
+   which leaves the base parameters alone. Start: the WLS fit where physical, else
+   the CAD model. Solver: SciPy's
    ``least_squares`` (trust-region reflective, bounds).
 """
 
@@ -59,6 +60,9 @@ COST_TOL = 1e-8
 """Stop when an iteration lowers the cost by less than this share (an optimum on the
 boundary of the physical set lies at infinity in log-Cholesky coordinates)."""
 ROUNDING_TOL = 1e-9
+START_MIN = 1e-4
+MARGIN_REL = 1e-6
+MARGIN_MIN_KG_M2 = 1e-9
 
 
 @dataclass(frozen=True)
@@ -377,11 +381,37 @@ def consistent_parameters(
         out[:, signed] = a_signed * (2 * x[signed])
         return out
 
+    # start: the exact fit's links where they are physical, else the start model's; its
+    # armature and friction where >= 0, else a small positive value (x^2 has no gradient
+    # at 0, so a parameter started at 0 would stay there)
     x0 = phi0.copy()
-    x0[signed] = np.sqrt(np.maximum(theta_start[signed], 0.0))
+    for blk in blocks:
+        if physical.min_eigenvalue(nearest[blk]) > 0:
+            x0[blk] = physical.to_log_cholesky(nearest[blk])
+    x0[signed] = np.sqrt(np.maximum(nearest[signed], START_MIN))
     # MINPACK's Levenberg-Marquardt: no bounds needed (every x is physical)
     sol = optimize.least_squares(
         residual, x0, jac=jacobian, method="lm", x_scale="jac",
         xtol=1e-10, ftol=COST_TOL, gtol=1e-10, max_nfev=MAX_EVALUATIONS,
     )  # fmt: skip
-    return theta_of(sol.x)[0]
+    return with_margin(theta_of(sol.x)[0])
+
+
+def with_margin(theta: F64) -> F64:
+    """``theta`` with every link's second moments raised by a hair (:data:`MARGIN_REL` of
+    its rotational inertia's trace) where its pseudo-inertia is nearly singular.
+
+    An optimum on the boundary of the physical set is a degenerate body (a rod, a point
+    mass): its pseudo-inertia's smallest eigenvalue is zero up to rounding, and the robot
+    loader refuses principal moments below 1e-12 kg m^2. Adding ``delta I3`` to Sigma
+    adds ``2 delta I3`` to the inertia; the torques change by far less than the noise.
+    """
+    out = theta.copy()
+    for j in range(theta.size // PER_JOINT):
+        block = out[PER_JOINT * j : PER_JOINT * j + 10]
+        trace = float(np.trace(physical.inertia_matrix(block)))
+        delta = max(MARGIN_REL * trace, MARGIN_MIN_KG_M2)
+        if physical.min_eigenvalue(block) < delta:
+            for k in (4, 6, 9):  # Ixx, Iyy, Izz
+                block[k] += 2 * delta
+    return out
