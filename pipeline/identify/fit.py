@@ -14,9 +14,9 @@
    minimise ``||Y_w (E theta - beta_wls)||^2`` (the weighted residual's increase over
    the WLS optimum, via the R factor of ``Y_w``), plus a small pull of the
    *unidentifiable* part of ``theta`` (the null space of ``E``) towards the CAD values,
-   which leaves the base parameters alone. Start: the WLS fit where physical, else
-   the CAD model. Solver: SciPy's
-   ``least_squares`` (trust-region reflective, bounds).
+   which leaves the base parameters alone. Armature and friction are squares (>= 0).
+   Start: the WLS fit where physical, else the CAD model. Solver: SciPy's
+   ``least_squares`` (MINPACK Levenberg-Marquardt), on one BLAS thread.
 """
 
 from __future__ import annotations
