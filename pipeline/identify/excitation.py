@@ -221,7 +221,7 @@ def _onto_limits(spec: RobotSpec, ref: FourierReference, *, span_rad: float) -> 
     )
     if worst <= 1.0:
         return ref
-    k = 1.0 / (worst * (1 + 1e-6))
+    k = 1.0 / (worst * (1 + 1e-3))  # a margin for the peaks between samples
     return FourierReference(
         q0=ref.q0,
         a=tuple(tuple(v * k for v in row) for row in ref.a),
