@@ -56,7 +56,7 @@ def test_an_excitation_beyond_the_limits_is_refused() -> None:
     ref = FourierReference.from_free(
         np.zeros(6), free, harmonics=5, base_frequency_hz=0.1, periods=1
     )
-    with pytest.raises(IdentificationError, match="leaves the (position|velocity) limit"):
+    with pytest.raises(IdentificationError, match=r"leaves the (position|velocity) limit"):
         check_excitation(spec, ref)
 
 
