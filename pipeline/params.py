@@ -145,6 +145,9 @@ class ScenarioParams(_Strict):
     preroll_s: float = Field(default=2.0, ge=0, le=MAX_PREROLL_S)
     # compare with the paper's numbers in the report (only the paper's experiment)
     reproduces_paper: bool = False
+    # the controllers' nominal model: an identified MODEL.yaml (`pipeline identify fit`);
+    # None: the robot's own description (its CAD values)
+    nominal: str | None = Field(default=None, min_length=1)
 
     @model_validator(mode="after")
     def _unique_obstacles(self) -> ScenarioParams:
@@ -353,7 +356,7 @@ class _Params(_Strict):
 
 _NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
 # scenario fields a sweep may not set: goals have their own axis, the rest is the scenario
-_NOT_SWEPT = ("robot", "start", "goal", "obstacles", "reproduces_paper")
+_NOT_SWEPT = ("robot", "start", "goal", "obstacles", "reproduces_paper", "nominal")
 
 
 def sweep_path_problem(path: str, controllers: Mapping[str, ControllerParams]) -> str:

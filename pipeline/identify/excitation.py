@@ -331,8 +331,11 @@ def record_excitation(
     ref = design.reference
     check_excitation(spec, ref, obstacles=obstacles)
     cparams = params.controllers[controller_name]
+    from pipeline.identify.model_file import nominal_spec
+
+    nominal = nominal_spec(spec, scenario.nominal, where=f"scenarios.{scenario_name}")
     controller = make_controller(
-        cparams.type, spec, cparams.gains, source=f"controllers.{controller_name}"
+        cparams.type, nominal, cparams.gains, source=f"controllers.{controller_name}"
     )
     plant_spec, plant, plant_settings = scenario_plant(spec, scenario, seed=seed)
     sim = params.sim

@@ -16,8 +16,8 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, replace
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,17 +25,6 @@ import numpy as np
 import yaml
 
 from pipeline.errors import IdentificationError, PipelineError
-from pipeline.fileio import atomic_write_bytes
-from pipeline.identify.fit import FitResult
-from pipeline.identify.regressor import (
-    ARMATURE,
-    COULOMB,
-    OFFSET,
-    PER_JOINT,
-    VISCOUS,
-    link_inertial,
-)
-from pipeline.identify.samples import JointSamples
 from pipeline.robots.spec import RobotSpec, parse_spec
 from pipeline.yamlio import parse_yaml
 
@@ -92,96 +81,10 @@ def spec_document(spec: RobotSpec) -> dict[str, Any]:
     return {"name": spec.name, "convention": spec.convention, "angle_unit": "rad", "joints": joints}
 
 
-def identified_spec(spec: RobotSpec, theta: np.ndarray) -> RobotSpec:
-    """``spec`` with the inertials and armature of standard parameters ``theta``."""
-    joints = tuple(
-        replace(
-            joint,
-            inertial=link_inertial(spec, j, theta[PER_JOINT * j : PER_JOINT * j + 10]),
-            armature=float(theta[PER_JOINT * j + ARMATURE]),
-        )
-        for j, joint in enumerate(spec.joints)
-    )
-    return replace(spec, joints=joints)
-
-
-def _floats(values: np.ndarray | Sequence[float]) -> list[float]:
-    return [float(x) for x in values]
-
-
-def model_document(
-    spec: RobotSpec,
-    fit: FitResult,
-    samples: Sequence[JointSamples],
-    *,
-    method: Mapping[str, Any],
-) -> dict[str, Any]:
-    """The ``MODEL.yaml`` content of an identification.
-
-    Args:
-        spec: the robot identified (the CAD model).
-        fit: the identification.
-        samples: the recordings it used (paths and SHA-256).
-        method: how the samples were made (filter, cutoff, speed threshold).
-    """
-    theta = fit.theta
-    rel = np.abs(fit.std_error) / np.maximum(np.abs(fit.beta_wls), 1e-12) * 100
-    return {
-        "format": FORMAT,
-        "robot": spec_document(identified_spec(spec, theta)),
-        "friction": {
-            "coulomb_nm": _floats(theta[COULOMB::PER_JOINT]),
-            "viscous_nm_s_rad": _floats(theta[VISCOUS::PER_JOINT]),
-            "offset_nm": _floats(theta[OFFSET::PER_JOINT]),
-        },
-        "identification": {
-            "robot": spec.name,
-            "robot_source": spec.source,
-            "recordings": [
-                {"path": s.source, "sha256": s.sha256, "ground_truth": s.truth} for s in samples
-            ],
-            "method": {
-                "regressor": "pinocchio computeJointTorqueRegressor + armature (qdd) + "
-                "friction (Coulomb sign(qd), viscous qd, offset 1) per joint",
-                "base_parameters": "QR with column pivoting of the regressor stacked over "
-                "random states",
-                "estimator": "weighted least squares, weights 1/sigma_j from an OLS residual",
-                "physical": "log-Cholesky pseudo-inertia per link (Rucker & Wensing 2022), "
-                "armature and friction >= 0; Levenberg-Marquardt from the CAD model",
-                **dict(method),
-            },
-            "equations": fit.rows,
-            "condition_number": fit.condition_number,
-            "condition_number_scaled": fit.condition_number_scaled,
-            "projection_cost": fit.projection_cost,
-            "joint_sigma_nm": _floats(fit.joint_sigma_nm),
-            "residual_rms_nm": _floats(fit.residual_rms_nm),
-            "torque_rms_nm": _floats(fit.torque_rms_nm),
-            "base_parameters": [
-                {
-                    "name": name,
-                    "wls": float(b),
-                    "std_error": float(se),
-                    "rel_std_error_pct": float(r),
-                    "physical": float(p),
-                    "cad": float(c),
-                }
-                for name, b, se, r, p, c in zip(
-                    fit.base.names,
-                    fit.beta_wls,
-                    fit.std_error,
-                    rel,
-                    fit.beta,
-                    fit.base.of(fit.theta_cad),
-                    strict=True,
-                )
-            ],
-        },
-    }
-
-
 def write_model(path: Path, document: Mapping[str, Any]) -> None:
     """Write ``MODEL.yaml`` atomically."""
+    from pipeline.fileio import atomic_write_bytes  # the fit's; the record stage only reads
+
     text = yaml.safe_dump(dict(document), sort_keys=False, width=100, default_flow_style=None)
     try:
         atomic_write_bytes(Path(path), text.encode("utf-8"))
@@ -234,3 +137,20 @@ def load_model(path: str | Path) -> IdentifiedModel:
         friction=Friction(**values),
         identification=ident if isinstance(ident, dict) else {},
     )
+
+
+def nominal_spec(spec: RobotSpec, path: str | None, *, where: str = "nominal") -> RobotSpec:
+    """The controllers' nominal robot: ``spec`` itself, or the identified model at ``path``.
+
+    Raises:
+        IdentificationError: a bad model file, or one of another robot (joint names).
+    """
+    if path is None:
+        return spec
+    model = load_model(path)
+    if model.spec.joint_names != spec.joint_names:
+        raise IdentificationError(
+            f"{where}.nominal: {path} is a model of joints {', '.join(model.spec.joint_names)}, "
+            f"the scenario's robot '{spec.name}' has {', '.join(spec.joint_names)}"
+        )
+    return model.spec

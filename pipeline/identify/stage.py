@@ -10,8 +10,8 @@ share of the RMS torque.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -23,14 +23,24 @@ from pipeline.identify.defaults import (
     DEFAULT_MAX_CONDITION,
     DEFAULT_MIN_SPEED_RAD_S,
 )
-from pipeline.identify.fit import identify, violations
+from pipeline.identify.fit import FitResult, identify, violations
 from pipeline.identify.model_file import (
+    FORMAT,
     IdentifiedModel,
     load_model,
-    model_document,
+    spec_document,
     write_model,
 )
-from pipeline.identify.regressor import Regressor, standard_parameters
+from pipeline.identify.regressor import (
+    ARMATURE,
+    COULOMB,
+    OFFSET,
+    PER_JOINT,
+    VISCOUS,
+    Regressor,
+    link_inertial,
+    standard_parameters,
+)
 from pipeline.identify.samples import FILTER_ORDER, JointSamples, joint_samples
 from pipeline.log.reader import Recording, read_recording
 from pipeline.robots.spec import RobotSpec, load_spec, parse_spec
@@ -78,6 +88,94 @@ def _read(paths: Sequence[Path], robot: str | None, cutoff_hz: float) -> tuple[
         samples.append(joint_samples(recording, spec, cutoff_hz=cutoff_hz))
     assert spec is not None
     return spec, samples
+
+
+def identified_spec(spec: RobotSpec, theta: np.ndarray) -> RobotSpec:
+    """``spec`` with the inertials and armature of standard parameters ``theta``."""
+    joints = tuple(
+        replace(
+            joint,
+            inertial=link_inertial(spec, j, theta[PER_JOINT * j : PER_JOINT * j + 10]),
+            armature=float(theta[PER_JOINT * j + ARMATURE]),
+        )
+        for j, joint in enumerate(spec.joints)
+    )
+    return replace(spec, joints=joints)
+
+
+def _floats(values: np.ndarray | Sequence[float]) -> list[float]:
+    return [float(x) for x in values]
+
+
+def model_document(
+    spec: RobotSpec,
+    fit: FitResult,
+    samples: Sequence[JointSamples],
+    *,
+    method: Mapping[str, Any],
+) -> dict[str, Any]:
+    """The ``MODEL.yaml`` content of an identification.
+
+    Args:
+        spec: the robot identified (the CAD model).
+        fit: the identification.
+        samples: the recordings it used (paths and SHA-256).
+        method: how the samples were made (filter, cutoff, speed threshold).
+    """
+    theta = fit.theta
+    rel = np.abs(fit.std_error) / np.maximum(np.abs(fit.beta_wls), 1e-12) * 100
+    return {
+        "format": FORMAT,
+        "robot": spec_document(identified_spec(spec, theta)),
+        "friction": {
+            "coulomb_nm": _floats(theta[COULOMB::PER_JOINT]),
+            "viscous_nm_s_rad": _floats(theta[VISCOUS::PER_JOINT]),
+            "offset_nm": _floats(theta[OFFSET::PER_JOINT]),
+        },
+        "identification": {
+            "robot": spec.name,
+            "robot_source": spec.source,
+            "recordings": [
+                {"path": s.source, "sha256": s.sha256, "ground_truth": s.truth} for s in samples
+            ],
+            "method": {
+                "regressor": "pinocchio computeJointTorqueRegressor + armature (qdd) + "
+                "friction (Coulomb sign(qd), viscous qd, offset 1) per joint",
+                "base_parameters": "QR with column pivoting of the regressor stacked over "
+                "random states",
+                "estimator": "weighted least squares, weights 1/sigma_j from an OLS residual",
+                "physical": "log-Cholesky pseudo-inertia per link (Rucker & Wensing 2022), "
+                "armature and friction >= 0; Levenberg-Marquardt from the CAD model",
+                **dict(method),
+            },
+            "equations": fit.rows,
+            "condition_number": fit.condition_number,
+            "condition_number_scaled": fit.condition_number_scaled,
+            "projection_cost": fit.projection_cost,
+            "joint_sigma_nm": _floats(fit.joint_sigma_nm),
+            "residual_rms_nm": _floats(fit.residual_rms_nm),
+            "torque_rms_nm": _floats(fit.torque_rms_nm),
+            "base_parameters": [
+                {
+                    "name": name,
+                    "wls": float(b),
+                    "std_error": float(se),
+                    "rel_std_error_pct": float(r),
+                    "physical": float(p),
+                    "cad": float(c),
+                }
+                for name, b, se, r, p, c in zip(
+                    fit.base.names,
+                    fit.beta_wls,
+                    fit.std_error,
+                    rel,
+                    fit.beta,
+                    fit.base.of(fit.theta_cad),
+                    strict=True,
+                )
+            ],
+        },
+    }
 
 
 def fit_command(

@@ -87,6 +87,10 @@ RECORD_CODE = (
     "settings.py",
     "trajectory.py",
     "yamlio.py",
+    "identify/__init__.py",  # cli.py's sub-app, and a scenario's `nominal:` model file
+    "identify/cli.py",
+    "identify/defaults.py",
+    "identify/model_file.py",
     "robots",
     "model",
     "kinematics",
@@ -349,6 +353,7 @@ def _run_and_write(
     before_write: Callable[[], None] | None = None,
 ) -> EpisodeOutcome:
     from pipeline.control import make_controller
+    from pipeline.identify.model_file import nominal_spec
     from pipeline.log.bag import write_episode_bag
     from pipeline.model.mjcf import PlantOptions
     from pipeline.model.uncertainty import draw_plant, link_inertials, with_plant
@@ -359,9 +364,10 @@ def _run_and_write(
     spec = load_spec(scenario.robot)
     sim = episode.sim
     control_dt_s = sim.physics_dt_s * sim.control_period_steps
+    nominal = nominal_spec(spec, scenario.nominal, where=f"scenarios.{episode.scenario_name}")
     controller = make_controller(
         episode.controller.type,
-        spec,
+        nominal,
         episode.controller.gains,
         source=f"controllers.{episode.controller_name}",
     )
@@ -410,10 +416,10 @@ def _run_and_write(
         skip_within_m=SKIP_WITHIN_M,
     )
     plant_settings = PlantSettings(
-        exact=_plant_is_exact(spec, plant_spec, scenario),
+        exact=_plant_is_exact(nominal, plant_spec, scenario),
         links=link_inertials(plant_spec),
         armature=tuple(float(a) for a in plant_spec.armature),
-        nominal_armature=tuple(float(a) for a in spec.armature),
+        nominal_armature=tuple(float(a) for a in nominal.armature),
         damping=per_joint(_per_joint(p.damping), spec.dof),
         frictionloss=per_joint(_per_joint(p.frictionloss), spec.dof),
         payload_kg=p.payload_kg,
