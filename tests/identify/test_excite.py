@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from pipeline.errors import IdentificationError
 from pipeline.identify.excitation import (
@@ -89,3 +90,51 @@ def test_realistic_plant_identifies_friction_and_predicts_torque(tmp_path: Path)
     np.testing.assert_allclose(coulomb, plant["frictionloss"], rtol=0.10)
     check = validate_command(model, [tmp_path / "check"])
     assert max(check["rms_error_pct"]) <= 5.0, check["rms_error_pct"]
+
+
+def test_nominal_of_another_robot_is_refused(tmp_path: Path) -> None:
+    from pipeline.identify.model_file import FORMAT, nominal_spec, spec_document
+
+    ur10 = load_spec("ur10")
+    path = tmp_path / "m.yaml"
+    doc = {
+        "format": FORMAT,
+        "robot": {**spec_document(ur10), "joints": spec_document(ur10)["joints"][:5]},
+        "friction": {k: [0.0] * 5 for k in ("coulomb_nm", "viscous_nm_s_rad", "offset_nm")},
+    }
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(IdentificationError, match=r"scenarios.x.nominal: .* is a model of joints"):
+        nominal_spec(load_spec("ur5"), str(path), where="scenarios.x")
+    assert nominal_spec(load_spec("ur5"), None) == load_spec("ur5")
+
+
+@pytest.mark.slow
+def test_ctc_on_the_identified_model_beats_ctc_on_cad(tmp_path: Path) -> None:
+    """The paper's motion on a drawn realistic plant: CTC whose nominal model is identified
+    from an excitation of that plant has a smaller max error on shoulder lift and elbow
+    than CTC on the CAD model (the gravity error is what identification removes)."""
+    from pipeline.control import make_controller
+    from pipeline.identify.model_file import nominal_spec
+    from pipeline.sim.references import PAPER_GOAL_RAD, PAPER_START_RAD, QuinticReference
+    from pipeline.sim.runner import run_episode
+
+    kw = {"scenario_name": "paper-realistic", "seed": 3, "budget_s": 6.0, "periods": 2}
+    record_excitation(PARAMS, variant=1, out=tmp_path / "fit", **kw)  # type: ignore[arg-type]
+    fit_command([tmp_path / "fit"], out=tmp_path / "model.yaml")
+    scenario = load_params(PARAMS).scenarios["paper-realistic"]
+    spec = load_spec("ur5")
+    plant_spec, plant, _ = scenario_plant(spec, scenario, seed=3)
+    reference = QuinticReference.between(PAPER_START_RAD, PAPER_GOAL_RAD, duration_s=3.0)
+    max_error = {}
+    for label, nominal in (
+        ("cad", spec),
+        ("identified", nominal_spec(spec, str(tmp_path / "model.yaml"))),
+    ):
+        result = run_episode(
+            spec, reference=reference, controller=make_controller("ctc", nominal), seed=3,
+            plant=plant, plant_spec=plant_spec, hold_s=1.0, preroll_s=1.0,
+        )  # fmt: skip
+        assert result.status == "ok"
+        max_error[label] = np.abs(result.q_ref - result.q_true).max(axis=0)
+    for j in (1, 2):  # shoulder lift, elbow
+        assert max_error["identified"][j] < max_error["cad"][j], max_error
