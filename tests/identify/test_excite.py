@@ -138,3 +138,14 @@ def test_ctc_on_the_identified_model_beats_ctc_on_cad(tmp_path: Path) -> None:
         max_error[label] = np.abs(result.q_ref - result.q_true).max(axis=0)
     for j in (1, 2):  # shoulder lift, elbow
         assert max_error["identified"][j] < max_error["cad"][j], max_error
+
+
+def test_params_accept_a_nominal_model_path() -> None:
+    from pipeline.params import parse_params
+    from pipeline.yamlio import parse_yaml
+
+    data = parse_yaml(PARAMS.read_text(), source="params.yaml", error=IdentificationError)
+    data["scenarios"]["paper-realistic"]["nominal"] = "models/ur5.yaml"
+    params = parse_params(data, source="params.yaml")
+    assert params.scenarios["paper-realistic"].nominal == "models/ur5.yaml"
+    assert params.scenarios["paper"].nominal is None
