@@ -147,6 +147,10 @@ def excite_cmd(
         float, typer.Option("--budget-s", help="Wall-clock budget of the design [s].")
     ] = 30.0,
     force: Annotated[bool, typer.Option("--force", help="Overwrite the recording.")] = False,
+    export: Annotated[
+        Path | None,
+        typer.Option("--export", help="Also write the trajectory as CSV (1 kHz) for a robot."),
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
 ) -> None:
     """Design excitation K (Fourier series, within limits, collision-free); record it on S."""
@@ -165,6 +169,7 @@ def excite_cmd(
         span_rad=span_rad,
         budget_s=budget_s,
         force=force,
+        export=export,
     )
     _emit(
         s,

@@ -42,6 +42,7 @@ LIMIT_SHARE = 0.9
 DESIGN_SAMPLES_PER_PERIOD = 60
 CHECK_SAMPLES_PER_PERIOD = 1000
 PENALTY = 1e3
+EXPORT_RATE_HZ = 1000.0
 CLEARANCE_M = 0.05
 """The design keeps this far from collisions (robot, floor, pedestal, obstacles) [m]."""
 
@@ -282,9 +283,13 @@ def record_excitation(
     span_rad: float = 1.0,
     budget_s: float = 30.0,
     force: bool = False,
+    export: Path | None = None,
 ) -> dict[str, Any]:
     """Design excitation ``variant`` for scenario ``scenario_name`` and record it on the
     plant that scenario draws for ``seed``; the JSON summary.
+
+    ``export``: also write the trajectory as CSV at 1 kHz (:func:`.fourier.write_csv`),
+    for a real robot.
 
     Raises:
         PipelineError: unknown scenario or controller, an excitation that leaves the limits
@@ -410,8 +415,16 @@ def record_excitation(
         ros_distro=sim.ros_distro,
         force=force,
     )
+    if export is not None:
+        from pipeline.identify.fourier import write_csv
+
+        try:
+            write_csv(export, ref, spec.joint_names, rate_hz=EXPORT_RATE_HZ)
+        except OSError as err:
+            raise IdentificationError(f"{export}: cannot write ({err.strerror or err})") from err
     return {
         "recording": str(out),
+        "export": str(export) if export is not None else None,
         "scenario": scenario_name,
         "seed": seed,
         "variant": variant,

@@ -14,7 +14,9 @@ excitation starts without a jump in the reference's velocity or acceleration. Af
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -89,3 +91,17 @@ class FourierReference:
         qd[~moving] = 0.0
         qdd[~moving] = 0.0
         return q, qd, qdd
+
+
+def write_csv(path: Path, reference: FourierReference, joint_names: Sequence[str], *,
+              rate_hz: float) -> int:  # fmt: skip
+    """The reference sampled at ``rate_hz`` as CSV (``time_s``, then per joint ``q_<name>``
+    [rad], ``qd_<name>`` [rad/s], ``qdd_<name>`` [rad/s^2]): a trajectory a real robot's
+    controller can stream. Returns the rows written."""
+    t = np.arange(0.0, reference.duration_s + 0.5 / rate_hz, 1.0 / rate_hz)
+    q, qd, qdd = reference.sample_many(t)
+    header = ["time_s"] + [f"{k}_{n}" for k in ("q", "qd", "qdd") for n in joint_names]
+    table = np.column_stack([t, q, qd, qdd])
+    lines = [",".join(header)] + [",".join(repr(float(x)) for x in row) for row in table]
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return int(t.size)

@@ -42,10 +42,13 @@ from pipeline.identify.regressor import (
     standard_parameters,
 )
 from pipeline.identify.samples import FILTER_ORDER, JointSamples, joint_samples
-from pipeline.log.reader import Recording, read_recording
+from pipeline.log.reader import ReadOptions, Recording, read_recording
 from pipeline.robots.spec import RobotSpec, load_spec, parse_spec
 
 F64 = np.ndarray
+
+WHOLE = ReadOptions(stream_above_bytes=1 << 62)
+"""Read every recording whole: identification needs every sample, never a decimated read."""
 
 
 def recording_spec(recording: Recording, robot: str | None) -> RobotSpec:
@@ -75,8 +78,7 @@ def _read(paths: Sequence[Path], robot: str | None, cutoff_hz: float) -> tuple[
     spec: RobotSpec | None = None
     samples = []
     for path in paths:
-        # stream_above_bytes: identification needs every sample, never a decimated read
-        recording = read_recording(Path(path))
+        recording = read_recording(Path(path), WHOLE)
         this = recording_spec(recording, robot)
         if spec is None:
             spec = this
@@ -289,7 +291,7 @@ def validate_command(
         raise IdentificationError("no recordings given")
     predictions = []
     for path in paths:
-        recording = read_recording(Path(path))
+        recording = read_recording(Path(path), WHOLE)
         robot = recording.metadata.get("robot") if recording.armlab_metadata else None
         if robot and robot != model.spec.name:
             raise IdentificationError(

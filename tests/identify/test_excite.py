@@ -41,6 +41,22 @@ def test_fourier_reference_starts_and_ends_at_rest() -> None:
     np.testing.assert_allclose(numeric, ref.sample_many(t)[1], atol=1e-6)
 
 
+def test_excitation_exports_as_csv_for_a_robot(tmp_path: Path) -> None:
+    from pipeline.identify.fourier import write_csv
+
+    rng = np.random.default_rng(1)
+    ref = FourierReference.from_free(
+        np.zeros(6), rng.normal(size=48) * 0.1, harmonics=5, base_frequency_hz=0.1, periods=1
+    )
+    names = load_spec("ur5").joint_names
+    rows = write_csv(tmp_path / "x.csv", ref, names, rate_hz=100.0)
+    table = np.loadtxt(tmp_path / "x.csv", delimiter=",", skiprows=1)
+    assert rows == table.shape[0] == 1001 and table.shape[1] == 1 + 18
+    q, qd, _ = ref.sample_many(table[:, 0])
+    np.testing.assert_array_equal(table[:, 1:7], q)
+    np.testing.assert_array_equal(table[:, 7:13], qd)
+
+
 def test_design_stays_within_limits_and_beats_a_random_series() -> None:
     spec = load_spec("ur5")
     q0 = np.array([0.0, -1.2, 1.2, -1.0, 0.5, 0.0])
