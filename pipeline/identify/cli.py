@@ -34,6 +34,17 @@ def _emit(summary: dict[str, Any], *, as_json: bool, lines: list[str]) -> None:
         sys.stdout.write("\n".join(lines) + "\n")
 
 
+def _floats(text: str, option: str) -> list[float]:
+    try:
+        return [float(x) for x in text.replace(" ", "").split(",") if x]
+    except ValueError as err:
+        from pipeline.errors import IdentificationError
+
+        raise IdentificationError(
+            f"{option}: expected comma-separated numbers, got {text!r}"
+        ) from err
+
+
 def _row(values: list[float], fmt: str) -> str:
     return " ".join(format(v, fmt) for v in values)
 
@@ -147,6 +158,14 @@ def excite_cmd(
         float, typer.Option("--budget-s", help="Wall-clock budget of the design [s].")
     ] = 30.0,
     force: Annotated[bool, typer.Option("--force", help="Overwrite the recording.")] = False,
+    mid: Annotated[
+        str | None,
+        typer.Option(
+            "--mid",
+            help="Mid posture, comma-separated [rad] (default: the scenario's start); "
+            "a bent arm excites better than a stretched one.",
+        ),
+    ] = None,
     export: Annotated[
         Path | None,
         typer.Option("--export", help="Also write the trajectory as CSV (1 kHz) for a robot."),
@@ -170,6 +189,7 @@ def excite_cmd(
         budget_s=budget_s,
         force=force,
         export=export,
+        mid_posture=_floats(mid, "--mid") if mid else None,
     )
     _emit(
         s,

@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -284,10 +285,12 @@ def record_excitation(
     budget_s: float = 30.0,
     force: bool = False,
     export: Path | None = None,
+    mid_posture: Sequence[float] | None = None,
 ) -> dict[str, Any]:
     """Design excitation ``variant`` for scenario ``scenario_name`` and record it on the
     plant that scenario draws for ``seed``; the JSON summary.
 
+    ``mid_posture``: the series' offset [rad] (default: the scenario's start pose).
     ``export``: also write the trajectory as CSV at 1 kHz (:func:`.fourier.write_csv`),
     for a real robot.
 
@@ -324,7 +327,7 @@ def record_excitation(
     obstacles = tuple(Box(b.name, b.center, b.half_size) for b in scenario.obstacles)
     design = design_excitation(
         spec,
-        q0=np.asarray(scenario.start, dtype=float),
+        q0=np.asarray(scenario.start if mid_posture is None else mid_posture, dtype=float),
         variant=variant,
         harmonics=harmonics,
         base_frequency_hz=base_frequency_hz,
