@@ -53,6 +53,10 @@ class TeachError(PipelineError):
     """The teach page cannot start (e.g. its port is in use)."""
 
 
+class IdentificationError(PipelineError):
+    """Dynamic identification cannot run: data unfit, unexcited parameters, a bad model file."""
+
+
 def unknown_name_message(kind: str, name: object, valid: Iterable[str], *, where: str = "") -> str:
     """The one wording for a name that is not among the valid ones, with the nearest.
 

@@ -160,6 +160,9 @@ class ScenarioParams(_Strict):
     preroll_s: float = Field(default=2.0, ge=0, le=MAX_PREROLL_S)
     # compare with the paper's numbers in the report (only the paper's experiment)
     reproduces_paper: bool = False
+    # the controllers' nominal model: an identified MODEL.yaml (`pipeline identify fit`);
+    # None: the robot's own description (its CAD values)
+    nominal: str | None = Field(default=None, min_length=1)
 
     @model_validator(mode="after")
     def _unique_obstacles(self) -> ScenarioParams:
@@ -288,6 +291,10 @@ class SimParams(_Strict):
     # episode costs is estimated before it runs (pipeline.stages.budget.estimate_episode).
     physics_dt_s: float = Field(default=0.001, ge=MIN_PHYSICS_DT_S, le=0.01)
     control_period_steps: int = Field(default=1, ge=1, le=1000)
+    # MuJoCo's integrator (RK4 by default: the convergence test in tests/sim/test_convergence.py)
+    integrator: Literal["RK4", "Euler", "implicit", "implicitfast"] = (
+        "RK4"  # = PLANT_INTEGRATOR (a test keeps them equal)
+    )
     joint_state_decimation: int = Field(default=1, ge=1, le=1000)
     tf_rate_hz: float = Field(default=50.0, gt=0, le=1000)
     # Whose message definitions and metadata layout the bags use (Humble subscribers need
@@ -387,7 +394,7 @@ class _Params(_Strict):
 
 _NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
 # scenario fields a sweep may not set: goals have their own axis, the rest is the scenario
-_NOT_SWEPT = ("robot", "start", "goal", "obstacles", "reproduces_paper")
+_NOT_SWEPT = ("robot", "start", "goal", "obstacles", "reproduces_paper", "nominal")
 
 
 def sweep_path_problem(path: str, controllers: Mapping[str, ControllerParams]) -> str:

@@ -206,3 +206,10 @@ def test_the_controller_study_is_a_valid_params_file_outside_the_demo():
     assert len(episodes) == 6 * 20 * 2
     validate_episodes(study, episodes[::20])
     assert "controllers-delay" not in load_params(REPO / "params.yaml").campaigns
+
+
+def test_the_default_integrator_is_the_plant_s():
+    from pipeline.constants import PLANT_INTEGRATOR
+    from pipeline.params import SimParams
+
+    assert SimParams().integrator == PLANT_INTEGRATOR

@@ -23,7 +23,7 @@ from pipeline.cli.root import app, console
 # isort: off
 # the command modules register their commands on ``app``; `pipeline --help` lists them in
 # this order
-from pipeline.cli import kinematics, teach, controllers, record, report
+from pipeline.cli import kinematics, teach, controllers, record, report, identify  # noqa: F401
 
 # isort: on
 from pipeline.errors import (

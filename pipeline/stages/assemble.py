@@ -102,6 +102,7 @@ def episode_settings(
     episode: Episode,
     *,
     spec: RobotSpec,
+    nominal: RobotSpec,
     plant_spec: RobotSpec,
     uncertainty: Uncertainty,
     gains: Mapping[str, Any],
@@ -115,7 +116,9 @@ def episode_settings(
     """What the episode's bag records about how it was run.
 
     Args:
-        spec: the nominal robot (the controller's model).
+        spec: the robot as described (its YAML: what the bag records as ``robot``).
+        nominal: the controllers' model: ``spec``, or the identified robot of a scenario's
+            ``nominal:`` model file.
         plant_spec: the robot as simulated (drawn inertials, armature).
         gains: the controller's gains in effect (``Controller.gains_in_effect()``).
         origin: where the controller's code came from
@@ -130,10 +133,10 @@ def episode_settings(
     k0 = int(result.extra["motion_start_row"])
     at_start = min(k0, len(result.stamp_ns) - 1)
     plant = PlantSettings(
-        exact=_plant_is_exact(spec, plant_spec, scenario),
+        exact=_plant_is_exact(nominal, plant_spec, scenario),
         links=link_inertials(plant_spec),
         armature=tuple(float(a) for a in plant_spec.armature),
-        nominal_armature=tuple(float(a) for a in spec.armature),
+        nominal_armature=tuple(float(a) for a in nominal.armature),
         damping=per_joint(param_values(p.damping), spec.dof),
         frictionloss=per_joint(param_values(p.frictionloss), spec.dof),
         payload_kg=p.payload_kg,

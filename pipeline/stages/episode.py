@@ -104,6 +104,7 @@ def _run_and_write(
     before_write: Callable[[], None] | None = None,
 ) -> EpisodeOutcome:
     from pipeline.control import controller_origin, make_controller
+    from pipeline.identify.model_file import nominal_spec
     from pipeline.log.bag import write_episode_bag
     from pipeline.model.mjcf import PlantOptions
     from pipeline.model.uncertainty import draw_plant, link_inertials, with_plant
@@ -114,9 +115,10 @@ def _run_and_write(
     spec = load_spec(scenario.robot)
     sim = episode.sim
     control_dt_s = sim.physics_dt_s * sim.control_period_steps
+    nominal = nominal_spec(spec, scenario.nominal, where=f"scenarios.{episode.scenario_name}")
     controller = make_controller(
         episode.controller.type,
-        spec,
+        nominal,
         episode.controller.gains,
         source=f"controllers.{episode.controller_name}",
     )
@@ -146,6 +148,7 @@ def _run_and_write(
         obstacles=obstacle_boxes(scenario),
         physics_dt_s=sim.physics_dt_s,
         control_period_steps=sim.control_period_steps,
+        integrator=sim.integrator,
         hold_s=scenario.hold_s,
         preroll_s=scenario.preroll_s,
         position_noise_std_rad=p.position_noise_std_rad,
@@ -168,6 +171,7 @@ def _run_and_write(
     settings = episode_settings(
         episode,
         spec=spec,
+        nominal=nominal,
         plant_spec=plant_spec,
         uncertainty=uncertainty,
         gains=controller.gains_in_effect(),

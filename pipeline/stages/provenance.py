@@ -21,6 +21,10 @@ RECORD_CODE = (
     "settings.py",
     "trajectory.py",
     "yamlio.py",
+    "identify/__init__.py",  # cli's sub-app, and a scenario's `nominal:` model file
+    "identify/cli.py",
+    "identify/defaults.py",
+    "identify/model_file.py",
     "robots",
     "model",
     "kinematics",

@@ -1,0 +1,204 @@
+"""``pipeline identify``: excite, fit, validate (a Typer sub-app; errors reach the main CLI's
+one-line handler as :class:`pipeline.errors.PipelineError`)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from pipeline.identify.defaults import (
+    DEFAULT_CUTOFF_HZ,
+    DEFAULT_MAX_CONDITION,
+    DEFAULT_MIN_SPEED_RAD_S,
+)
+
+identify_app = typer.Typer(
+    help=(
+        "Identify the arm's dynamics from recordings: design and record an excitation, "
+        "fit inertials, armature and friction (MODEL.yaml), validate on other recordings."
+    ),
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+
+
+def _emit(summary: dict[str, Any], *, as_json: bool, lines: list[str]) -> None:
+    if as_json:
+        sys.stdout.write(json.dumps(summary, indent=2) + "\n")
+    else:
+        sys.stdout.write("\n".join(lines) + "\n")
+
+
+def _floats(text: str, option: str) -> list[float]:
+    try:
+        return [float(x) for x in text.replace(" ", "").split(",") if x]
+    except ValueError as err:
+        from pipeline.errors import IdentificationError
+
+        raise IdentificationError(
+            f"{option}: expected comma-separated numbers, got {text!r}"
+        ) from err
+
+
+def _row(values: list[float], fmt: str) -> str:
+    return " ".join(format(v, fmt) for v in values)
+
+
+@identify_app.command("fit")
+def fit_cmd(
+    recordings: Annotated[list[Path], typer.Argument(help="Recordings (rosbag2 folders, .mcap).")],
+    out: Annotated[Path, typer.Option("--out", help="The model file to write (MODEL.yaml).")],
+    robot: Annotated[
+        str | None,
+        typer.Option("--robot", help="Robot name or YAML (default: the one recorded)."),
+    ] = None,
+    cutoff_hz: Annotated[
+        float,
+        typer.Option(
+            "--cutoff-hz",
+            help="Zero-phase Butterworth cutoff [Hz]; 0: no filter, recorded velocities "
+            "and their forward difference (exact on noise-free simulated data).",
+        ),
+    ] = DEFAULT_CUTOFF_HZ,
+    min_speed: Annotated[
+        float,
+        typer.Option("--min-speed", help="Leave out joint samples slower than this [rad/s]."),
+    ] = DEFAULT_MIN_SPEED_RAD_S,
+    max_condition: Annotated[
+        float,
+        typer.Option(
+            "--max-condition",
+            help="Refuse a regressor (unit-norm columns) whose pivots fall below "
+            "1/this of the largest (unexcited parameters).",
+        ),
+    ] = DEFAULT_MAX_CONDITION,
+    as_json: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
+) -> None:
+    """Identify base parameters (WLS, standard errors), make them physical, write MODEL.yaml."""
+    from pipeline.identify.stage import fit_command
+
+    s = fit_command(
+        recordings,
+        out=out,
+        robot=robot,
+        cutoff_hz=cutoff_hz,
+        min_speed_rad_s=min_speed,
+        max_condition=max_condition,
+    )
+    _emit(
+        s,
+        as_json=as_json,
+        lines=[
+            f"identified {s['base_parameters']} base parameters of {s['robot']} from "
+            f"{s['equations']} equations in {s['wall_s']:.1f} s",
+            f"condition number {s['condition_number']:.4g} (unit-norm columns "
+            f"{s['condition_number_scaled']:.4g}); largest relative standard error "
+            f"{s['max_rel_std_error_pct']:.3g} %",
+            f"residual RMS [N m]: {_row(s['residual_rms_nm'], '.3g')}",
+            f"torque RMS   [N m]: {_row(s['torque_rms_nm'], '.3g')}",
+            f"wrote {s['model']}",
+        ],
+    )
+
+
+@identify_app.command("validate")
+def validate_cmd(
+    model: Annotated[Path, typer.Argument(help="The model file (MODEL.yaml).")],
+    recordings: Annotated[list[Path], typer.Argument(help="Recordings not used in the fit.")],
+    figure: Annotated[
+        Path | None,
+        typer.Option("--figure", help="Predicted-vs-measured PNG (default: next to MODEL)."),
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
+) -> None:
+    """Torque RMS error per joint of MODEL on other recordings, absolute and % of RMS torque."""
+    from pipeline.identify.stage import validate_command
+
+    s = validate_command(model, recordings, figure=figure)
+    lines = [f"{'joint':<22} {'RMS error [N m]':>16} {'RMS torque [N m]':>17} {'error %':>8}"]
+    for name, e, t, p in zip(
+        s["joints"], s["rms_error_nm"], s["rms_torque_nm"], s["rms_error_pct"], strict=True
+    ):
+        lines.append(f"{name:<22} {e:>16.4g} {t:>17.4g} {p:>8.3g}")
+    lines.append(f"wrote {s['figure']}")
+    _emit(s, as_json=as_json, lines=lines)
+
+
+@identify_app.command("excite")
+def excite_cmd(
+    params: Annotated[Path, typer.Option("--params", help="The params file.")] = Path(
+        "params.yaml"
+    ),
+    scenario: Annotated[
+        str, typer.Option("--scenario", help="Scenario: robot, mid posture, plant.")
+    ] = "paper",
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the plant draw and noise.")] = 0,
+    variant: Annotated[int, typer.Option("--variant", help="Seed of the excitation design.")] = 0,
+    out: Annotated[Path, typer.Option("--out", help="The recording to write (a folder).")] = Path(
+        "recordings/excitation"
+    ),
+    controller: Annotated[
+        str | None,
+        typer.Option("--controller", help="Controller tracking it (default: ctc)."),
+    ] = None,
+    harmonics: Annotated[int, typer.Option("--harmonics", help="Harmonics per joint.")] = 5,
+    base_frequency_hz: Annotated[
+        float, typer.Option("--base-frequency-hz", help="Fundamental frequency [Hz].")
+    ] = 0.1,
+    periods: Annotated[int, typer.Option("--periods", help="Periods recorded.")] = 2,
+    span_rad: Annotated[
+        float, typer.Option("--span-rad", help="Largest excursion from the mid posture [rad].")
+    ] = 1.0,
+    budget_s: Annotated[
+        float, typer.Option("--budget-s", help="Wall-clock budget of the design [s].")
+    ] = 30.0,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite the recording.")] = False,
+    mid: Annotated[
+        str | None,
+        typer.Option(
+            "--mid",
+            help="Mid posture, comma-separated [rad] (default: the scenario's start); "
+            "a bent arm excites better than a stretched one.",
+        ),
+    ] = None,
+    export: Annotated[
+        Path | None,
+        typer.Option("--export", help="Also write the trajectory as CSV (1 kHz) for a robot."),
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
+) -> None:
+    """Design excitation K (Fourier series, within limits, collision-free); record it on S."""
+    from pipeline.identify.excitation import record_excitation
+
+    s = record_excitation(
+        params,
+        scenario_name=scenario,
+        seed=seed,
+        variant=variant,
+        out=out,
+        controller_name=controller,
+        harmonics=harmonics,
+        base_frequency_hz=base_frequency_hz,
+        periods=periods,
+        span_rad=span_rad,
+        budget_s=budget_s,
+        force=force,
+        export=export,
+        mid_posture=_floats(mid, "--mid") if mid else None,
+    )
+    _emit(
+        s,
+        as_json=as_json,
+        lines=[
+            f"excitation {variant}: condition number {s['condition_number']:.4g} (unit-norm "
+            f"columns {s['condition_number_scaled']:.4g}), designed in "
+            f"{s['design_wall_s']:.1f} s",
+            f"recorded {s['duration_s']:.0f} s on scenario {scenario}, seed {seed}, "
+            f"controller {s['controller']}: {s['recording']}",
+        ],
+    )

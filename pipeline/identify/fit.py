@@ -1,0 +1,417 @@
+"""Weighted least squares on the base parameters, then a physically consistent model.
+
+1. Stack the base regressor ``Y_b`` and torques of every sample, leaving out a joint's
+   rows while it moves slower than ``min_speed_rad_s`` (sticking friction is no
+   function of ``sign(qd)``).
+2. Check the excitation: pivoted QR of the column-normalized ``Y_b``; parameters whose
+   pivot falls below ``1 / max_condition`` of the first are not excited (an error
+   naming them).
+3. Ordinary least squares, per-joint residual standard deviation ``sigma_j``, then
+   weighted least squares with weights ``1 / sigma_j`` (Gautier & Poignet 2001); the
+   covariance ``sigma^2 (Y_w^T Y_w)^-1`` gives a standard error per base parameter.
+4. Physical consistency: over every link's log-Cholesky vector (:mod:`.physical`,
+   physical by construction), armature, Coulomb and viscous friction >= 0 and offsets,
+   minimise ``||Y_w (E theta - beta_wls)||^2`` (the weighted residual's increase over
+   the WLS optimum, via the R factor of ``Y_w``), plus a small pull of the
+   *unidentifiable* part of ``theta`` (the null space of ``E``) towards the CAD values,
+   which leaves the base parameters alone. Armature and friction are squares (>= 0).
+   Start: the WLS fit where physical, else the CAD model. Solver: SciPy's
+   ``least_squares`` (MINPACK Levenberg-Marquardt), on one BLAS thread.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+from numpy.typing import NDArray
+from scipy import optimize
+
+from pipeline.errors import IdentificationError
+from pipeline.identify import physical
+from pipeline.identify.blas import one_thread
+from pipeline.identify.defaults import (
+    DEFAULT_MAX_CONDITION,
+    DEFAULT_MIN_SPEED_RAD_S,
+)
+from pipeline.identify.regressor import (
+    ARMATURE,
+    COULOMB,
+    PER_JOINT,
+    VISCOUS,
+    BaseParameters,
+    Regressor,
+    base_parameters,
+    standard_names,
+    standard_parameters,
+)
+from pipeline.identify.samples import JointSamples
+from pipeline.robots.spec import RobotSpec
+
+F64 = NDArray[np.float64]
+
+NULL_SPACE_WEIGHT = 1e-4
+"""Weight of the pull towards CAD in the unidentifiable directions (relative)."""
+MIN_ROWS_PER_PARAMETER = 10
+MAX_EVALUATIONS = 100
+COST_TOL = 1e-8
+"""Stop when an iteration lowers the cost by less than this share (an optimum on the
+boundary of the physical set lies at infinity in log-Cholesky coordinates)."""
+ROUNDING_TOL = 1e-9
+START_MIN = 1e-4
+MARGIN_REL = 1e-6
+MARGIN_MIN_KG_M2 = 1e-9
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """An identification.
+
+    Attributes:
+        base: the base parameters identified.
+        beta_wls: (rank,) weighted least-squares estimate.
+        std_error: (rank,) standard error of ``beta_wls``.
+        beta: (rank,) base parameters of the physically consistent model.
+        theta: (n_standard,) the physically consistent standard parameters.
+        theta_cad: (n_standard,) the CAD model's (start and null-space prior).
+        condition_number: of the base regressor ``Y_b`` (unweighted).
+        condition_number_scaled: of ``Y_b`` with unit-norm columns.
+        joint_sigma_nm: (dof,) first-pass (OLS) residual RMS per joint [N m].
+        residual_rms_nm: (dof,) residual RMS of the consistent model per joint [N m].
+        torque_rms_nm: (dof,) RMS of the fitted torque per joint [N m].
+        rows: equations used (joint samples above the speed threshold).
+        projection_cost: increase of the weighted residual's sum of squares from the WLS
+            estimate to the physically consistent one, as a share of the weighted
+            torque's (0: the WLS estimate is physical).
+    """
+
+    base: BaseParameters
+    beta_wls: F64
+    std_error: F64
+    beta: F64
+    theta: F64
+    theta_cad: F64
+    condition_number: float
+    condition_number_scaled: float
+    joint_sigma_nm: F64
+    residual_rms_nm: F64
+    torque_rms_nm: F64
+    rows: int
+    projection_cost: float
+
+
+def stacked(
+    spec: RobotSpec, samples: Sequence[JointSamples], *, min_speed_rad_s: float
+) -> tuple[F64, F64, NDArray[np.intp]]:
+    """Standard regressor rows, torques and each row's joint, slow rows left out."""
+    reg = Regressor(spec)
+    ys, taus, joints = [], [], []
+    for s in samples:
+        y = reg.stacked(s.q, s.qd, s.qdd)
+        keep = (np.abs(s.qd) >= min_speed_rad_s).ravel()
+        ys.append(y[keep])
+        taus.append(s.tau_nm.ravel()[keep])
+        joints.append(np.tile(np.arange(spec.dof), s.q.shape[0])[keep])
+    return np.concatenate(ys), np.concatenate(taus), np.concatenate(joints)
+
+
+def unexcited(gram: F64, names: Sequence[str], *, max_condition: float) -> tuple[list[str], float]:
+    """Base parameters the data do not excite, and the scaled condition number.
+
+    ``gram`` is ``Y_b^T Y_b``. Columns are scaled to unit norm (a parameter's units do not
+    matter); the pivoted Cholesky factor of the scaled Gram matrix is the R factor of the
+    pivoted QR of the scaled regressor, and a pivot below ``1 / max_condition`` of the
+    first marks its parameter.
+    """
+    norms = np.sqrt(np.maximum(np.diag(gram), 0.0))
+    zero = [names[int(i)] for i in np.flatnonzero(norms == 0)]
+    inv = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 0.0)
+    scaled = gram * inv[:, None] * inv[None, :]
+    eig = np.linalg.eigvalsh(scaled)
+    cond = float(np.sqrt(eig[-1] / eig[0])) if eig[0] > 0 else float("inf")
+    factor, piv, rank, _ = scipy.linalg.lapack.dpstrf(scaled, lower=0, tol=-1.0)
+    piv = piv - 1  # LAPACK counts from 1
+    diag = np.abs(np.diag(factor))
+    diag[rank:] = 0.0
+    weak = [names[int(piv[i])] for i in np.flatnonzero(diag < diag[0] / max_condition)]
+    out = zero + [w for w in weak if w not in zero]
+    if not out and cond > max_condition:
+        out = [names[int(piv[-1])]]
+    return out, cond
+
+
+def _per_joint_rms(values: F64, joint_of: NDArray[np.intp], dof: int) -> F64:
+    counts = np.bincount(joint_of, minlength=dof)
+    sums = np.bincount(joint_of, weights=values**2, minlength=dof)
+    return np.sqrt(sums / np.maximum(counts, 1))
+
+
+def _upper_factor(gram: F64) -> F64:
+    """R with ``R^T R = gram`` (the R factor of the regressor), via a scaled Cholesky."""
+    d = np.sqrt(np.diag(gram))
+    chol = np.linalg.cholesky(gram / d[:, None] / d[None, :])
+    return np.asarray(chol.T * d[None, :], dtype=float)
+
+
+def identify(
+    spec: RobotSpec,
+    samples: Sequence[JointSamples],
+    *,
+    min_speed_rad_s: float = DEFAULT_MIN_SPEED_RAD_S,
+    max_condition: float = DEFAULT_MAX_CONDITION,
+    physical_fit: bool = True,
+) -> FitResult:
+    """Identify ``spec``'s base parameters from ``samples`` (see the module docstring).
+
+    The least squares run on per-joint Gram matrices ``Y_j^T Y_j`` (one pass over the
+    data; column-scaled Cholesky solves): the weighted problem is their weighted sum.
+
+    Raises:
+        IdentificationError: too few equations for the parameters, or parameters the data
+            do not excite (named).
+    """
+    with one_thread():
+        return _identify(
+            spec, samples, min_speed_rad_s=min_speed_rad_s, max_condition=max_condition,
+            physical_fit=physical_fit,
+        )  # fmt: skip
+
+
+def _identify(
+    spec: RobotSpec,
+    samples: Sequence[JointSamples],
+    *,
+    min_speed_rad_s: float,
+    max_condition: float,
+    physical_fit: bool,
+) -> FitResult:
+    base = base_parameters(spec)
+    y_std, tau, joint_of = stacked(spec, samples, min_speed_rad_s=min_speed_rad_s)
+    y_b = y_std[:, base.columns]
+    where = ", ".join(s.source for s in samples)
+    need = MIN_ROWS_PER_PARAMETER * base.rank
+    if tau.size < need:
+        raise IdentificationError(
+            f"{where}: {tau.size} equations (joint samples moving faster than "
+            f"{min_speed_rad_s:g} rad/s), too short for {base.rank} base parameters "
+            f"(needs {need}): record a longer excitation"
+        )
+    dof = spec.dof
+    grams = np.empty((dof, base.rank, base.rank))
+    moments = np.empty((dof, base.rank))
+    for j in range(dof):
+        rows = y_b[joint_of == j]
+        grams[j] = rows.T @ rows
+        moments[j] = rows.T @ tau[joint_of == j]
+    weak, cond_scaled = unexcited(grams.sum(axis=0), base.names, max_condition=max_condition)
+    if weak:
+        shown = ", ".join(weak[:6]) + (f" (+{len(weak) - 6} more)" if len(weak) > 6 else "")
+        raise IdentificationError(
+            f"{where}: regressor too ill-conditioned to identify (scaled condition number "
+            f"{cond_scaled:.3g} > {max_condition:g}); not excited: {shown}; record an "
+            "excitation (pipeline identify excite)"
+        )
+    r_ols = _upper_factor(grams.sum(axis=0))
+    beta_ols = scipy.linalg.cho_solve((r_ols, False), moments.sum(axis=0))
+    sigma = _per_joint_rms(tau - y_b @ beta_ols, joint_of, dof)
+    tau_rms = _per_joint_rms(tau, joint_of, dof)
+    # exact (noise-free) data: no residual to weigh by; a floor keeps the weights finite
+    floor = 1e-9 * np.maximum(tau_rms, 1e-3)
+    w2 = 1.0 / np.maximum(sigma, floor) ** 2
+    r_w = _upper_factor(np.tensordot(w2, grams, axes=1))
+    beta_wls = scipy.linalg.cho_solve((r_w, False), w2 @ moments)
+    resid = tau - y_b @ beta_wls
+    resid_w2 = float(np.sum(w2[joint_of] * resid**2))
+    s2 = resid_w2 / max(tau.size - base.rank, 1)
+    r_inv = scipy.linalg.solve_triangular(r_w, np.eye(base.rank))
+    std_error = np.sqrt(s2 * np.sum(r_inv**2, axis=1))
+    sv = np.linalg.svd(r_ols, compute_uv=False)
+    cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
+    theta_cad = standard_parameters(spec)
+    if physical_fit:
+        theta = consistent_parameters(
+            base, beta_wls, r_w, theta_cad, column_scale=np.linalg.norm(y_std, axis=0)
+        )
+    else:
+        theta = theta_cad + np.linalg.pinv(base.projection) @ (beta_wls - base.of(theta_cad))
+    beta = base.of(theta)
+    final = tau - y_b @ beta
+    tau_w2 = float(w2 @ (tau_rms**2 * np.bincount(joint_of, minlength=dof)))
+    final_w2 = float(np.sum(w2[joint_of] * final**2))
+    return FitResult(
+        base=base,
+        beta_wls=beta_wls,
+        std_error=std_error,
+        beta=beta,
+        theta=theta,
+        theta_cad=theta_cad,
+        condition_number=cond,
+        condition_number_scaled=cond_scaled,
+        joint_sigma_nm=sigma,
+        residual_rms_nm=_per_joint_rms(final, joint_of, dof),
+        torque_rms_nm=tau_rms,
+        rows=int(tau.size),
+        projection_cost=max(final_w2 - resid_w2, 0.0) / max(tau_w2, 1e-300),
+    )
+
+
+# --- physical consistency -------------------------------------------------------------------
+
+_NONNEGATIVE = (ARMATURE, COULOMB, VISCOUS)
+
+
+def violations(spec: RobotSpec, theta: F64, *, tol: float = 0.0) -> list[str]:
+    """Why a standard parameter set is not physical (empty: it is).
+
+    A link is physical iff its pseudo-inertia is positive definite (eigenvalue > ``tol``);
+    armature, Coulomb and viscous friction must be >= 0.
+    """
+    out = []
+    names = standard_names(spec)
+    for j, joint in enumerate(spec.joint_names):
+        block = theta[PER_JOINT * j : PER_JOINT * (j + 1)]
+        eig = physical.min_eigenvalue(block[:10])
+        if not eig > tol:
+            out.append(
+                f"{joint}: link pseudo-inertia not positive definite (smallest eigenvalue "
+                f"{eig:.3g})"
+            )
+        for k in _NONNEGATIVE:
+            if block[k] < 0:
+                out.append(f"{names[PER_JOINT * j + k]}: {block[k]:.6g} < 0")
+    return out
+
+
+def _nonnegative_indices(n_standard: int) -> NDArray[np.intp]:
+    return np.array(
+        [PER_JOINT * j + k for j in range(n_standard // PER_JOINT) for k in _NONNEGATIVE],
+        dtype=np.intp,
+    )
+
+
+def violations_of(theta: F64) -> bool:
+    """Whether a standard parameter vector is not physical (fast, no messages)."""
+    for j in range(theta.size // PER_JOINT):
+        block = theta[PER_JOINT * j : PER_JOINT * (j + 1)]
+        if not physical.min_eigenvalue(block[:10]) > 0 or (block[list(_NONNEGATIVE)] < 0).any():
+            return True
+    return False
+
+
+def _to_phi(theta: F64) -> F64:
+    dof = theta.size // PER_JOINT
+    phi = theta.copy()
+    for j in range(dof):
+        phi[PER_JOINT * j : PER_JOINT * j + 10] = physical.to_log_cholesky(
+            theta[PER_JOINT * j : PER_JOINT * j + 10]
+        )
+    return phi
+
+
+def consistent_parameters(
+    base: BaseParameters,
+    beta_target: F64,
+    r_w: F64,
+    theta_start: F64,
+    *,
+    column_scale: F64,
+) -> F64:
+    """Physical standard parameters whose base parameters best fit ``beta_target``.
+
+    Args:
+        base: the base parameters.
+        beta_target: the unconstrained (WLS) estimate.
+        r_w: R factor of the weighted base regressor (the metric of the residual).
+        theta_start: a physical start (the CAD model); also the prior in the null space.
+        column_scale: per standard parameter, the norm of its regressor column (makes
+            the null-space pull unit-free; zero columns get the median).
+
+    Raises:
+        IdentificationError: ``theta_start`` is not physical.
+    """
+    dof = theta_start.size // PER_JOINT
+    try:
+        phi0 = _to_phi(theta_start)
+    except ValueError as err:
+        raise IdentificationError(f"the start model is not physical: {err}") from err
+    e = base.projection
+    e_pinv = np.linalg.pinv(e)
+    # the nearest point to the start that fits beta_target exactly: if physical, it is the
+    # optimum (zero misfit, zero pull), no search needed
+    nearest = theta_start + e_pinv @ (beta_target - e @ theta_start)
+    signed: NDArray[np.intp] = _nonnegative_indices(nearest.size)
+    values = nearest[signed]
+    # rounding-level negatives of a zero friction (exact data) are zero
+    nearest[signed] = np.where((values < 0) & (values > -ROUNDING_TOL), 0.0, values)
+    if not violations_of(nearest):
+        return nearest
+    null = np.eye(theta_start.size) - e_pinv @ e
+    positive = column_scale[column_scale > 0]
+    scale = np.where(column_scale > 0, column_scale, np.median(positive) if positive.size else 1.0)
+    fit_scale = float(np.linalg.norm(r_w)) / np.sqrt(base.rank)
+    pull = np.sqrt(NULL_SPACE_WEIGHT) * fit_scale / float(np.median(scale))
+    # residual(theta) = A theta - c: the weighted misfit, then the pull in the null space
+    a_map = np.vstack([r_w @ e, pull * scale[:, None] * null])
+    c = np.concatenate([r_w @ beta_target, pull * scale * (null @ theta_start)])
+    blocks = [slice(PER_JOINT * j, PER_JOINT * j + 10) for j in range(dof)]
+    a_blocks = [np.ascontiguousarray(a_map[:, blk]) for blk in blocks]
+    a_signed = np.ascontiguousarray(a_map[:, signed])
+
+    def theta_of(x: F64) -> tuple[F64, list[F64]]:
+        theta = x.copy()
+        jacs = []
+        for blk in blocks:
+            theta[blk], jac = physical.log_cholesky_jacobian(x[blk])
+            jacs.append(jac)
+        theta[signed] = x[signed] ** 2  # armature and friction >= 0 by construction
+        return theta, jacs
+
+    def residual(x: F64) -> F64:
+        return np.asarray(a_map @ theta_of(x)[0] - c, dtype=float)
+
+    def jacobian(x: F64) -> F64:
+        # block by block: d theta / d x is block diagonal, and small products stay off
+        # the BLAS thread pool (a shared machine makes it 10x slower on these sizes)
+        _, jacs = theta_of(x)
+        out = a_map.copy()
+        for blk, a_blk, jac in zip(blocks, a_blocks, jacs, strict=True):
+            out[:, blk] = a_blk @ jac
+        out[:, signed] = a_signed * (2 * x[signed])
+        return out
+
+    # start: the exact fit's links where they are physical, else the start model's; its
+    # armature and friction where >= 0, else a small positive value (x^2 has no gradient
+    # at 0, so a parameter started at 0 would stay there)
+    x0 = phi0.copy()
+    for blk in blocks:
+        if physical.min_eigenvalue(nearest[blk]) > 0:
+            x0[blk] = physical.to_log_cholesky(nearest[blk])
+    x0[signed] = np.sqrt(np.maximum(nearest[signed], START_MIN))
+    # MINPACK's Levenberg-Marquardt: no bounds needed (every x is physical)
+    sol = optimize.least_squares(
+        residual, x0, jac=jacobian, method="lm", x_scale="jac",
+        xtol=1e-10, ftol=COST_TOL, gtol=1e-10, max_nfev=MAX_EVALUATIONS,
+    )  # fmt: skip
+    return with_margin(theta_of(sol.x)[0])
+
+
+def with_margin(theta: F64) -> F64:
+    """``theta`` with every link's second moments raised by a hair (:data:`MARGIN_REL` of
+    its rotational inertia's trace) where its pseudo-inertia is nearly singular.
+
+    An optimum on the boundary of the physical set is a degenerate body (a rod, a point
+    mass): its pseudo-inertia's smallest eigenvalue is zero up to rounding, and the robot
+    loader refuses principal moments below 1e-12 kg m^2. Adding ``delta I3`` to Sigma
+    adds ``2 delta I3`` to the inertia; the torques change by far less than the noise.
+    """
+    out = theta.copy()
+    for j in range(theta.size // PER_JOINT):
+        block = out[PER_JOINT * j : PER_JOINT * j + 10]
+        trace = float(np.trace(physical.inertia_matrix(block)))
+        delta = max(MARGIN_REL * trace, MARGIN_MIN_KG_M2)
+        if physical.min_eigenvalue(block) < delta:
+            for k in (4, 6, 9):  # Ixx, Iyy, Izz
+                block[k] += 2 * delta
+    return out

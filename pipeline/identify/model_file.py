@@ -1,0 +1,156 @@
+"""The identified model file (``MODEL.yaml``): a robot description plus friction and provenance.
+
+::
+
+    format: armlab.identified-model/1
+    robot: {...}            # a robot YAML (pipeline/robots/*.yaml) with identified
+                            # inertials and armature: load_spec-compatible
+    friction:               # per joint, in the robot's joint order
+      coulomb_nm: [...]
+      viscous_nm_s_rad: [...]
+      offset_nm: [...]
+    identification: {...}   # provenance: bags and their SHA-256, method, filter,
+                            # condition number, base parameters with standard errors
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from pipeline.errors import IdentificationError, PipelineError
+from pipeline.robots.spec import RobotSpec, parse_spec
+from pipeline.yamlio import parse_yaml
+
+FORMAT = "armlab.identified-model/1"
+
+
+@dataclass(frozen=True)
+class Friction:
+    """Identified joint friction: ``tau_f = fc sign(qd) + fv qd + offset`` per joint."""
+
+    coulomb_nm: tuple[float, ...]
+    viscous_nm_s_rad: tuple[float, ...]
+    offset_nm: tuple[float, ...]
+
+    def torque_nm(self, qd: np.ndarray) -> np.ndarray:
+        """Friction torque [N m] at joint velocities ``qd`` [rad/s] (any leading shape)."""
+        return np.asarray(
+            np.asarray(self.coulomb_nm) * np.sign(qd)
+            + np.asarray(self.viscous_nm_s_rad) * qd
+            + np.asarray(self.offset_nm),
+            dtype=float,
+        )
+
+
+@dataclass(frozen=True)
+class IdentifiedModel:
+    """A loaded ``MODEL.yaml``."""
+
+    path: Path
+    spec: RobotSpec
+    friction: Friction
+    identification: dict[str, Any]
+
+
+def spec_document(spec: RobotSpec) -> dict[str, Any]:
+    """The robot as a robot-YAML mapping (radians), the format of ``pipeline/robots``."""
+    joints = []
+    for j in spec.joints:
+        entry: dict[str, Any] = {
+            "name": j.name,
+            "dh": [j.dh.alpha, j.dh.a, j.dh.d, j.dh.theta_offset],
+            "limits": asdict(j.limits),
+        }
+        if j.inertial is not None:
+            t = j.inertial.inertia
+            entry["inertial"] = {
+                "mass": j.inertial.mass,
+                "com": list(j.inertial.com),
+                "inertia": [t[0][0], t[1][1], t[2][2], t[0][1], t[0][2], t[1][2]],
+            }
+        entry["collision"] = {"radius": j.collision_radius}
+        entry["armature"] = j.armature
+        joints.append(entry)
+    return {"name": spec.name, "convention": spec.convention, "angle_unit": "rad", "joints": joints}
+
+
+def write_model(path: Path, document: Mapping[str, Any]) -> None:
+    """Write ``MODEL.yaml`` atomically."""
+    from pipeline.fileio import atomic_write_bytes  # the fit's; the record stage only reads
+
+    text = yaml.safe_dump(dict(document), sort_keys=False, width=100, default_flow_style=None)
+    try:
+        atomic_write_bytes(Path(path), text.encode("utf-8"))
+    except OSError as err:
+        raise IdentificationError(f"{path}: cannot write ({err.strerror or err})") from err
+
+
+def load_model(path: str | Path) -> IdentifiedModel:
+    """Read a ``MODEL.yaml``.
+
+    Raises:
+        IdentificationError: missing, not YAML, another format, a bad robot or friction.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise IdentificationError(f"{p}: no such model file")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise IdentificationError(f"{p}: cannot read ({err})") from err
+    data = parse_yaml(text, source=str(p), error=IdentificationError)
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        got = data.get("format") if isinstance(data, dict) else None
+        raise IdentificationError(f"{p}: format: expected {FORMAT!r}, got {got!r}")
+    try:
+        spec = parse_spec(data.get("robot"), source=f"{p}: robot")
+    except PipelineError as err:
+        raise IdentificationError(str(err)) from err
+    spec.require_dynamics("an identified model")
+    friction_data = data.get("friction")
+    if not isinstance(friction_data, dict):
+        raise IdentificationError(f"{p}: friction: expected a mapping")
+    values = {}
+    for key in ("coulomb_nm", "viscous_nm_s_rad", "offset_nm"):
+        v = friction_data.get(key)
+        if not (
+            isinstance(v, list)
+            and len(v) == spec.dof
+            and all(isinstance(x, int | float) and not isinstance(x, bool) for x in v)
+            and all(math.isfinite(x) for x in v)
+        ):
+            raise IdentificationError(
+                f"{p}: friction.{key}: expected {spec.dof} finite numbers, got {v!r}"
+            )
+        values[key] = tuple(float(x) for x in v)
+    ident = data.get("identification")
+    return IdentifiedModel(
+        path=p,
+        spec=spec,
+        friction=Friction(**values),
+        identification=ident if isinstance(ident, dict) else {},
+    )
+
+
+def nominal_spec(spec: RobotSpec, path: str | None, *, where: str = "nominal") -> RobotSpec:
+    """The controllers' nominal robot: ``spec`` itself, or the identified model at ``path``.
+
+    Raises:
+        IdentificationError: a bad model file, or one of another robot (joint names).
+    """
+    if path is None:
+        return spec
+    model = load_model(path)
+    if model.spec.joint_names != spec.joint_names:
+        raise IdentificationError(
+            f"{where}.nominal: {path} is a model of joints {', '.join(model.spec.joint_names)}, "
+            f"the scenario's robot '{spec.name}' has {', '.join(spec.joint_names)}"
+        )
+    return model.spec

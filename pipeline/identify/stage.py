@@ -1,0 +1,350 @@
+"""The ``pipeline identify fit`` and ``validate`` commands: recordings in, model / verdict out.
+
+Validation predicts each recording's torque from the model file's robot (inertials,
+armature) and friction with the same regressor, on the same samples the fit would use
+(same filter; joints slower than the speed threshold left out, since sticking friction
+is no function of the velocity), and reports the RMS error per joint, absolute and as a
+share of the RMS torque.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pipeline.errors import IdentificationError, PipelineError
+from pipeline.identify.defaults import (
+    DEFAULT_CUTOFF_HZ,
+    DEFAULT_MAX_CONDITION,
+    DEFAULT_MIN_SPEED_RAD_S,
+)
+from pipeline.identify.fit import FitResult, identify, violations
+from pipeline.identify.model_file import (
+    FORMAT,
+    IdentifiedModel,
+    load_model,
+    spec_document,
+    write_model,
+)
+from pipeline.identify.regressor import (
+    ARMATURE,
+    COULOMB,
+    OFFSET,
+    PER_JOINT,
+    VISCOUS,
+    Regressor,
+    link_inertial,
+    standard_parameters,
+)
+from pipeline.identify.samples import FILTER_ORDER, JointSamples, joint_samples
+from pipeline.log.reader import ReadOptions, Recording, read_recording
+from pipeline.log.robot_facts import robot_facts
+from pipeline.robots.spec import RobotSpec, load_spec
+
+F64 = np.ndarray
+
+WHOLE = ReadOptions(stream_above_bytes=1 << 62)
+"""Read every recording whole: identification needs every sample, never a decimated read."""
+
+
+def recording_spec(recording: Recording, robot: str | None) -> RobotSpec:
+    """The robot of a recording: ``robot`` if given, else the one it recorded.
+
+    Raises:
+        IdentificationError: the recording does not say, and no ``robot`` was given.
+    """
+    if robot:
+        return load_spec(robot)
+    facts = robot_facts(recording)
+    if facts.spec is not None and facts.source != "urdf":
+        return facts.spec
+    name = recording.metadata.get("robot") if recording.armlab_metadata else None
+    if name:
+        return load_spec(name)
+    raise IdentificationError(
+        f"{recording.source}: does not say which robot it recorded: pass --robot NAME|PATH"
+    )
+
+
+def _read(paths: Sequence[Path], robot: str | None, cutoff_hz: float) -> tuple[
+    RobotSpec, list[JointSamples]
+]:  # fmt: skip
+    if not paths:
+        raise IdentificationError("no recordings given")
+    spec: RobotSpec | None = None
+    samples = []
+    for path in paths:
+        recording = read_recording(Path(path), WHOLE)
+        this = recording_spec(recording, robot)
+        if spec is None:
+            spec = this
+        elif this.joint_names != spec.joint_names or this.name != spec.name:
+            raise IdentificationError(
+                f"{path}: robot '{this.name}' ({', '.join(this.joint_names)}) differs from "
+                f"'{spec.name}' of {paths[0]}"
+            )
+        samples.append(joint_samples(recording, spec, cutoff_hz=cutoff_hz))
+    assert spec is not None
+    return spec, samples
+
+
+def identified_spec(spec: RobotSpec, theta: np.ndarray) -> RobotSpec:
+    """``spec`` with the inertials and armature of standard parameters ``theta``."""
+    joints = tuple(
+        replace(
+            joint,
+            inertial=link_inertial(spec, j, theta[PER_JOINT * j : PER_JOINT * j + 10]),
+            armature=float(theta[PER_JOINT * j + ARMATURE]),
+        )
+        for j, joint in enumerate(spec.joints)
+    )
+    return replace(spec, joints=joints)
+
+
+def _floats(values: np.ndarray | Sequence[float]) -> list[float]:
+    return [float(x) for x in values]
+
+
+def model_document(
+    spec: RobotSpec,
+    fit: FitResult,
+    samples: Sequence[JointSamples],
+    *,
+    method: Mapping[str, Any],
+) -> dict[str, Any]:
+    """The ``MODEL.yaml`` content of an identification.
+
+    Args:
+        spec: the robot identified (the CAD model).
+        fit: the identification.
+        samples: the recordings it used (paths and SHA-256).
+        method: how the samples were made (filter, cutoff, speed threshold).
+    """
+    theta = fit.theta
+    rel = np.abs(fit.std_error) / np.maximum(np.abs(fit.beta_wls), 1e-12) * 100
+    return {
+        "format": FORMAT,
+        "robot": spec_document(identified_spec(spec, theta)),
+        "friction": {
+            "coulomb_nm": _floats(theta[COULOMB::PER_JOINT]),
+            "viscous_nm_s_rad": _floats(theta[VISCOUS::PER_JOINT]),
+            "offset_nm": _floats(theta[OFFSET::PER_JOINT]),
+        },
+        "identification": {
+            "robot": spec.name,
+            "robot_source": spec.source,
+            "recordings": [
+                {"path": s.source, "sha256": s.sha256, "ground_truth": s.truth} for s in samples
+            ],
+            "method": {
+                "regressor": "pinocchio computeJointTorqueRegressor + armature (qdd) + "
+                "friction (Coulomb sign(qd), viscous qd, offset 1) per joint",
+                "base_parameters": "QR with column pivoting of the regressor stacked over "
+                "random states",
+                "estimator": "weighted least squares, weights 1/sigma_j from an OLS residual",
+                "physical": "log-Cholesky pseudo-inertia per link (Rucker & Wensing 2022), "
+                "armature and friction >= 0; Levenberg-Marquardt from the CAD model",
+                **dict(method),
+            },
+            "equations": fit.rows,
+            "condition_number": fit.condition_number,
+            "condition_number_scaled": fit.condition_number_scaled,
+            "projection_cost": fit.projection_cost,
+            "joint_sigma_nm": _floats(fit.joint_sigma_nm),
+            "residual_rms_nm": _floats(fit.residual_rms_nm),
+            "torque_rms_nm": _floats(fit.torque_rms_nm),
+            "base_parameters": [
+                {
+                    "name": name,
+                    "wls": float(b),
+                    "std_error": float(se),
+                    "rel_std_error_pct": float(r),
+                    "physical": float(p),
+                    "cad": float(c),
+                }
+                for name, b, se, r, p, c in zip(
+                    fit.base.names,
+                    fit.beta_wls,
+                    fit.std_error,
+                    rel,
+                    fit.beta,
+                    fit.base.of(fit.theta_cad),
+                    strict=True,
+                )
+            ],
+        },
+    }
+
+
+def fit_command(
+    paths: Sequence[Path],
+    *,
+    out: Path,
+    robot: str | None = None,
+    cutoff_hz: float = DEFAULT_CUTOFF_HZ,
+    min_speed_rad_s: float = DEFAULT_MIN_SPEED_RAD_S,
+    max_condition: float = DEFAULT_MAX_CONDITION,
+) -> dict[str, Any]:
+    """Identify from ``paths``, write ``out`` (MODEL.yaml); the JSON summary.
+
+    Raises:
+        PipelineError: unreadable recordings, unfit data (one line), unwritable output.
+    """
+    wall0 = time.perf_counter()
+    spec, samples = _read(paths, robot, cutoff_hz)
+    spec.require_dynamics("identification")
+    fit = identify(spec, samples, min_speed_rad_s=min_speed_rad_s, max_condition=max_condition)
+    bad = violations(spec, fit.theta)
+    if bad:  # cannot happen by construction; a guard against a solver returning nonsense
+        raise IdentificationError(f"the identified model is not physical: {bad[0]}")
+    method = {
+        "filter": (
+            {"type": "butterworth", "order": FILTER_ORDER, "zero_phase": True,
+             "cutoff_hz": cutoff_hz}
+            if cutoff_hz > 0
+            else {"type": "none", "acceleration": "forward difference of recorded velocity"}
+        ),
+        "min_speed_rad_s": min_speed_rad_s,
+        "max_condition": max_condition,
+    }  # fmt: skip
+    write_model(out, model_document(spec, fit, samples, method=method))
+    rel = np.abs(fit.std_error) / np.maximum(np.abs(fit.beta_wls), 1e-12) * 100
+    return {
+        "model": str(out),
+        "robot": spec.name,
+        "recordings": [{"path": s.source, "sha256": s.sha256} for s in samples],
+        "equations": fit.rows,
+        "base_parameters": fit.base.rank,
+        "condition_number": fit.condition_number,
+        "condition_number_scaled": fit.condition_number_scaled,
+        "projection_cost": fit.projection_cost,
+        "max_rel_std_error_pct": float(rel.max()),
+        "residual_rms_nm": [float(x) for x in fit.residual_rms_nm],
+        "torque_rms_nm": [float(x) for x in fit.torque_rms_nm],
+        "joints": list(spec.joint_names),
+        "wall_s": time.perf_counter() - wall0,
+    }
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """Measured and predicted torque of one recording (rows: samples; slow joints NaN)."""
+
+    source: str
+    times_s: F64
+    measured_nm: F64
+    predicted_nm: F64
+
+
+def model_parameters(model: IdentifiedModel) -> F64:
+    """The standard parameter vector of a model file (inertials, armature, friction)."""
+    f = model.friction
+    return standard_parameters(
+        model.spec,
+        coulomb_nm=np.asarray(f.coulomb_nm),
+        viscous_nm_s_rad=np.asarray(f.viscous_nm_s_rad),
+        offset_nm=np.asarray(f.offset_nm),
+    )
+
+
+def predict(model: IdentifiedModel, samples: JointSamples, *, min_speed_rad_s: float) -> Prediction:
+    """The model's torque on a recording's samples (slow joint samples set to NaN)."""
+    theta = model_parameters(model)
+    n, dof = samples.q.shape
+    predicted = (Regressor(model.spec).stacked(samples.q, samples.qd, samples.qdd) @ theta).reshape(
+        n, dof
+    )
+    slow = np.abs(samples.qd) < min_speed_rad_s
+    measured = samples.tau_nm.copy()
+    measured[slow] = np.nan
+    predicted[slow] = np.nan
+    return Prediction(samples.source, np.arange(n) * samples.dt_s, measured, predicted)
+
+
+def validate_command(
+    model_path: Path,
+    paths: Sequence[Path],
+    *,
+    figure: Path | None = None,
+    cutoff_hz: float | None = None,
+    min_speed_rad_s: float | None = None,
+) -> dict[str, Any]:
+    """Torque RMS error per joint of ``model_path`` on ``paths``; a figure; the summary.
+
+    The filter and speed threshold default to the model's own (its ``identification``).
+
+    Raises:
+        PipelineError: a bad model file, unreadable recordings, a recording of another robot.
+    """
+    model = load_model(model_path)
+    method = model.identification.get("method", {})
+    if cutoff_hz is None:
+        filt = method.get("filter", {}) if isinstance(method, dict) else {}
+        cutoff_hz = float(filt.get("cutoff_hz", 0.0)) if filt.get("type") != "none" else 0.0
+    if min_speed_rad_s is None:
+        min_speed_rad_s = float(method.get("min_speed_rad_s", DEFAULT_MIN_SPEED_RAD_S))
+    if not paths:
+        raise IdentificationError("no recordings given")
+    predictions = []
+    for path in paths:
+        recording = read_recording(Path(path), WHOLE)
+        robot = recording.metadata.get("robot") if recording.armlab_metadata else None
+        if robot and robot != model.spec.name:
+            raise IdentificationError(
+                f"{path}: a recording of robot '{robot}', the model is of '{model.spec.name}'"
+            )
+        samples = joint_samples(recording, model.spec, cutoff_hz=cutoff_hz)
+        predictions.append(predict(model, samples, min_speed_rad_s=min_speed_rad_s))
+    measured = np.concatenate([p.measured_nm for p in predictions])
+    predicted = np.concatenate([p.predicted_nm for p in predictions])
+    err = predicted - measured
+    rms_err = np.sqrt(np.nanmean(err**2, axis=0))
+    rms_tau = np.sqrt(np.nanmean(measured**2, axis=0))
+    figure = figure or Path(model_path).with_suffix(".validation.png")
+    write_figure(figure, model.spec, predictions[0])
+    return {
+        "model": str(model_path),
+        "robot": model.spec.name,
+        "recordings": [str(p) for p in paths],
+        "joints": list(model.spec.joint_names),
+        "rms_error_nm": [float(x) for x in rms_err],
+        "rms_torque_nm": [float(x) for x in rms_tau],
+        "rms_error_pct": [float(x) for x in 100 * rms_err / np.maximum(rms_tau, 1e-12)],
+        "samples": int(measured.shape[0]),
+        "cutoff_hz": cutoff_hz,
+        "min_speed_rad_s": min_speed_rad_s,
+        "figure": str(figure),
+    }
+
+
+def write_figure(path: Path, spec: RobotSpec, prediction: Prediction) -> None:
+    """Predicted vs measured torque per joint, over time (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    dof = spec.dof
+    fig, axes = plt.subplots(dof, 1, figsize=(9, 1.6 * dof + 0.8), sharex=True, squeeze=False)
+    for j, ax in enumerate(axes[:, 0]):
+        ax.plot(prediction.times_s, prediction.measured_nm[:, j], lw=1.0, label="measured")
+        ax.plot(prediction.times_s, prediction.predicted_nm[:, j], lw=0.8, ls="--",
+                label="predicted")  # fmt: skip
+        ax.set_ylabel(f"{spec.joint_names[j]}\n[N m]", fontsize=7)
+        ax.tick_params(labelsize=7)
+    axes[0, 0].legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle(f"torque: identified model vs {Path(prediction.source).name}", fontsize=9)
+    fig.tight_layout()
+    try:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=110)
+    except OSError as err:
+        raise PipelineError(f"{path}: cannot write the figure ({err.strerror or err})") from err
+    finally:
+        plt.close(fig)
