@@ -6,10 +6,11 @@ the MCAP metadata record (and ``metadata.yaml``); the report parses it back with
 classes, so a fixture cannot carry keys production never writes.
 
 Validation is declared once, in the field types: each field's type says what it accepts
-(``NonNegative``, ``Names``, ...), pydantic walks the frozen dataclasses with those rules,
-and ``from_dict`` raises :class:`SettingsError` naming the field path
-(``planner.trajectory_duration_s: expected a finite number >= 0, got -1``). Every field
-must be present (defaults serve the recorder, not old bags); unknown keys are ignored.
+(``NonNegative``, ``Names``, ..., declared in :mod:`pipeline.contract`), pydantic walks the
+frozen dataclasses with those rules, and ``from_dict`` raises :class:`SettingsError`
+naming the field path (``planner.trajectory_duration_s: expected a finite number >= 0,
+got -1``). Every field must be present (defaults serve the recorder, not old bags);
+unknown keys are ignored.
 
 Times are from the recording's first sample: the motion starts at
 ``protocol.motion_start_s`` (after the pre-roll) and ends
@@ -18,216 +19,62 @@ Times are from the recording's first sample: the motion starts at
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass, field, fields
-from typing import Annotated, Any, ClassVar, Literal, Self, cast
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Annotated, Any, Literal, Self
 
-from pydantic import BeforeValidator, GetCoreSchemaHandler, PlainValidator, TypeAdapter
-from pydantic import ValidationError as _ValidationError
-from pydantic_core import CoreSchema, PydanticCustomError, core_schema
+from pydantic import PlainValidator
 
-from pipeline.errors import RecordingError
+from pipeline.contract import (
+    Contract,
+    Count,
+    CountFromOne,
+    Finite,
+    Flag,
+    Names,
+    NonNegative,
+    NonNegatives,
+    Numbers,
+    Plain,
+    Positive,
+    Scalar,
+    Text,
+    expected_error,
+    guard,
+    is_mapping,
+    listed,
+    plain,
+    rule,
+)
+from pipeline.contract import SettingsError as SettingsError
 
 SETTINGS_VERSION = 2
 LEGACY_FRICTION = "frictionloss at MuJoCo's default softness (creeps under the breakaway torque)"
 """The friction law of bags that do not name theirs (recorded before it stuck)."""
 
 
-class SettingsError(RecordingError):
-    """A recording's settings do not follow the contract (names the field path)."""
-
-
-# --- the rules a field's type declares ------------------------------------------------
-
-
-def _expected(what: str) -> PydanticCustomError:
-    return PydanticCustomError("contract", "expected {expected}", {"expected": what})
-
-
-def _rule(
-    expected: str, ok: Callable[[Any], bool], cast: Callable[[Any], Any] = lambda v: v
-) -> Any:
-    """A leaf: ``cast(value)`` if ``ok(value)``, else "expected <expected>"."""
-
-    def check(value: Any) -> Any:
-        if not ok(value):
-            raise _expected(expected)
-        return cast(value)
-
-    return PlainValidator(check)
-
-
-def _guard(expected: str, ok: Callable[[Any], bool]) -> Any:
-    """A container's own type, checked before pydantic checks its items."""
-
-    def check(value: Any) -> Any:
-        if not ok(value):
-            raise _expected(expected)
-        return value
-
-    return BeforeValidator(check)
-
-
-def _listed(expected: str, *, tuples: bool = True, length: int = 0, sized: str = "") -> Any:
-    """A JSON list (or a tuple): of ``length`` items if given, else "expected <sized>"."""
-
-    def check(value: Any) -> Any:
-        if not isinstance(value, list | tuple if tuples else list):
-            raise _expected(expected)
-        if length and len(value) != length:
-            raise _expected(sized or expected)
-        return value
-
-    return BeforeValidator(check)
-
-
-def _number(minimum: float | None = None, *, strict: bool = False) -> Any:
-    def check(value: Any) -> float:
-        if (
-            isinstance(value, bool)
-            or not isinstance(value, int | float)
-            or not math.isfinite(value)
-        ):
-            raise _expected("a finite number")
-        if minimum is not None and (value <= minimum if strict else value < minimum):
-            raise _expected(f"a finite number {'>' if strict else '>='} {minimum:g}")
-        return float(value)
-
-    return PlainValidator(check)
-
-
-def _integer(minimum: int) -> Any:
-    return _rule(
-        f"an integer >= {minimum}",
-        lambda v: not isinstance(v, bool) and isinstance(v, int) and v >= minimum,
-        int,
-    )
-
-
-def _is_mapping(value: Any) -> bool:
-    return isinstance(value, Mapping)
-
-
-def _is_scalar(value: Any) -> bool:
-    return value is None or isinstance(value, str | int | float | bool)
-
-
 ContactKind = Literal["obstacle", "floor", "self"]
 KINDS: tuple[ContactKind, ...] = ("obstacle", "floor", "self")
 
-Finite = Annotated[float, _number()]
-NonNegative = Annotated[float, _number(0)]
-Positive = Annotated[float, _number(0, strict=True)]
-Count = Annotated[int, _integer(0)]
-CountFromOne = Annotated[int, _integer(1)]
-Text = Annotated[str, _rule("a string", lambda v: isinstance(v, str))]
-Flag = Annotated[bool, _rule("true or false", lambda v: isinstance(v, bool))]
-Numbers = Annotated[tuple[Finite, ...], _listed("a list of numbers")]
-NonNegatives = Annotated[tuple[NonNegative, ...], _listed("a list of numbers")]
-Names = Annotated[tuple[Text, Text], _listed("two names", length=2)]
-Kind = Annotated[ContactKind, _rule(f"one of {', '.join(KINDS)}", lambda v: v in KINDS)]
-Plain = Annotated[Mapping[str, Any], _rule("a mapping", _is_mapping, dict)]
-Scalar = Annotated[Any, _rule("a JSON scalar", _is_scalar)]
+Kind = Annotated[ContactKind, rule(f"one of {', '.join(KINDS)}", lambda v: v in KINDS)]
 
 
 def _status(value: Any) -> str:
     if not isinstance(value, str):
-        raise _expected("a string")
+        raise expected_error("a string")
     if value not in ("ok", "diverged"):
-        raise _expected("'ok' or 'diverged'")
+        raise expected_error("'ok' or 'diverged'")
     return value
 
 
 Status = Annotated[str, PlainValidator(_status)]
 Version = Annotated[
-    int, _rule(f"settings version {SETTINGS_VERSION}", lambda v: v == SETTINGS_VERSION, int)
+    int, rule(f"settings version {SETTINGS_VERSION}", lambda v: v == SETTINGS_VERSION, int)
 ]
 
 
-class _Contract:
-    """What every settings dataclass shares: ``from_dict``, validated by its field types.
-
-    Subclasses set ``_where`` (the field path their errors start with) and may name
-    ``_may_be_absent`` fields (added after bags were written; their default stands in).
-    """
-
-    _where: ClassVar[str]
-    _may_be_absent: ClassVar[frozenset[str]] = frozenset()
-
-    @classmethod
-    def from_dict(cls, data: Any, path: str | None = None) -> Self:
-        """Validate plain data (parsed JSON) into settings; the inverse of ``to_dict``.
-
-        Args:
-            data: the parsed JSON.
-            path: the field path errors start with (default: where the class sits in
-                :class:`EpisodeSettings`).
-
-        Raises:
-            SettingsError: a missing or ill-typed field, a value out of range (names it).
-        """
-        try:
-            value: Self = _adapter(cls).validate_python(data)
-        except _ValidationError as err:
-            raise _settings_error(err, cls._where if path is None else path) from err
-        return value
-
-    @classmethod
-    def __get_pydantic_core_schema__(cls, source: Any, handler: GetCoreSchemaHandler) -> CoreSchema:
-        """pydantic's schema of the dataclass, behind a check that the data is a mapping
-        holding every field (a dataclass default is the recorder's, not an old bag's)."""
-        required = sorted(f.name for f in fields(cls) if f.name not in cls._may_be_absent)  # type: ignore[arg-type]
-
-        def check(value: Any) -> Any:
-            if not isinstance(value, Mapping):
-                raise _expected("a mapping")
-            for name in required:
-                if name not in value:
-                    raise PydanticCustomError("contract_missing", "missing", {"field": name})
-            return dict(value)
-
-        # the check takes the schema's reference, so every use of the class goes through it
-        schema = dict(handler(source))
-        ref = schema.pop("ref", None)
-        return core_schema.no_info_before_validator_function(
-            check, cast(CoreSchema, schema), ref=ref
-        )
-
-
-_ADAPTERS: dict[type, TypeAdapter[Any]] = {}
-
-
-def _adapter(cls: type) -> TypeAdapter[Any]:
-    if cls not in _ADAPTERS:  # built on first use: the schema needs every class defined
-        _ADAPTERS[cls] = TypeAdapter(cls)
-    return _ADAPTERS[cls]
-
-
-def _settings_error(err: _ValidationError, where: str) -> SettingsError:
-    """pydantic's first error as one line naming the field path."""
-    first = err.errors()[0]
-    path = where
-    for part in first["loc"]:
-        path += f"[{part}]" if isinstance(part, int) else f"{'.' if path else ''}{part}"
-    if first["type"] == "contract_missing":
-        field_name = (first.get("ctx") or {}).get("field", "")
-        path += f"{'.' if path else ''}{field_name}"
-        return SettingsError(f"{path}: missing (required by the contract)")
-    return SettingsError(f"{path or 'settings'}: {first['msg']}, got {first['input']!r}")
-
-
-def _plain(value: Any) -> Any:
-    """JSON-ready: tuples to lists, recursively."""
-    if isinstance(value, Mapping):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
-    return value
-
-
 @dataclass(frozen=True)
-class PlannerSettings(_Contract):
+class PlannerSettings(Contract):
     """The planned path and its timing (what the planner and TOPP-RA produced)."""
 
     _where = "planner"
@@ -251,7 +98,7 @@ class PlannerSettings(_Contract):
 
 
 @dataclass(frozen=True)
-class LinkInertial(_Contract):
+class LinkInertial(Contract):
     """One link's rigid-body inertia as the plant has it (DH frame of its joint).
 
     Attributes:
@@ -263,16 +110,16 @@ class LinkInertial(_Contract):
 
     mass: Positive
     com: Annotated[
-        tuple[Finite, Finite, Finite], _listed("a list of numbers", length=3, sized="3 numbers")
+        tuple[Finite, Finite, Finite], listed("a list of numbers", length=3, sized="3 numbers")
     ]
     inertia: Annotated[
         tuple[Finite, Finite, Finite, Finite, Finite, Finite],
-        _listed("a list of numbers", length=6, sized="6 numbers (ixx iyy izz ixy ixz iyz)"),
+        listed("a list of numbers", length=6, sized="6 numbers (ixx iyy izz ixy ixz iyz)"),
     ]
 
 
 @dataclass(frozen=True)
-class Uncertainty(_Contract):
+class Uncertainty(Contract):
     """How far the plant may differ from the nominal model (uniform draws per episode seed).
 
     Attributes:
@@ -296,7 +143,7 @@ class Uncertainty(_Contract):
 
 
 @dataclass(frozen=True)
-class PlantSettings(_Contract):
+class PlantSettings(Contract):
     """The simulated plant, exactly enough to rebuild it (with the robot's geometry).
 
     Attributes:
@@ -319,7 +166,7 @@ class PlantSettings(_Contract):
     _may_be_absent = frozenset({"friction_model"})
 
     exact: Flag
-    links: Annotated[tuple[LinkInertial, ...], _listed("a list of link inertials", tuples=False)]
+    links: Annotated[tuple[LinkInertial, ...], listed("a list of link inertials", tuples=False)]
     armature: NonNegatives
     nominal_armature: NonNegatives
     damping: NonNegatives
@@ -340,7 +187,7 @@ VELOCITY_SOURCES: tuple[VelocitySource, ...] = ("plant", "encoder")
 
 
 @dataclass(frozen=True)
-class LoopSettings(_Contract):
+class LoopSettings(Contract):
     """The loop between the plant and the controller (the defaults: an ideal loop).
 
     Attributes:
@@ -363,7 +210,7 @@ class LoopSettings(_Contract):
     encoder_counts_per_rev: Count = 0
     velocity: Annotated[
         VelocitySource,
-        _rule(f"one of {', '.join(VELOCITY_SOURCES)}", lambda v: v in VELOCITY_SOURCES),
+        rule(f"one of {', '.join(VELOCITY_SOURCES)}", lambda v: v in VELOCITY_SOURCES),
     ] = "plant"
     velocity_cutoff_hz: NonNegative = 0.0
 
@@ -380,7 +227,7 @@ class LoopSettings(_Contract):
 
 
 @dataclass(frozen=True)
-class ProtocolSettings(_Contract):
+class ProtocolSettings(Contract):
     """How the episode was run (the fair-comparison protocol).
 
     Attributes:
@@ -403,7 +250,7 @@ class ProtocolSettings(_Contract):
 
 
 @dataclass(frozen=True)
-class ControllerSettings(_Contract):
+class ControllerSettings(Contract):
     """The controller as run: its params name, registry type, every gain in effect and
     where its code came from (``origin``: ``pipeline.control.controller_origin``)."""
 
@@ -417,7 +264,7 @@ class ControllerSettings(_Contract):
 
 
 @dataclass(frozen=True)
-class ContactSpan(_Contract):
+class ContactSpan(Contract):
     """One pair that penetrated during the episode.
 
     Attributes:
@@ -451,12 +298,12 @@ class ContactSpan(_Contract):
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
-        out: dict[str, Any] = _plain(asdict(self))
+        out: dict[str, Any] = plain(asdict(self))
         return out
 
 
 @dataclass(frozen=True)
-class Clearance(_Contract):
+class Clearance(Contract):
     """The closest approach of one kind of pair during the episode.
 
     Attributes:
@@ -481,12 +328,12 @@ class Clearance(_Contract):
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready form."""
-        out: dict[str, Any] = _plain(asdict(self))
+        out: dict[str, Any] = plain(asdict(self))
         return out
 
 
 @dataclass(frozen=True)
-class ExecutionSafety(_Contract):
+class ExecutionSafety(Contract):
     """Contacts and clearance over an episode's true states.
 
     Attributes:
@@ -506,8 +353,8 @@ class ExecutionSafety(_Contract):
     padding_m: NonNegative
     every: CountFromOne
     samples_checked: Count
-    clearances: Annotated[tuple[Clearance, ...], _listed("a list", tuples=False)]
-    contacts: Annotated[tuple[ContactSpan, ...], _listed("a list", tuples=False)]
+    clearances: Annotated[tuple[Clearance, ...], listed("a list", tuples=False)]
+    contacts: Annotated[tuple[ContactSpan, ...], listed("a list", tuples=False)]
     skip_within_m: NonNegative = 0.0
 
     @property
@@ -549,7 +396,7 @@ class ExecutionSafety(_Contract):
 
 
 @dataclass(frozen=True)
-class CampaignInfo(_Contract):
+class CampaignInfo(Contract):
     """Where an episode sits in a campaign (a sweep), for the report's summaries.
 
     Attributes:
@@ -565,11 +412,11 @@ class CampaignInfo(_Contract):
 
     name: Text
     condition: Text
-    swept: Annotated[Mapping[str, Scalar], _guard("a mapping", _is_mapping)]
+    swept: Annotated[Mapping[str, Scalar], guard("a mapping", is_mapping)]
 
 
 @dataclass(frozen=True)
-class EpisodeSettings(_Contract):
+class EpisodeSettings(Contract):
     """Everything a recording says about how it was made (its ``settings`` JSON).
 
     Attributes:
@@ -607,7 +454,7 @@ class EpisodeSettings(_Contract):
     reason: Text
     package_version: Text
     git_commit: Text
-    mujoco_warnings: Annotated[Mapping[str, Count], _guard("a mapping", _is_mapping)] = field(
+    mujoco_warnings: Annotated[Mapping[str, Count], guard("a mapping", is_mapping)] = field(
         default_factory=dict
     )
     campaign: CampaignInfo | None = None
@@ -616,7 +463,7 @@ class EpisodeSettings(_Contract):
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready plain data (lists, not tuples)."""
-        out: dict[str, Any] = _plain(asdict(self))
+        out: dict[str, Any] = plain(asdict(self))
         out["safety"] = self.safety.to_dict()  # with its derived keys, for readers of the JSON
         return out
 

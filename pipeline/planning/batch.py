@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import PlanningError
-from pipeline.planning.collision import CollisionChecker, _coarse_to_fine, reach_terms_m
+from pipeline.planning.collision import CollisionChecker, coarse_to_fine, reach_terms_m
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -475,7 +475,7 @@ class BatchChecker:
         if n_steps <= _SHORT_MOTION:
             return self.checker.motion_clear(qa, qb, step_rad=step_rad)
         is_clear = self.checker.is_clear
-        for i in _coarse_to_fine(n_steps)[:_PROBE_STATES]:
+        for i in coarse_to_fine(n_steps)[:_PROBE_STATES]:
             if not is_clear(qa + (i / n_steps) * delta):
                 return False
         k = np.arange(0, n_steps + 1)

@@ -74,7 +74,7 @@ def motion_check_step_rad(spec: RobotSpec, padding_m: float) -> float:
 
 
 @functools.lru_cache(maxsize=4096)
-def _coarse_to_fine(n_steps: int) -> NDArray[np.float64]:
+def coarse_to_fine(n_steps: int) -> NDArray[np.float64]:
     """1..n_steps (the motion's end first) in bisection order: each pass halves the gaps."""
     order = [n_steps]
     seen = {0, n_steps}
@@ -227,7 +227,7 @@ class CollisionChecker:
             return self.is_clear(qb)
         model, data = self.model, self.data
         qpos, kinematics, collision = data.qpos, mujoco.mj_kinematics, mujoco.mj_collision
-        for q in qa + np.outer(_coarse_to_fine(n_steps) / n_steps, qb - qa):
+        for q in qa + np.outer(coarse_to_fine(n_steps) / n_steps, qb - qa):
             qpos[:] = q
             kinematics(model, data)
             collision(model, data)

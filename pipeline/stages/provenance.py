@@ -14,6 +14,7 @@ RECORD_CODE = (
     "__main__.py",
     "cli",
     "constants.py",
+    "contract.py",
     "errors.py",
     "fsutil.py",
     "params.py",

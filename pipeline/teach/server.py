@@ -12,7 +12,8 @@ nothing is fetched at run time.
 
 Only the page itself may drive the server: a websocket whose ``Origin`` header is not
 this server's own address (a page on another site, which the user's browser would let
-connect to 127.0.0.1) is refused with 403 before its first message (:func:`own_origin`).
+connect to 127.0.0.1) is refused with 403 before its first message
+(:mod:`pipeline.teach.origin`).
 A handler that cannot act on what a client sent (a NaN pose, a value outside its range,
 a file that cannot be written) tells that client in a notification, instead of printing
 a traceback on the server's terminal.
@@ -24,16 +25,13 @@ import contextlib
 import errno
 import functools
 import html
-import http
 import io
-import ipaddress
 import math
 import socket
 import threading
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, cast
-from urllib.parse import urlsplit
 
 import numpy as np
 import trimesh
@@ -52,6 +50,7 @@ from pipeline.model.chain import chain
 from pipeline.model.dh import link_frames
 from pipeline.model.mjcf import FLOOR_Z_M
 from pipeline.teach.goal import GoalKind, goal_from_state, write_goal
+from pipeline.teach.origin import origin_checked_serve
 from pipeline.teach.session import TeachSession, TeachState
 
 Array = NDArray[np.float64]
@@ -69,79 +68,6 @@ OK_RGB = (46, 160, 67)
 BAD_RGB = (218, 54, 51)
 _LINK_RGB = ((77, 128, 204), (204, 204, 204))
 _OK_HTML, _BAD_HTML = "#2ea043", "#da3633"
-
-
-_LOOPBACK_NAMES = frozenset({"localhost", "127.0.0.1", "::1"})
-_WILDCARD_HOSTS = frozenset({"", "0.0.0.0", "::"})
-
-
-def own_origin(origin: str, *, host: str, port: int) -> bool:
-    """Whether a websocket's ``Origin`` is the teach page's own: ``http(s)://`` the
-    server's host (or a loopback name; any IP address when it listens on all
-    interfaces) and its port. A host *name* other than ``localhost`` is refused even
-    when it resolves here: that is how DNS rebinding reaches 127.0.0.1.
-    """
-    try:
-        parts = urlsplit(origin)
-        origin_port = parts.port or {"http": 80, "https": 443}.get(parts.scheme)
-    except ValueError:
-        return False
-    name = (parts.hostname or "").lower()
-    if parts.scheme not in ("http", "https") or origin_port != port or not name:
-        return False
-    if name in _LOOPBACK_NAMES or name == host.lower().strip("[]"):
-        return True
-    if host in _WILDCARD_HOSTS:
-        try:
-            ipaddress.ip_address(name)
-        except ValueError:
-            return False
-        return True
-    return False
-
-
-# viser builds its websocket server inside a thread it starts; the Origin check is put
-# into that server by wrapping ``websockets.asyncio.server.serve`` while it is built
-_SERVE_LOCK = threading.Lock()
-
-
-@contextlib.contextmanager
-def _origin_checked_serve(host: str) -> Iterator[list[bool]]:
-    """While active, websocket servers built in this process refuse foreign Origins.
-
-    Yields a list that gains an entry when a server was built with the check (the
-    caller fails closed when viser built none)."""
-    import websockets.asyncio.server as ws_server
-
-    real = ws_server.serve
-    built: list[bool] = []
-
-    def serve(*args: Any, **kwargs: Any) -> Any:
-        inner = kwargs.get("process_request")
-
-        def process_request(connection: Any, request: Any) -> Any:
-            origin = request.headers.get("Origin")
-            if (
-                request.headers.get("Upgrade", "").lower() == "websocket"
-                and origin is not None
-                and not own_origin(origin, host=host, port=int(connection.local_address[1]))
-            ):
-                return connection.respond(
-                    http.HTTPStatus.FORBIDDEN,
-                    f"armlab teach: a websocket from {origin} is refused; open the page itself\n",
-                )
-            return inner(connection, request) if inner is not None else None
-
-        kwargs["process_request"] = process_request
-        built.append(True)
-        return real(*args, **kwargs)
-
-    with _SERVE_LOCK:
-        setattr(ws_server, "serve", serve)  # noqa: B010 - mypy: serve is a class there
-        try:
-            yield built
-        finally:
-            setattr(ws_server, "serve", real)  # noqa: B010
 
 
 def _told_to_client(handler: Callable[[Any, Any], None]) -> Callable[[Any, Any], None]:
@@ -323,7 +249,7 @@ class TeachServer:
         check_port_free(host, port)
         with (
             contextlib.redirect_stdout(io.StringIO()),  # viser's banner; we print the URL
-            _origin_checked_serve(host) as built,
+            origin_checked_serve(host) as built,
         ):
             self._server = viser.ViserServer(
                 host=host, port=port, label=f"armlab teach: {self._spec.name}", verbose=False

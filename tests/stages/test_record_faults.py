@@ -331,7 +331,8 @@ def _report(rec: Path, out: Path, env: dict[str, str] | None = None) -> subproce
 
 @pytest.mark.slow
 def test_sigterm_during_a_report_keeps_the_earlier_report_and_leaves_no_staging(tmp_path, cleanup):
-    from pipeline.stages.report import MANIFEST, run_report
+    from pipeline.stages.report import run_report
+    from pipeline.stages.report_commit import MANIFEST
 
     rec, out = _two_reports(tmp_path, recordings=4)
     before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}

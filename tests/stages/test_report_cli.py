@@ -14,6 +14,7 @@ import pytest
 from pipeline.cli import main
 from pipeline.errors import ReportError
 from pipeline.stages import report as report_stage
+from pipeline.stages import report_commit
 from tests.analysis.bagfactory import damage, paper_like, write_bag
 
 KINDS = ("truncated", "bitflip", "empty", "not_mcap", "no_joint_states", "no_stamp")
@@ -45,7 +46,7 @@ def _old_reports(root: Path) -> dict[str, bytes]:
     (out / "metrics.json").write_text('{"earlier": true}\n')
     (out / "figures" / "old.png").write_bytes(b"png")
     # what an earlier `pipeline report` lists as its own (it may remove these, nothing else)
-    (out / report_stage.MANIFEST).write_text("report.md\nmetrics.json\nfigures/old.png\n")
+    (out / report_commit.MANIFEST).write_text("report.md\nmetrics.json\nfigures/old.png\n")
     return _snapshot(out)
 
 
@@ -244,7 +245,7 @@ def test_failure_while_swapping_outputs_in_leaves_the_earlier_report(
     def full_disk(a: Path, b: Path) -> bool:
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(report_stage, "exchange", full_disk)
+    monkeypatch.setattr(report_commit, "exchange", full_disk)
     with pytest.raises(ReportError, match="earlier reports are untouched"):
         report_stage.run_report(recordings_dir=tmp_path / "recordings", out_dir=out)
     assert _snapshot(out) == before
@@ -263,10 +264,10 @@ def test_report_removes_only_files_its_manifest_lists(tmp_path: Path) -> None:
     report_stage.run_report(recordings_dir=tmp_path / "recordings", out_dir=out)
     assert (out / "figures" / "mine.png").read_bytes() == b"user's own"
     assert (out / "campaigns" / "mine.csv").read_bytes() == b"a,b\n"
-    listed = (out / report_stage.MANIFEST).read_text().splitlines()
+    listed = (out / report_commit.MANIFEST).read_text().splitlines()
     assert "report.md" in listed and "figures/mine.png" not in listed
     (out / "figures" / "gone.png").write_bytes(b"x")
-    (out / report_stage.MANIFEST).write_text("\n".join([*listed, "figures/gone.png"]) + "\n")
+    (out / report_commit.MANIFEST).write_text("\n".join([*listed, "figures/gone.png"]) + "\n")
     report_stage.run_report(recordings_dir=tmp_path / "recordings", out_dir=out)
     assert not (out / "figures" / "gone.png").exists()
     assert (out / "figures" / "mine.png").read_bytes() == b"user's own"

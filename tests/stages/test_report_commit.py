@@ -11,13 +11,14 @@ from pathlib import Path
 import pytest
 
 from pipeline.stages import report as report_stage
+from pipeline.stages import report_commit
 from tests.analysis.bagfactory import paper_like, write_bag
 
 ROOT = Path(__file__).resolve().parents[2]
 USER_FILES = {"notes.md": b"my notes\n", "plots/.gitignore": b"/errors.csv\n"}
 # the CLI with the atomic swap unavailable (a file system without RENAME_EXCHANGE)
 NO_EXCHANGE = (
-    "import sys; import pipeline.stages.report as r; r.exchange = lambda a, b: False; "
+    "import sys; import pipeline.stages.report_commit as r; r.exchange = lambda a, b: False; "
     "from pipeline.cli import main; sys.argv[0] = 'pipeline'; main()"
 )
 
@@ -73,7 +74,7 @@ def _fresh_out(tmp: Path, name: str) -> Path:
 @pytest.mark.parametrize(
     ("step", "swap"),
     [
-        *((s, True) for s in report_stage.COMMIT_STEPS if s != "half-swapped"),
+        *((s, True) for s in report_commit.COMMIT_STEPS if s != "half-swapped"),
         ("half-swapped", False),
     ],
 )

@@ -8,7 +8,8 @@ import math
 import pytest
 from websockets.exceptions import InvalidStatus
 
-from pipeline.teach.server import TeachServer, own_origin
+from pipeline.teach.origin import own_origin
+from pipeline.teach.server import TeachServer
 from pipeline.teach.wire import PageClient
 
 
