@@ -27,7 +27,9 @@ from pipeline.trajectory import F64
 
 def closed_loop(spec: RobotSpec, q0: Sequence[float], *, delay: int, dt_s: float) -> F64:
     """The closed-loop transition matrix and the index ranges of q and qd in its state."""
-    model = build_mujoco_model(spec, timestep_s=dt_s)
+    # MuJoCo's finite-difference transition supports the Euler integrators only: the
+    # linearization is of the semi-implicit Euler step at the control period
+    model = build_mujoco_model(spec, timestep_s=dt_s, integrator="Euler")
     data = mujoco.MjData(model)
     n = spec.dof
     data.qpos[:] = q0
