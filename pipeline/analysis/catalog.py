@@ -31,6 +31,12 @@ does not see its neighbours):
 - ``joint_states`` frame: ``time_s``, ``velocity_rad_s``, ``effort_nm``,
   ``commanded_effort_nm``, ``effort_limit_nm`` and ``saturated`` (at the limit or clipped;
   null where no effort was recorded).
+- ``tcp`` frame (task space, joint :data:`pipeline.analysis.task_space.TCP`):
+  ``time_s``, ``position_error_mm``, ``orientation_error_mrad`` (FK of the reference vs the
+  position the joint metrics use) plus ``completed`` and ``in_final`` as above.
+
+A metric of the ``tcp`` frame is a task-space metric (:attr:`Metric.space`): its value is in
+the rows of the pseudo-joint ``tcp``, a joint-space metric's in the joints' rows.
 """
 
 from __future__ import annotations
@@ -48,7 +54,10 @@ MIN_TRAVEL_RAD = 1e-9
 # The band |e| must stay in, after the motion end, to count as settled [rad].
 SETTLING_TOLERANCE_RAD = 1e-3
 
-Frame = Literal["controller_state", "joint_states"]
+Frame = Literal["controller_state", "joint_states", "tcp"]
+Space = Literal["joint", "task"]
+# The pseudo-joint of the task-space rows (= pipeline.analysis.task_space.TCP).
+TCP_JOINT = "tcp"
 # A finish reads the partial ``key`` of its own metric as ``p(key)``.
 PartialColumn = Callable[[str], pl.Expr]
 
@@ -99,10 +108,19 @@ class Metric:
     definition: str = ""
 
     def __post_init__(self) -> None:
-        if self.needs_completed_motion and self.frame != "controller_state":
-            raise ValueError(f"{self.name}: ``completed`` is a controller_state frame column")
+        if self.needs_completed_motion and self.frame == "joint_states":
+            raise ValueError(f"{self.name}: ``completed`` is not a joint_states frame column")
         if _COMPLETED in self.partials():
             raise ValueError(f"{self.name}: the partial name '{_COMPLETED}' is reserved")
+
+    @property
+    def space(self) -> Space:
+        """``task`` for a TCP metric (rows of joint :data:`TCP_JOINT`), else ``joint``."""
+        return "task" if self.frame == "tcp" else "joint"
+
+    def applies_to(self, joint: str) -> bool:
+        """Whether this metric has a value in the rows of ``joint``."""
+        return (joint == TCP_JOINT) == (self.space == "task")
 
     @property
     def is_time(self) -> bool:
@@ -236,6 +254,18 @@ def _first_at_peak(col: str) -> Callable[[PartialColumn], pl.Expr]:
     return finish
 
 
+def _max_of(col: str) -> Callable[[], dict[str, pl.Expr]]:
+    return lambda: {"max": pl.col(col).abs().max()}
+
+
+def _final_of(col: str) -> Callable[[], dict[str, pl.Expr]]:
+    def parts() -> dict[str, pl.Expr]:
+        final = pl.col(col).abs().filter(pl.col("in_final"))
+        return {"sum": final.sum(), "n": final.count()}
+
+    return parts
+
+
 def _saturation_fraction() -> dict[str, pl.Expr]:
     sat = pl.col("saturated")
     return {"sum": sat.cast(pl.Float64).sum(), "n": sat.count()}
@@ -244,6 +274,35 @@ def _saturation_fraction() -> dict[str, pl.Expr]:
 _CS = TOPIC_CONTROLLER_STATE
 _JS = TOPIC_JOINT_STATES
 _CS_CODE, _JS_CODE = f"`{_CS}`", f"`{_JS}`"
+_TCP_SOURCE = f"{_CS} (FK)"
+_TCP_FK = (
+    "FK (the recording's robot model, Pinocchio) of the reference and of the position the "
+    "joint errors use (true where recorded), at the tool centre point (TCP: the flange "
+    "unless `--tool-offset` moves it)"
+)
+
+
+def _tcp_metrics(quantity: str, unit: str, col: str, what: str) -> tuple[Metric, ...]:
+    """Max, RMS and final of one TCP error (position or orientation)."""
+    return (
+        Metric(
+            f"tcp_max_{quantity}_error", unit, f"TCP max {quantity} error", ".3g", "tcp",
+            _TCP_SOURCE, _max_of(col), _max_abs_error_finish, compared=True, log_scale=True,
+            definition=f"TCP {quantity} error: {what} between the {_TCP_FK}; max, RMS and "
+            "the error at the target (final window) as for a joint",
+        ),
+        Metric(
+            f"tcp_rms_{quantity}_error", unit, f"TCP RMS {quantity} error", ".3g", "tcp",
+            _TCP_SOURCE, lambda: _squares(col), _root_mean, compared=True, log_scale=True,
+        ),
+        Metric(
+            f"tcp_final_{quantity}_error", unit, f"TCP {quantity} error at the target", ".3g",
+            "tcp", _TCP_SOURCE, _final_of(col), _mean, needs_completed_motion=True,
+            compared=True, log_scale=True,
+            detail=f"mean over the final window, ≤ {FINAL_WINDOW_S} s",
+        ),
+    )  # fmt: skip
+
 
 METRICS: tuple[Metric, ...] = (
     Metric(
@@ -317,11 +376,20 @@ METRICS: tuple[Metric, ...] = (
             "|applied|"
         ),
     ),
+    *_tcp_metrics("position", "mm", "position_error_mm", "|p_ref − p|"),
+    *_tcp_metrics(
+        "orientation", "mrad", "orientation_error_mrad", "the rotation angle of R_refᵀ R"
+    ),
 )  # fmt: skip
 
 BY_NAME: dict[str, Metric] = {m.name: m for m in METRICS}
 METRIC_COLUMNS: tuple[str, ...] = tuple(m.name for m in METRICS)
 COMPARED_METRICS: tuple[str, ...] = tuple(m.name for m in METRICS if m.compared)
+# The compared metrics of the joints and of the TCP.
+JOINT_COMPARED: tuple[str, ...] = tuple(
+    m.name for m in METRICS if m.compared and m.space == "joint"
+)
+TASK_COMPARED: tuple[str, ...] = tuple(m.name for m in METRICS if m.compared and m.space == "task")
 # The columns of a partials frame after ``episode, joint``, in catalog order.
 PARTIAL_COLUMNS: tuple[str, ...] = tuple(
     e.meta.output_name() for m in METRICS for e in m.partial_exprs()

@@ -18,7 +18,7 @@ baseline x 100, null when |baseline| is below :data:`ERROR_FLOOR_RAD` or missing
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import polars as pl
 
@@ -33,6 +33,7 @@ from pipeline.analysis.catalog import (
     Frame,
 )
 from pipeline.analysis.episodes import comparable
+from pipeline.analysis.task_space import TaskSpace, tcp_errors
 from pipeline.constants import FINAL_WINDOW_S
 from pipeline.errors import ReportError, unknown_name_message
 
@@ -141,6 +142,22 @@ def _prepared_joint_states(samples: pl.DataFrame, limits: pl.DataFrame | None) -
     )
 
 
+def _prepared_tcp(
+    controller_states: pl.DataFrame,
+    episodes: pl.DataFrame,
+    task_space: Mapping[str, TaskSpace] | None,
+    *,
+    final_window_s: float,
+) -> pl.DataFrame:
+    """The ``tcp`` frame of the catalog: the TCP errors of each sample time (row-local)."""
+    t = pl.col("time_s")
+    return (
+        tcp_errors(controller_states, task_space)
+        .join(_episode_columns(episodes, final_window_s), on="episode", how="left")
+        .with_columns(in_final=(t >= pl.col("end_s") - pl.col("final_window_s") - 1e-9))
+    )
+
+
 def _partials_over(frame: pl.DataFrame, which: Frame) -> pl.DataFrame:
     exprs = [e for m in METRICS if m.frame == which for e in m.partial_exprs()]
     return frame.group_by(_KEY, maintain_order=True).agg(exprs)
@@ -154,6 +171,7 @@ def metric_partials(
     *,
     settling_tolerance_rad: float = SETTLING_TOLERANCE_RAD,
     final_window_s: float = FINAL_WINDOW_S,
+    task_space: Mapping[str, TaskSpace] | None = None,
 ) -> pl.DataFrame:
     """The catalog's partials over one time slice of the recorded frames.
 
@@ -172,11 +190,14 @@ def metric_partials(
         limits: ``episode, joint, effort_limit_nm`` (null where unknown); None = unknown.
         settling_tolerance_rad: band |e| must stay in to count as settled [rad].
         final_window_s: longest window at the end used for the final error [s].
+        task_space: per episode, the robot's FK and tool offset for the task-space
+            metrics (an episode without one has no ``tcp`` row).
 
     Returns:
-        One row per (episode, joint) present in either frame of the slice: ``episode``,
-        ``joint``, then one column per partial (:meth:`Metric.partial_column`; null for
-        the partials of a frame with no row of that joint in the slice).
+        One row per (episode, joint) present in any frame of the slice (the TCP as joint
+        ``tcp``): ``episode``, ``joint``, then one column per partial
+        (:meth:`Metric.partial_column`; null for the partials of a frame with no row of
+        that joint in the slice).
     """
     errors = _partials_over(
         _prepared_controller_states(
@@ -188,7 +209,12 @@ def metric_partials(
         "controller_state",
     )
     states = _partials_over(_prepared_joint_states(samples, limits), "joint_states")
+    tcp = _partials_over(
+        _prepared_tcp(controller_states, episodes, task_space, final_window_s=final_window_s),
+        "tcp",
+    )
     out = states.join(errors, on=_KEY, how="full", coalesce=True, maintain_order="left")
+    out = pl.concat([out, tcp], how="diagonal_relaxed")
     return out.select(*_KEY, *PARTIAL_COLUMNS)
 
 
@@ -214,8 +240,10 @@ def joint_metrics(
     *,
     settling_tolerance_rad: float = SETTLING_TOLERANCE_RAD,
     final_window_s: float = FINAL_WINDOW_S,
+    task_space: Mapping[str, TaskSpace] | None = None,
 ) -> pl.DataFrame:
-    """Metrics per episode and joint (columns ``episode``, ``joint``, :data:`METRIC_COLUMNS`).
+    """Metrics per episode and joint (columns ``episode``, ``joint``, :data:`METRIC_COLUMNS`;
+    the task-space metrics in the rows of joint ``tcp`` of the episodes in ``task_space``).
 
     Error-based metrics come from ``controller_states`` (full rate), velocity and effort
     metrics from ``samples`` (``/joint_states``); see :data:`METRIC_SOURCES`. The whole
@@ -229,6 +257,7 @@ def joint_metrics(
         limits: ``episode, joint, effort_limit_nm`` (null where unknown); None = unknown.
         settling_tolerance_rad: band |e| must stay in to count as settled [rad].
         final_window_s: longest window at the end used for the final error [s].
+        task_space: per episode, the robot's FK and tool offset (None: no TCP rows).
     """
     return finish_metrics(
         metric_partials(
@@ -238,6 +267,7 @@ def joint_metrics(
             limits,
             settling_tolerance_rad=settling_tolerance_rad,
             final_window_s=final_window_s,
+            task_space=task_space,
         )
     )
 

@@ -31,7 +31,7 @@ from pipeline.analysis.checks import (
     duplicate_stamp_notes,
     duplicate_stamps,
 )
-from pipeline.analysis.episodes import episode_table, limits_table, shown_status
+from pipeline.analysis.episodes import episode_table, limits_table, robot_spec, shown_status
 from pipeline.analysis.metrics import (
     check_baseline,
     comparisons,
@@ -46,6 +46,7 @@ from pipeline.analysis.protocol import (
     protocol_view,
     start_state,
 )
+from pipeline.analysis.task_space import FLANGE_TOOL, TaskSpace, ToolOffset
 from pipeline.constants import TOPIC_CONTROLLER_STATE, TOPIC_JOINT_STATES
 from pipeline.errors import PipelineError, RecordingError, ReportError
 from pipeline.fsutil import OutputLock, remove_stale
@@ -242,8 +243,12 @@ def run_report(
     skip_bad: bool = False,
     progress: Progress = _noop,
     options: ReadOptions | None = None,
+    tool: ToolOffset = FLANGE_TOOL,
 ) -> ReportResult:
     """Read the recordings, compute metrics and write every report output.
+
+    ``tool`` places the TCP of the task-space metrics in the flange frame (default: the
+    flange).
 
     One run at a time writes a given ``out_dir`` (a second one refuses at once); staging
     folders that killed runs left beside it are removed first.
@@ -269,6 +274,7 @@ def run_report(
                 skip_bad=skip_bad,
                 progress=progress,
                 options=options,
+                tool=tool,
             )
     except PipelineError as err:
         if isinstance(err, RecordingError | ReportError):
@@ -304,8 +310,9 @@ def _run_report_locked(
     skip_bad: bool,
     progress: Progress,
     options: ReadOptions | None,
+    tool: ToolOffset,
 ) -> ReportResult:
-    measured = _Measured()
+    measured = _Measured(tool)
     recordings, bad = read_all(
         recordings_dir,
         skip_bad=skip_bad,
@@ -380,12 +387,22 @@ def _run_report_locked(
 BAND_POINTS = 250
 
 
+def task_space_of(rec: Recording, tool: ToolOffset) -> dict[str, TaskSpace]:
+    """``{episode: TaskSpace}`` when the recording carries its robot and the robot's joints
+    are the recorded ones; empty (task-space metrics n/a) otherwise."""
+    spec = robot_spec(rec)
+    if spec is None or tuple(spec.joint_names) != tuple(rec.joint_names):
+        return {}
+    return {rec.episode: TaskSpace(spec, tool)}
+
+
 class _Streamed:
     """A long recording's windows as they are read: the protocol applied to each, their
     partial metrics, counts and duplicate stamps, and the exact state at the motion start."""
 
-    def __init__(self, header: Recording) -> None:
+    def __init__(self, header: Recording, tool: ToolOffset) -> None:
         self.protocol: Protocol = protocol_of(header)[0]
+        self.task_space = task_space_of(header, tool)
         view, _ = protocol_view(header)
         # the episode row as far as the metrics need it (motion end, end, completed)
         self.row = episode_table([view.recording], {header.episode: view})
@@ -412,7 +429,9 @@ class _Streamed:
                 old = self.duplicates.get(topic)
                 self.duplicates[topic] = dup if old is None else old + dup
         if js.height or cs.height:
-            self.partials.append(metric_partials(js, cs, self.row, self.limits))
+            self.partials.append(
+                metric_partials(js, cs, self.row, self.limits, task_space=self.task_space)
+            )
 
     def view(self, raw: Recording) -> tuple[ProtocolView, pl.DataFrame]:
         """The recording's view (decimated frames, exact counts and start state) and its
@@ -434,7 +453,9 @@ class _Streamed:
             view, recording=dataclasses.replace(rec, notes=(*rec.notes, *notes))
         )
         # nothing after the motion start: the metrics of empty frames, as a whole read has
-        parts = self.partials or [metric_partials(*self.empty, self.row, self.limits)]
+        parts = self.partials or [
+            metric_partials(*self.empty, self.row, self.limits, task_space=self.task_space)
+        ]
         return view, finish_metrics(pl.concat(parts, how="vertical_relaxed"))
 
 
@@ -446,7 +467,8 @@ class _Measured:
     It is also the reader's :class:`WindowSink`: a long recording's metrics are computed
     window by window as it is read (:class:`_Streamed`); its frames are decimated."""
 
-    def __init__(self) -> None:
+    def __init__(self, tool: ToolOffset) -> None:
+        self.tool = tool
         self.views: dict[str, ProtocolView] = {}
         self.rows: dict[str, pl.DataFrame] = {}
         self.metrics: dict[str, pl.DataFrame] = {}
@@ -454,7 +476,7 @@ class _Measured:
         self.streamed: _Streamed | None = None
 
     def begin(self, header: Recording) -> None:
-        self.streamed = _Streamed(header)
+        self.streamed = _Streamed(header, self.tool)
 
     def window(self, samples: pl.DataFrame, controller_states: pl.DataFrame) -> None:
         assert self.streamed is not None
@@ -471,7 +493,13 @@ class _Measured:
             view, _ = protocol_view(raw)
             rec = view.recording
             row = episode_table([rec], {rec.episode: view})
-            metrics = joint_metrics(rec.samples, rec.controller_states, row, limits_table([rec]))
+            metrics = joint_metrics(
+                rec.samples,
+                rec.controller_states,
+                row,
+                limits_table([rec]),
+                task_space=task_space_of(rec, self.tool),
+            )
         self.rows[rec.episode] = row
         self.metrics[rec.episode] = metrics
         if view.settings is not None and view.settings.campaign is not None:
