@@ -51,6 +51,11 @@ from pipeline.constants import FINAL_WINDOW_S, TOPIC_CONTROLLER_STATE, TOPIC_JOI
 
 # A joint that moves less than this has no direction of travel: no overshoot.
 MIN_TRAVEL_RAD = 1e-9
+# Below this a joint error is numerical noise (a perfect-model CTC settles to ~1e-13 rad);
+# a reduction relative to it would read 1e10 %, so none is given.
+ERROR_FLOOR_RAD = 1e-9
+# The same for the TCP: 1 nm [mm] and 1 nrad [mrad].
+TCP_FLOOR = 1e-6
 # The band |e| must stay in, after the motion end, to count as settled [rad].
 SETTLING_TOLERANCE_RAD = 1e-3
 
@@ -89,6 +94,8 @@ class Metric:
         definition: what it is, as every report's Definitions section and docs/report.md
             say it (``term: meaning``); "" for a companion metric its metric's definition
             covers (``peak_velocity_time``).
+        floor: below this a baseline value is numerical noise: no reduction % against it
+            [the metric's unit].
     """
 
     name: str
@@ -106,6 +113,7 @@ class Metric:
     in_tables: bool = True
     detail: str = ""
     definition: str = ""
+    floor: float = ERROR_FLOOR_RAD
 
     def __post_init__(self) -> None:
         if self.needs_completed_motion and self.frame == "joint_states":
@@ -288,17 +296,19 @@ def _tcp_metrics(quantity: str, unit: str, col: str, what: str) -> tuple[Metric,
         Metric(
             f"tcp_max_{quantity}_error", unit, f"TCP max {quantity} error", ".3g", "tcp",
             _TCP_SOURCE, _max_of(col), _max_abs_error_finish, compared=True, log_scale=True,
+            floor=TCP_FLOOR,
             definition=f"TCP {quantity} error: {what} between the {_TCP_FK}; max, RMS and "
             "the error at the target (final window) as for a joint",
         ),
         Metric(
             f"tcp_rms_{quantity}_error", unit, f"TCP RMS {quantity} error", ".3g", "tcp",
             _TCP_SOURCE, lambda: _squares(col), _root_mean, compared=True, log_scale=True,
+            floor=TCP_FLOOR,
         ),
         Metric(
             f"tcp_final_{quantity}_error", unit, f"TCP {quantity} error at the target", ".3g",
             "tcp", _TCP_SOURCE, _final_of(col), _mean, needs_completed_motion=True,
-            compared=True, log_scale=True,
+            compared=True, log_scale=True, floor=TCP_FLOOR,
             detail=f"mean over the final window, ≤ {FINAL_WINDOW_S} s",
         ),
     )  # fmt: skip

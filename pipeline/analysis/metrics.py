@@ -23,7 +23,9 @@ from collections.abc import Mapping, Sequence
 import polars as pl
 
 from pipeline.analysis.catalog import (
+    BY_NAME,
     COMPARED_METRICS,
+    ERROR_FLOOR_RAD,
     METRIC_COLUMNS,
     METRIC_SOURCES,
     METRICS,
@@ -55,9 +57,6 @@ __all__ = [
 ]
 
 SATURATION_REL_TOL = 1e-6
-# Below this a joint error is numerical noise (a perfect-model CTC settles to ~1e-13 rad);
-# a reduction relative to it would read 1e10 %, so none is given.
-ERROR_FLOOR_RAD = 1e-9
 
 _KEY = ["episode", "joint"]
 
@@ -313,13 +312,16 @@ def pairs(episodes: pl.DataFrame, *, baseline: str) -> list[tuple[str, str, str]
     return sorted(out)
 
 
-def reduction_pct(baseline: pl.Expr, candidate: pl.Expr) -> pl.Expr:
-    """(baseline - candidate) / baseline x 100; null when |baseline| < :data:`ERROR_FLOOR_RAD`
-    (numerical noise: the ratio would be meaningless) or either value is missing."""
+def reduction_pct(
+    baseline: pl.Expr, candidate: pl.Expr, *, floor: float = ERROR_FLOOR_RAD
+) -> pl.Expr:
+    """(baseline - candidate) / baseline x 100; null when |baseline| < ``floor`` (numerical
+    noise: the ratio would be meaningless; a metric's :attr:`Metric.floor`) or either value
+    is missing."""
     valid = (
         baseline.is_not_null()
         & baseline.is_not_nan()
-        & (baseline.abs() >= ERROR_FLOOR_RAD)
+        & (baseline.abs() >= floor)
         & candidate.is_not_null()
     )
     return pl.when(valid).then((baseline - candidate) / baseline * 100.0).otherwise(None)
@@ -353,9 +355,11 @@ def comparisons(
     )
     out = out.with_columns(
         [
-            reduction_pct(pl.col(f"{m}_baseline"), pl.col(f"{m}_candidate")).alias(
-                f"{m}_reduction_pct"
-            )
+            reduction_pct(
+                pl.col(f"{m}_baseline"),
+                pl.col(f"{m}_candidate"),
+                floor=BY_NAME[m].floor if m in BY_NAME else ERROR_FLOOR_RAD,
+            ).alias(f"{m}_reduction_pct")
             for m in compared
         ]
     )

@@ -126,7 +126,9 @@ def metrics_document(data: ReportData) -> dict[str, Any]:
         joints: dict[str, Any] = {}
         if group is not None:
             for m in group.iter_rows(named=True):
-                joints[m["joint"]] = {x.name: _rounded(x.name, m[x.name]) for x in METRICS}
+                joints[m["joint"]] = {
+                    x.name: _rounded(x.name, m[x.name]) for x in METRICS if x.applies_to(m["joint"])
+                }
         episodes[ep] = {
             "controller": row["controller"],
             "scenario": row["scenario"],
@@ -157,6 +159,7 @@ def metrics_document(data: ReportData) -> dict[str, Any]:
             joints[m["joint"]] = {
                 f"{metric}_reduction_pct": number(m[f"{metric}_reduction_pct"])
                 for metric in COMPARED_METRICS
+                if BY_NAME[metric].applies_to(m["joint"])
             }
         comparisons.append(
             {"scenario": scenario, "baseline": base, "candidate": cand, "joints": joints}
@@ -171,6 +174,8 @@ def metrics_document(data: ReportData) -> dict[str, Any]:
                 f"{_FLOOR} (reduction_floor_rad)"
             ),
             "reduction_floor_rad": ERROR_FLOOR_RAD,
+            # per compared metric, in its unit (the TCP's: 1 nm, 1 nrad)
+            "reduction_floors": {m.name: m.floor for m in METRICS if m.compared},
             "confidence": CONFIDENCE,
             "metric_sources": dict(METRIC_SOURCES),
             "metric_units": {m.name: m.unit for m in METRICS},

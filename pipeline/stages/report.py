@@ -334,6 +334,7 @@ def _run_report_locked(
         recordings_dir=recordings_dir,
         protocol=measured.views,
         error_series=measured.errors,
+        task_space=measured.task_space,
     )
     data = measured.with_sample_frames(first, options)
     # The name is known before the folder exists, so an interrupt at any point (even
@@ -469,6 +470,7 @@ class _Measured:
 
     def __init__(self, tool: ToolOffset) -> None:
         self.tool = tool
+        self.task_space: dict[str, TaskSpace] = {}
         self.views: dict[str, ProtocolView] = {}
         self.rows: dict[str, pl.DataFrame] = {}
         self.metrics: dict[str, pl.DataFrame] = {}
@@ -484,6 +486,7 @@ class _Measured:
 
     def add(self, raw: Recording) -> Recording:
         streamed, self.streamed = self.streamed, None
+        self.task_space.update(task_space_of(raw, self.tool))
         if raw.windows:
             assert streamed is not None
             view, metrics = streamed.view(raw)
@@ -498,7 +501,7 @@ class _Measured:
                 rec.controller_states,
                 row,
                 limits_table([rec]),
-                task_space=task_space_of(rec, self.tool),
+                task_space=self.task_space,
             )
         self.rows[rec.episode] = row
         self.metrics[rec.episode] = metrics
