@@ -39,12 +39,30 @@ console = Console()
 _state = {"debug": False}
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        from pipeline import __version__
+
+        sys.stdout.write(f"armlab-pipeline {__version__}\n")
+        raise typer.Exit()
+
+
 @app.callback()
 def _root(
     debug: Annotated[
         bool, typer.Option("--debug", help="Show Python tracebacks for errors.")
     ] = False,
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version",
+            help="Print the version and exit.",
+            callback=_print_version,
+            is_eager=True,
+        ),
+    ] = False,
 ) -> None:
+    del version
     _state["debug"] = debug
 
 
@@ -277,7 +295,7 @@ def ik_check_cmd(
     ] = 0,
     out: Annotated[
         str,
-        typer.Option("--out", help="Folder that receives ik_check.json and error_map.png."),
+        typer.Option("--out", "-o", help="Folder that receives ik_check.json and error_map.png."),
     ] = "reports/ik-check",
     min_success_rate: Annotated[
         float,
@@ -519,7 +537,7 @@ def record_cmd(
         str, typer.Option("--params", help="Scenarios, controllers and episodes (YAML).")
     ] = "params.yaml",
     out: Annotated[
-        str, typer.Option("--out", help="Directory that receives one ROS 2 bag per episode.")
+        str, typer.Option("--out", "-o", help="Directory that receives one ROS 2 bag per episode.")
     ] = "recordings",
     only: Annotated[
         list[str] | None,
@@ -839,7 +857,7 @@ def report_cmd(
         str, typer.Option("--recordings", help="Folder of recordings (rosbag2 folders / .mcap).")
     ] = "recordings",
     out: Annotated[
-        str, typer.Option("--out", help="Folder that receives report.md, metrics.json, .rrd.")
+        str, typer.Option("--out", "-o", help="Folder that receives report.md, metrics.json, .rrd.")
     ] = "reports",
     baseline: Annotated[
         str, typer.Option("--baseline", help="Controller the others are compared against.")
@@ -869,6 +887,14 @@ def report_cmd(
         typer.Option(
             "--scenario",
             help="Scenario label for bags without our metadata (default: 'external').",
+        ),
+    ] = None,
+    tool_offset: Annotated[
+        str | None,
+        typer.Option(
+            "--tool-offset",
+            help="The tool centre point of the task-space metrics in the flange frame: "
+            "x,y,z [m] or x,y,z,roll,pitch,yaw [m, rad] (default: the flange).",
         ),
     ] = None,
     salvage: Annotated[
@@ -909,8 +935,11 @@ def report_cmd(
 
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
+    from pipeline.analysis.task_space import FLANGE_TOOL, ToolOffset
     from pipeline.log.reader import ReadOptions
     from pipeline.stages.report import run_report
+
+    tool = FLANGE_TOOL if tool_offset is None else ToolOffset.parse(tool_offset)
 
     progress_console = Console(stderr=True)
     with Progress(
@@ -941,6 +970,7 @@ def report_cmd(
                 controller=controller,
                 scenario=scenario,
             ),
+            tool=tool,
         )
     from rich import box
     from rich.markup import escape

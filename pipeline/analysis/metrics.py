@@ -135,8 +135,11 @@ def _prepared_joint_states(samples: pl.DataFrame, limits: pl.DataFrame | None) -
         _time_sorted(samples)
         .join(limits, on=_KEY, how="left", maintain_order="left")
         .with_columns(
-            # Null (not counted) where no effort was recorded.
-            saturated=pl.when(eff.is_not_null()).then((at_limit | clipped).fill_null(False)),
+            # Null (not counted) where no effort was recorded or the limit is unknown (a
+            # bag without its robot: "0 % saturated" would be a pass it cannot give).
+            saturated=pl.when(eff.is_not_null() & limit.is_not_null()).then(
+                (at_limit | clipped).fill_null(False)
+            ),
         )
     )
 

@@ -19,6 +19,7 @@ from pipeline.analysis.aggregate import CONFIDENCE, MeanCI
 from pipeline.analysis.episodes import setting, shown_status
 from pipeline.analysis.findings import (
     SATURATION_WARN_FRACTION,
+    check_grid,
     physical_checks,
     worst_saturation,
 )
@@ -40,6 +41,7 @@ from pipeline.report.md import (
 from pipeline.report.paper import versus_paper
 from pipeline.report.physical_checks import physical_checks_section
 from pipeline.report.setup import setup_section
+from pipeline.report.summary import summary_section
 
 REPORT_FILE = "report.md"
 # A campaign's mean ± CI tables are written for at most this many conditions.
@@ -152,6 +154,7 @@ def _intro(data: ReportData) -> list[str]:
         + f"Recorded by armlab-pipeline {', '.join(versions)} (git {', '.join(commits)}).",
         *_salvaged_summary(data),
         "",
+        *summary_section(data),
         "Interactive view: [`recording.rrd`](recording.rrd), next to this file: open it with "
         "`rerun recording.rrd` (per-joint time series, the arm in 3D per controller).",
         "Numbers: [`metrics.json`](metrics.json); series for `dvc plots`: "
@@ -227,7 +230,9 @@ def _intro(data: ReportData) -> list[str]:
         "of the file, or of a `.db3`'s messages, not read); cut before its motion end, "
         "such an episode takes no part in comparisons.",
     ]
-    lines += physical_checks_section(physical_checks(data.recordings, data.protocol, data.metrics))
+    checks = physical_checks(data.recordings, data.protocol, data.metrics)
+    grid = check_grid(data.recordings, data.protocol, data.metrics, checks)
+    lines += physical_checks_section(checks, grid)
     failed = [r for r in recs if r.status != "ok"]
     if failed:
         lines += ["", "### Failed episodes", ""]
