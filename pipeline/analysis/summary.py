@@ -152,3 +152,34 @@ def headline_table(
         if row in joints or r["joint"] == TCP_JOINT:
             out[(r["scenario"], r["controller"], row)] = _ci(r)
     return out
+
+
+# ``dvc exp show`` / ``dvc metrics diff`` stay readable: headline.json holds at most this
+# many scalars for the default experiment (tests/report/test_headline_json.py).
+HEADLINE_MAX_SCALARS = 300
+
+
+def _row_key(e: Effect) -> str:
+    return {
+        "tcp_max_position_error": "tcp_position",
+        "tcp_max_orientation_error": "tcp_orientation",
+    }.get(e.metric, e.joint)
+
+
+def headline_document(qs: list[Question]) -> dict[str, dict[str, dict[str, dict[str, object]]]]:
+    """The small DVC metric: ``<group>.<candidate>_vs_<baseline>.<joint | tcp_position |
+    tcp_orientation>.{max_error_reduction_pct, ci95_half_width, n}`` (nested dicts of
+    scalars only: DVC skips lists). The reduction is the mean per-pair reduction of the max
+    error (max |error| per joint, the TCP's max position and orientation errors) [%], with
+    its paired 95 % half width (None for one pair) and the number of pairs."""
+    out: dict[str, dict[str, dict[str, dict[str, object]]]] = {}
+    for q in qs:
+        node = out.setdefault(q.group, {}).setdefault(f"{q.candidate}_vs_{q.baseline}", {})
+        for e in (*q.joint_space, *q.task_space):
+            ci = e.reduction
+            node[_row_key(e)] = {
+                "max_error_reduction_pct": None if ci.mean is None else round(ci.mean, 4),
+                "ci95_half_width": None if ci.half_width is None else round(ci.half_width, 4),
+                "n": ci.n,
+            }
+    return out

@@ -67,7 +67,12 @@ from pipeline.report.figures import (
 )
 from pipeline.report.inputs import ReportData, Skipped, cs_times_s, cs_wide
 from pipeline.report.markdown import REPORT_FILE, render_report
-from pipeline.report.metrics_json import write_episode_csvs, write_metrics, write_series_csvs
+from pipeline.report.metrics_json import (
+    write_episode_csvs,
+    write_headline,
+    write_metrics,
+    write_series_csvs,
+)
 from pipeline.report.rerun_rrd import RRD_FILE, write_rrd
 
 # progress(step, done, total): called as work advances (for a progress bar).
@@ -345,7 +350,8 @@ def _run_report_locked(
             staging.mkdir()
         except OSError as err:
             raise ReportError(f"{out_dir.parent}: cannot write the report there ({err})") from err
-        files = [write_metrics(data, staging), *write_series_csvs(data, staging)]
+        files = [write_metrics(data, staging), write_headline(data, staging)]
+        files += write_series_csvs(data, staging)
         files += write_episode_csvs(data, staging)
         sections = _campaigns(data, staging, progress)
         files += [CAMPAIGN_INDEX, *[f for sec in sections for f in (sec.table_path, *sec.files)]]
