@@ -851,6 +851,17 @@ def _remaps(items: list[str]) -> dict[str, str]:
     return remaps
 
 
+def _labels(items: list[str]) -> dict[str, str]:
+    """``--label BAG=CONTROLLER`` items as a dict (a one-line error for a bad one)."""
+    out: dict[str, str] = {}
+    for item in items:
+        bag, sep, controller = item.partition("=")
+        if not sep or not bag.strip() or not controller.strip():
+            raise PipelineError(f"--label {item}: expected BAG=CONTROLLER")
+        out[bag.strip().removesuffix(".mcap")] = controller.strip()
+    return out
+
+
 @app.command("report")
 def report_cmd(
     recordings: Annotated[
@@ -880,6 +891,15 @@ def report_cmd(
         typer.Option(
             "--controller",
             help="Controller label for bags without our metadata (default: the bag's name).",
+        ),
+    ] = None,
+    label: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--label",
+            help="BAG=CONTROLLER: the controller label of one bag (its folder or .mcap "
+            "name), before --controller; bags with different labels are different "
+            "controllers. Repeatable.",
         ),
     ] = None,
     scenario: Annotated[
@@ -969,6 +989,7 @@ def report_cmd(
                 salvage=salvage,
                 controller=controller,
                 scenario=scenario,
+                labels=_labels(label or []),
             ),
             tool=tool,
         )

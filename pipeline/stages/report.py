@@ -326,6 +326,7 @@ def _run_report_locked(
         measure=measured.add,
         sink=measured,
     )
+    recordings = merged_label_notes(recordings, options)
     episodes = pl.concat([measured.rows[r.episode] for r in recordings], how="vertical")
     check_baseline(episodes, baseline)
     metrics = pl.concat([measured.metrics[r.episode] for r in recordings], how="vertical_relaxed")
@@ -392,6 +393,36 @@ def _run_report_locked(
 
 # Thinned error series kept per campaign episode for the .rrd's percentile bands.
 BAND_POINTS = 250
+
+
+def merged_label_notes(recordings: list[Recording], options: ReadOptions | None) -> list[Recording]:
+    """``recordings`` with a warning on each bag we did not write that shares its
+    controller label (from ``--controller``) with another such bag of its scenario and was
+    not labelled on its own (``--label``): they are averaged as repeats of one controller."""
+    if options is None or not options.controller:
+        return recordings
+    shared: dict[tuple[str, str], list[str]] = {}
+    for rec in recordings:
+        bag = rec.source.name.removesuffix(".mcap")
+        if not rec.armlab_metadata and bag not in options.labels:
+            shared.setdefault((rec.scenario, rec.controller), []).append(rec.episode)
+    merged = {e: eps for eps in shared.values() if len(eps) > 1 for e in eps}
+    return [
+        dataclasses.replace(
+            rec,
+            notes=(
+                *rec.notes,
+                f"labelled '{rec.controller}' by --controller like {len(merged[rec.episode]) - 1} "
+                "other bag(s) without our metadata ("
+                + ", ".join(e for e in merged[rec.episode] if e != rec.episode)
+                + "): their metrics are averaged as repeats of one controller; if they are "
+                "different controllers, label each with --label BAG=CONTROLLER",
+            ),
+        )
+        if rec.episode in merged
+        else rec
+        for rec in recordings
+    ]
 
 
 def task_space_of(rec: Recording, tool: ToolOffset) -> dict[str, TaskSpace]:
