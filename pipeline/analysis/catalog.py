@@ -89,7 +89,8 @@ class Metric:
         compared: reductions between controllers are computed for it (and headlines).
         lower_is_better: a smaller value is the better controller (for win/loss).
         log_scale: figures draw it on a log axis (values span orders of magnitude).
-        in_tables: shown as its own per-episode Markdown table.
+        in_tables: shown as its own per-episode Markdown table (the TCP's metrics share
+            one table).
         detail: how it is taken, in a table heading's parentheses ("" for none).
         definition: what it is, as every report's Definitions section and docs/report.md
             say it (``term: meaning``); "" for a companion metric its metric's definition
@@ -296,6 +297,7 @@ def _tcp_metrics(quantity: str, unit: str, col: str, what: str) -> tuple[Metric,
         Metric(
             f"tcp_max_{quantity}_error", unit, f"TCP max {quantity} error", ".3g", "tcp",
             _TCP_SOURCE, _max_of(col), _max_abs_error_finish, compared=True, log_scale=True,
+            in_tables=False,
             floor=TCP_FLOOR,
             definition=f"TCP {quantity} error: {what} between the {_TCP_FK}; max, RMS and "
             "the error at the target (final window) as for a joint",
@@ -303,11 +305,12 @@ def _tcp_metrics(quantity: str, unit: str, col: str, what: str) -> tuple[Metric,
         Metric(
             f"tcp_rms_{quantity}_error", unit, f"TCP RMS {quantity} error", ".3g", "tcp",
             _TCP_SOURCE, lambda: _squares(col), _root_mean, compared=True, log_scale=True,
+            in_tables=False,
             floor=TCP_FLOOR,
         ),
         Metric(
             f"tcp_final_{quantity}_error", unit, f"TCP {quantity} error at the target", ".3g",
-            "tcp", _TCP_SOURCE, _final_of(col), _mean, needs_completed_motion=True,
+            "tcp", _TCP_SOURCE, _final_of(col), _mean, needs_completed_motion=True, in_tables=False,
             compared=True, log_scale=True, floor=TCP_FLOOR,
             detail=f"mean over the final window, ≤ {FINAL_WINDOW_S} s",
         ),

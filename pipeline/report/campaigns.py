@@ -33,6 +33,7 @@ from pipeline.analysis.campaign import (
     swept_axes,
     win_loss,
 )
+from pipeline.analysis.summary import HEADLINE_TASK_METRICS
 from pipeline.report import md
 from pipeline.report.colors import controller_colors, mpl
 from pipeline.report.figures import FigureFile, save_figure, subplot_grid
@@ -405,10 +406,16 @@ def campaign_section(
 
     if draw:
         figures: list[FigureFile] = []
-        for metric in compared:
+        # the joints' compared metrics and the TCP's max errors (not its RMS and final)
+        drawn = [
+            x for x in compared
+            if catalog.BY_NAME[x].space == "joint" or x in HEADLINE_TASK_METRICS
+        ]  # fmt: skip
+        for metric in drawn:
             m = catalog.BY_NAME[metric]
+            sub = table.filter((pl.col("joint") == catalog.TCP_JOINT) == (m.space == "task"))
             fig = _distribution_figure(
-                table, m, shown, colors, f"{name}: {m.title.lower()} per condition and controller"
+                sub, m, shown, colors, f"{name}: {m.title.lower()} per condition and controller"
             )
             figures.append(
                 FigureFile(
@@ -417,7 +424,7 @@ def campaign_section(
                     f"(boxes: quartiles; points: episodes, up to {MAX_POINTS_PER_BOX} per box)",
                 )
             )
-            fig = _ecdf_figure(table, m, colors, f"{name}: {m.title.lower()}, ECDF")
+            fig = _ecdf_figure(sub, m, colors, f"{name}: {m.title.lower()}, ECDF")
             figures.append(
                 FigureFile(
                     save_figure(fig, out_dir, f"{stem}_{metric}_ecdf.png"),
@@ -427,7 +434,7 @@ def campaign_section(
             for axis in axes[:MAX_AXES_DRAWN]:
                 short = axis.removeprefix(SWEPT_PREFIX)
                 fig = _parameter_figure(
-                    table, axis, m, colors, f"{name}: {m.title.lower()} against {short}"
+                    sub, axis, m, colors, f"{name}: {m.title.lower()} against {short}"
                 )
                 figures.append(
                     FigureFile(
