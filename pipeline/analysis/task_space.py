@@ -29,7 +29,9 @@ import polars as pl
 from numpy.typing import NDArray
 
 from pipeline.analysis.catalog import TCP_JOINT
+from pipeline.analysis.episodes import robot_spec
 from pipeline.errors import ReportError
+from pipeline.log.reader import Recording
 from pipeline.model import transforms as tf
 from pipeline.model.chain import FLANGE
 from pipeline.model.urdf import pinocchio_model
@@ -238,3 +240,12 @@ def tcp_errors(
             )
         )
     return pl.concat(parts, how="vertical")
+
+
+def task_space_of(rec: Recording, tool: ToolOffset) -> dict[str, TaskSpace]:
+    """``{episode: TaskSpace}`` when the recording carries its robot and the robot's joints
+    are the recorded ones; empty (task-space metrics n/a) otherwise."""
+    spec = robot_spec(rec)
+    if spec is None or tuple(spec.joint_names) != tuple(rec.joint_names):
+        return {}
+    return {rec.episode: TaskSpace(spec, tool)}

@@ -30,8 +30,9 @@ from pipeline.analysis.checks import (
     duplicate_note,
     duplicate_stamp_notes,
     duplicate_stamps,
+    merged_label_notes,
 )
-from pipeline.analysis.episodes import episode_table, limits_table, robot_spec, shown_status
+from pipeline.analysis.episodes import episode_table, limits_table, shown_status
 from pipeline.analysis.metrics import (
     check_baseline,
     comparisons,
@@ -46,7 +47,7 @@ from pipeline.analysis.protocol import (
     protocol_view,
     start_state,
 )
-from pipeline.analysis.task_space import FLANGE_TOOL, TaskSpace, ToolOffset
+from pipeline.analysis.task_space import FLANGE_TOOL, TaskSpace, ToolOffset, task_space_of
 from pipeline.constants import TOPIC_CONTROLLER_STATE, TOPIC_JOINT_STATES
 from pipeline.errors import PipelineError, RecordingError, ReportError
 from pipeline.fsutil import OutputLock, remove_stale
@@ -395,45 +396,6 @@ def _run_report_locked(
 BAND_POINTS = 250
 
 
-def merged_label_notes(recordings: list[Recording], options: ReadOptions | None) -> list[Recording]:
-    """``recordings`` with a warning on each bag we did not write that shares its
-    controller label (from ``--controller``) with another such bag of its scenario and was
-    not labelled on its own (``--label``): they are averaged as repeats of one controller."""
-    if options is None or not options.controller:
-        return recordings
-    shared: dict[tuple[str, str], list[str]] = {}
-    for rec in recordings:
-        bag = rec.source.name.removesuffix(".mcap")
-        if not rec.armlab_metadata and bag not in options.labels:
-            shared.setdefault((rec.scenario, rec.controller), []).append(rec.episode)
-    merged = {e: eps for eps in shared.values() if len(eps) > 1 for e in eps}
-    return [
-        dataclasses.replace(
-            rec,
-            notes=(
-                *rec.notes,
-                f"labelled '{rec.controller}' by --controller like {len(merged[rec.episode]) - 1} "
-                "other bag(s) without our metadata ("
-                + ", ".join(e for e in merged[rec.episode] if e != rec.episode)
-                + "): their metrics are averaged as repeats of one controller; if they are "
-                "different controllers, label each with --label BAG=CONTROLLER",
-            ),
-        )
-        if rec.episode in merged
-        else rec
-        for rec in recordings
-    ]
-
-
-def task_space_of(rec: Recording, tool: ToolOffset) -> dict[str, TaskSpace]:
-    """``{episode: TaskSpace}`` when the recording carries its robot and the robot's joints
-    are the recorded ones; empty (task-space metrics n/a) otherwise."""
-    spec = robot_spec(rec)
-    if spec is None or tuple(spec.joint_names) != tuple(rec.joint_names):
-        return {}
-    return {rec.episode: TaskSpace(spec, tool)}
-
-
 class _Streamed:
     """A long recording's windows as they are read: the protocol applied to each, their
     partial metrics, counts and duplicate stamps, and the exact state at the motion start."""
@@ -505,7 +467,7 @@ class _Measured:
     It is also the reader's :class:`WindowSink`: a long recording's metrics are computed
     window by window as it is read (:class:`_Streamed`); its frames are decimated."""
 
-    def __init__(self, tool: ToolOffset) -> None:
+    def __init__(self, tool: ToolOffset = FLANGE_TOOL) -> None:
         self.tool = tool
         self.task_space: dict[str, TaskSpace] = {}
         self.views: dict[str, ProtocolView] = {}

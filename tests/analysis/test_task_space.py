@@ -18,14 +18,13 @@ import pytest
 from pipeline.analysis.episodes import episode_table, limits_table
 from pipeline.analysis.metrics import finish_metrics, joint_metrics, metric_partials
 from pipeline.analysis.protocol import protocol_view
-from pipeline.analysis.task_space import TCP, TaskSpace, ToolOffset
+from pipeline.analysis.task_space import TCP, TaskSpace, ToolOffset, task_space_of
 from pipeline.constants import FINAL_WINDOW_S
 from pipeline.log.reader import read_recording
 from pipeline.model.chain import FLANGE
 from pipeline.model.mjcf import build_mjcf
 from pipeline.model.urdf import build_urdf
 from pipeline.robots import load_spec
-from pipeline.stages.report import task_space_of
 from tests.analysis.bagfactory import Episode, paper_like, write_bag
 
 TOL_M = 1e-9
