@@ -16,7 +16,7 @@ from typing import Any, NamedTuple
 import polars as pl
 from scipy import stats
 
-from pipeline.analysis.catalog import COMPARED_METRICS
+from pipeline.analysis.catalog import BY_NAME, COMPARED_METRICS
 from pipeline.analysis.episodes import comparable
 
 CONFIDENCE = 0.95
@@ -99,6 +99,11 @@ def runs_per_controller(episodes: pl.DataFrame) -> dict[tuple[str, str], int]:
     return {(r["scenario"], r["controller"]): int(r["len"]) for r in counts.iter_rows(named=True)}
 
 
+def _applying(compared: Sequence[str], joint: str) -> list[str]:
+    """The compared metrics with a value in the rows of ``joint`` (a joint or the TCP)."""
+    return [m for m in compared if m not in BY_NAME or BY_NAME[m].applies_to(joint)]
+
+
 def metric_aggregates(
     metrics: pl.DataFrame,
     episodes: pl.DataFrame,
@@ -117,7 +122,7 @@ def metric_aggregates(
     for (scenario, controller, joint), group in joined.group_by(
         "scenario", "controller", "joint", maintain_order=True
     ):
-        for metric in compared:
+        for metric in _applying(compared, str(joint)):
             ci = mean_ci(group.get_column(metric).to_list())
             rows.append(
                 {
@@ -176,7 +181,7 @@ def reduction_aggregates(
     for (scenario, base, controller, pairing, joint), group in pairs.group_by(
         "scenario", "baseline_controller", "controller", "pairing", "joint", maintain_order=True
     ):
-        for metric in compared:
+        for metric in _applying(compared, str(joint)):
             key = f"{metric}_reduction_pct"
             ci = mean_ci(group.get_column(key).to_list())
             rows.append(

@@ -10,11 +10,15 @@ frame as metrics.json (the recordings stay the source of truth); load it with
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import polars as pl
 
+from pipeline.analysis.aggregate import MeanCI, mean_ci
 from pipeline.analysis.catalog import BY_NAME, METRIC_COLUMNS
 from pipeline.analysis.episodes import SALVAGED_CUT, comparable
 from pipeline.settings import EpisodeSettings
@@ -99,6 +103,8 @@ def campaign_tables(
 ALPHA = 0.05
 WILCOXON = "Wilcoxon signed-rank (paired by seed)"
 MANN_WHITNEY = "Mann-Whitney U (unpaired: seeds do not pair)"
+TOO_FEW = "too few pairs for a test"
+HOLM = "Holm"
 
 WIN_LOSS_SCHEMA: dict[str, pl.DataType | type[pl.DataType]] = {
     "condition": pl.String,
@@ -108,8 +114,14 @@ WIN_LOSS_SCHEMA: dict[str, pl.DataType | type[pl.DataType]] = {
     "metric": pl.String,
     "n": pl.Int64,
     "effect_pct": pl.Float64,
+    "effect_ci95_half_width": pl.Float64,
+    "abs_diff": pl.Float64,
+    "abs_diff_ci95_half_width": pl.Float64,
+    "baseline_mean": pl.Float64,
     "test": pl.String,
     "p_value": pl.Float64,
+    "p_holm": pl.Float64,
+    "tests": pl.Int64,
     "verdict": pl.String,
 }
 
@@ -126,10 +138,43 @@ def swept_axes(table: pl.DataFrame) -> list[str]:
     return out
 
 
+def smallest_p(test: str, n: int, m: int = 0) -> float:
+    """The smallest two-sided p the exact test can give: ``2 / 2^n`` for the signed-rank
+    test of n pairs, ``2 / C(n + m, n)`` for the Mann-Whitney U test of n and m runs."""
+    if test == WILCOXON:
+        return min(1.0, 2.0 / 2.0**n)
+    return min(1.0, 2.0 / math.comb(n + m, n))
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One candidate-vs-baseline cell: the size of the effect and, with enough pairs, a test
+    of its sign.
+
+    Attributes:
+        n: pairs (paired) or the smaller group (unpaired).
+        effect: the mean per-pair reduction (baseline − candidate) / baseline [%] with its
+            paired 95 % interval; the reduction of the medians when seeds do not pair.
+        abs_diff: the mean per-pair difference baseline − candidate [the metric's unit]
+            with its interval (the medians' difference when unpaired).
+        baseline_mean: the baseline's mean (how near the noise the percentage's divisor is).
+        test: :data:`WILCOXON`, :data:`MANN_WHITNEY` or :data:`TOO_FEW` (the test cannot
+            reach p < :data:`ALPHA` with so few runs).
+        p: its two-sided p (None without a test).
+    """
+
+    n: int
+    effect: MeanCI
+    abs_diff: MeanCI
+    baseline_mean: float | None
+    test: str
+    p: float | None
+
+
 def _test(
-    base: dict[int, float], cand: dict[int, float], lower_is_better: bool
-) -> tuple[int, float | None, str, float | None]:
-    """(n, effect %, test, p): paired by seed when seeds pair, else unpaired."""
+    base: dict[int, float], cand: dict[int, float], lower_is_better: bool, floor: float
+) -> Effect:
+    """Paired by seed when seeds pair (at least two), else unpaired."""
     from scipy import stats
 
     sign = 1.0 if lower_is_better else -1.0
@@ -138,31 +183,55 @@ def _test(
         b = [base[s] for s in common]
         c = [cand[s] for s in common]
         diffs = [sign * (x - y) for x, y in zip(b, c, strict=True)]
-        red = [sign * (x - y) / abs(x) * 100.0 for x, y in zip(b, c, strict=True) if x != 0]
-        effect = float(sorted(red)[len(red) // 2]) if red else None
-        if all(d == 0 for d in diffs):
-            return len(common), effect, WILCOXON, 1.0
-        p = float(stats.wilcoxon(diffs).pvalue)
-        return len(common), effect, WILCOXON, p
-    b = list(base.values())
-    c = list(cand.values())
-    if len(b) < 2 or len(c) < 2:
-        return min(len(b), len(c)), None, MANN_WHITNEY, None
-    mb, mc = sorted(b)[len(b) // 2], sorted(c)[len(c) // 2]
-    effect = sign * (mb - mc) / abs(mb) * 100.0 if mb != 0 else None
-    p = float(stats.mannwhitneyu(b, c, alternative="two-sided").pvalue)
-    return min(len(b), len(c)), effect, MANN_WHITNEY, p
+        red = [
+            sign * (x - y) / abs(x) * 100.0 for x, y in zip(b, c, strict=True) if abs(x) >= floor
+        ]
+        n = len(common)
+        base_mean = math.fsum(b) / n
+        if smallest_p(WILCOXON, n) >= ALPHA:
+            return Effect(n, mean_ci(red), mean_ci(diffs), base_mean, TOO_FEW, None)
+        p = 1.0 if all(d == 0 for d in diffs) else float(stats.wilcoxon(diffs).pvalue)
+        return Effect(n, mean_ci(red), mean_ci(diffs), base_mean, WILCOXON, p)
+    bs, cs = list(base.values()), list(cand.values())
+    n = min(len(bs), len(cs))
+    if n == 0:
+        return Effect(0, mean_ci([]), mean_ci([]), None, TOO_FEW, None)
+    mb, mc = float(np.median(bs)), float(np.median(cs))
+    effect = sign * (mb - mc) / abs(mb) * 100.0 if abs(mb) >= floor else None
+    point = mean_ci([effect])
+    diff = mean_ci([sign * (mb - mc)])
+    if len(bs) < 2 or len(cs) < 2 or smallest_p(MANN_WHITNEY, len(bs), len(cs)) >= ALPHA:
+        return Effect(n, point, diff, mb, TOO_FEW, None)
+    p = float(stats.mannwhitneyu(bs, cs, alternative="two-sided").pvalue)
+    return Effect(n, point, diff, mb, MANN_WHITNEY, p)
+
+
+def holm(p_values: list[float | None]) -> list[float | None]:
+    """Holm's step-down adjusted p values of one family (None stays None: no test)."""
+    order = sorted((p, k) for k, p in enumerate(p_values) if p is not None)
+    m = len(order)
+    out: list[float | None] = [None] * len(p_values)
+    running = 0.0
+    for rank, (p, k) in enumerate(order):
+        running = max(running, min(1.0, (m - rank) * p))
+        out[k] = running
+    return out
 
 
 def win_loss(table: pl.DataFrame, *, baseline: str, metrics: tuple[str, ...]) -> pl.DataFrame:
     """Each candidate controller against ``baseline`` per condition, joint and metric.
 
-    Completed ("ok") episodes only. Where both controllers ran the same seeds (at least
-    two), the per-seed differences take a two-sided Wilcoxon signed-rank test and the
-    effect is the median paired reduction (baseline - candidate) / baseline x 100; else a
-    two-sided Mann-Whitney U test and the reduction of the medians. ``verdict``: "wins"
-    / "loses" when p < :data:`ALPHA` (by the effect's sign), else "no difference"
-    ("n/a" without a test). Columns :data:`WIN_LOSS_SCHEMA`.
+    One method per question. The size: where both controllers ran the same seeds (at
+    least two), the mean per-pair reduction (baseline − candidate) / baseline × 100 with
+    its paired 95 % Student-t interval, and the mean absolute difference in the metric's
+    unit beside it; else the reduction of the medians. The sign: a two-sided Wilcoxon
+    signed-rank test of the per-seed differences (Mann-Whitney U when seeds do not pair),
+    only when the test can reach p < :data:`ALPHA` with that many runs (signed rank: 6
+    pairs), else :data:`TOO_FEW`. The p values of one table (one metric and candidate:
+    every joint and condition) are Holm-corrected together, ``tests`` says how many.
+    ``verdict``: "wins" / "loses" when the corrected p < :data:`ALPHA` (by the effect's
+    sign), "n.s." when not, "too few pairs" without a test, "n/a" without values.
+    Columns :data:`WIN_LOSS_SCHEMA`.
     """
     ok = table.filter(pl.col("status") == "ok")
     rows: list[dict[str, Any]] = []
@@ -171,6 +240,8 @@ def win_loss(table: pl.DataFrame, *, baseline: str, metrics: tuple[str, ...]) ->
         return pl.DataFrame(schema=WIN_LOSS_SCHEMA)
     for (condition, joint), grp in ok.group_by("condition", "joint", maintain_order=True):
         for metric in metrics:
+            if not BY_NAME[metric].applies_to(str(joint)):
+                continue
             per: dict[str, dict[int, float]] = {}
             for r in grp.select("controller", "seed", metric).iter_rows():
                 if r[2] is not None:
@@ -178,15 +249,8 @@ def win_loss(table: pl.DataFrame, *, baseline: str, metrics: tuple[str, ...]) ->
             for cand in controllers:
                 if cand not in per or baseline not in per:
                     continue
-                lower = BY_NAME[metric].lower_is_better
-                n, effect, test, p = _test(per[baseline], per[cand], lower)
-                verdict = (
-                    "n/a"
-                    if p is None or effect is None
-                    else ("wins" if effect > 0 else "loses")
-                    if p < ALPHA
-                    else "no difference"
-                )
+                m = BY_NAME[metric]
+                e = _test(per[baseline], per[cand], m.lower_is_better, m.floor)
                 rows.append(
                     {
                         "condition": condition,
@@ -194,24 +258,63 @@ def win_loss(table: pl.DataFrame, *, baseline: str, metrics: tuple[str, ...]) ->
                         "baseline": baseline,
                         "joint": joint,
                         "metric": metric,
-                        "n": n,
-                        "effect_pct": effect,
-                        "test": test,
-                        "p_value": p,
-                        "verdict": verdict,
+                        "n": e.n,
+                        "effect_pct": e.effect.mean,
+                        "effect_ci95_half_width": e.effect.half_width,
+                        "abs_diff": e.abs_diff.mean,
+                        "abs_diff_ci95_half_width": e.abs_diff.half_width,
+                        "baseline_mean": e.baseline_mean,
+                        "test": e.test,
+                        "p_value": e.p,
                     }
                 )
-    return pl.DataFrame(rows, schema=WIN_LOSS_SCHEMA, orient="row").sort(
-        "metric", "candidate", "condition", "joint", maintain_order=True
+    out = pl.DataFrame(
+        rows, schema={k: v for k, v in WIN_LOSS_SCHEMA.items() if k not in _DERIVED}, orient="row"
     )
+    parts = []
+    for _, family in out.group_by("metric", "candidate", maintain_order=True):
+        ps = family.get_column("p_value").to_list()
+        adjusted = holm(ps)
+        tests = sum(p is not None for p in ps)
+        parts.append(
+            family.with_columns(
+                pl.Series("p_holm", adjusted, dtype=pl.Float64),
+                pl.lit(tests, dtype=pl.Int64).alias("tests"),
+            )
+        )
+    out = (
+        pl.concat(parts)
+        if parts
+        else out.with_columns(
+            pl.lit(None, dtype=pl.Float64).alias("p_holm"), pl.lit(0, dtype=pl.Int64).alias("tests")
+        )
+    )
+    effect, p = pl.col("effect_pct"), pl.col("p_holm")
+    verdict = (
+        pl.when(effect.is_null())
+        .then(pl.lit("n/a"))
+        .when(p.is_null())
+        .then(pl.lit("too few pairs"))
+        .when((p < ALPHA) & (effect > 0))
+        .then(pl.lit("wins"))
+        .when((p < ALPHA) & (effect < 0))
+        .then(pl.lit("loses"))
+        .otherwise(pl.lit("n.s."))
+    )
+    return (
+        out.with_columns(verdict.alias("verdict"))
+        .select(list(WIN_LOSS_SCHEMA))
+        .sort("metric", "candidate", "condition", "joint", maintain_order=True)
+    )
+
+
+_DERIVED = ("p_holm", "tests", "verdict")
 
 
 def by_parameter(table: pl.DataFrame, axis: str, metric: str) -> pl.DataFrame:
     """Mean and 95 % Student-t CI of ``metric`` per value of one swept ``axis``, controller
     and joint (completed episodes, every other axis pooled): ``value, controller, joint,
     n, mean, ci95_low, ci95_high``."""
-    from pipeline.analysis.aggregate import mean_ci
-
     ok = table.filter((pl.col("status") == "ok") & pl.col(metric).is_not_null())
     rows = []
     for (value, controller, joint), grp in ok.group_by(

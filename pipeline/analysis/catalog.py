@@ -32,6 +32,12 @@ does not see its neighbours):
 - ``joint_states`` frame: ``time_s``, ``velocity_rad_s``, ``effort_nm``,
   ``commanded_effort_nm``, ``effort_limit_nm`` and ``saturated`` (at the limit or clipped;
   null where no effort was recorded).
+- ``tcp`` frame (task space, joint :data:`pipeline.analysis.task_space.TCP`):
+  ``time_s``, ``position_error_mm``, ``orientation_error_mrad`` (FK of the reference vs the
+  position the joint metrics use) plus ``completed`` and ``in_final`` as above.
+
+A metric of the ``tcp`` frame is a task-space metric (:attr:`Metric.space`): its value is in
+the rows of the pseudo-joint ``tcp``, a joint-space metric's in the joints' rows.
 """
 
 from __future__ import annotations
@@ -46,6 +52,11 @@ from pipeline.constants import FINAL_WINDOW_S, TOPIC_CONTROLLER_STATE, TOPIC_JOI
 
 # A joint that moves less than this has no direction of travel: no overshoot.
 MIN_TRAVEL_RAD = 1e-9
+# Below this a joint error is numerical noise (a perfect-model CTC settles to ~1e-13 rad);
+# a reduction relative to it would read 1e10 %, so none is given.
+ERROR_FLOOR_RAD = 1e-9
+# The same for the TCP: 1 nm [mm] and 1 nrad [mrad].
+TCP_FLOOR = 1e-6
 # The band |e| must stay in, after the motion end, to count as settled [rad].
 SETTLING_TOLERANCE_RAD = 1e-3
 
@@ -56,7 +67,10 @@ SETTLING_TOLERANCE_RAD = 1e-3
 FINAL_DRIFT_REL = 0.1
 DRIFT_FLOOR_RAD = 1e-6
 
-Frame = Literal["controller_state", "joint_states"]
+Frame = Literal["controller_state", "joint_states", "tcp"]
+Space = Literal["joint", "task"]
+# The pseudo-joint of the task-space rows (= pipeline.analysis.task_space.TCP).
+TCP_JOINT = "tcp"
 # A finish reads the partial ``key`` of its own metric as ``p(key)``.
 PartialColumn = Callable[[str], pl.Expr]
 
@@ -83,11 +97,14 @@ class Metric:
         compared: reductions between controllers are computed for it (and headlines).
         lower_is_better: a smaller value is the better controller (for win/loss).
         log_scale: figures draw it on a log axis (values span orders of magnitude).
-        in_tables: shown as its own per-episode Markdown table.
+        in_tables: shown as its own per-episode Markdown table (the TCP's metrics share
+            one table).
         detail: how it is taken, in a table heading's parentheses ("" for none).
         definition: what it is, as every report's Definitions section and docs/report.md
             say it (``term: meaning``); "" for a companion metric its metric's definition
             covers (``peak_velocity_time``).
+        floor: below this a baseline value is numerical noise: no reduction % against it
+            [the metric's unit].
     """
 
     name: str
@@ -105,12 +122,22 @@ class Metric:
     in_tables: bool = True
     detail: str = ""
     definition: str = ""
+    floor: float = ERROR_FLOOR_RAD
 
     def __post_init__(self) -> None:
-        if self.needs_completed_motion and self.frame != "controller_state":
-            raise ValueError(f"{self.name}: ``completed`` is a controller_state frame column")
+        if self.needs_completed_motion and self.frame == "joint_states":
+            raise ValueError(f"{self.name}: ``completed`` is not a joint_states frame column")
         if _COMPLETED in self.partials():
             raise ValueError(f"{self.name}: the partial name '{_COMPLETED}' is reserved")
+
+    @property
+    def space(self) -> Space:
+        """``task`` for a TCP metric (rows of joint :data:`TCP_JOINT`), else ``joint``."""
+        return "task" if self.frame == "tcp" else "joint"
+
+    def applies_to(self, joint: str) -> bool:
+        """Whether this metric has a value in the rows of ``joint``."""
+        return (joint == TCP_JOINT) == (self.space == "task")
 
     @property
     def is_time(self) -> bool:
@@ -266,6 +293,18 @@ def _first_at_peak(col: str) -> Callable[[PartialColumn], pl.Expr]:
     return finish
 
 
+def _max_of(col: str) -> Callable[[], dict[str, pl.Expr]]:
+    return lambda: {"max": pl.col(col).abs().max()}
+
+
+def _final_of(col: str) -> Callable[[], dict[str, pl.Expr]]:
+    def parts() -> dict[str, pl.Expr]:
+        final = pl.col(col).abs().filter(pl.col("in_final"))
+        return {"sum": final.sum(), "n": final.count()}
+
+    return parts
+
+
 def _saturation_fraction() -> dict[str, pl.Expr]:
     sat = pl.col("saturated")
     return {"sum": sat.cast(pl.Float64).sum(), "n": sat.count()}
@@ -274,6 +313,39 @@ def _saturation_fraction() -> dict[str, pl.Expr]:
 _CS = TOPIC_CONTROLLER_STATE
 _JS = TOPIC_JOINT_STATES
 _CS_CODE, _JS_CODE = f"`{_CS}`", f"`{_JS}`"
+_TCP_SOURCE = f"{_CS} (FK)"
+_TCP_FK = (
+    "FK (the recording's robot model, Pinocchio) of the reference and of the position the "
+    "joint errors use (true where recorded), at the tool centre point (TCP: the flange "
+    "unless `--tool-offset` moves it)"
+)
+
+
+def _tcp_metrics(quantity: str, unit: str, col: str, what: str) -> tuple[Metric, ...]:
+    """Max, RMS and final of one TCP error (position or orientation)."""
+    return (
+        Metric(
+            f"tcp_max_{quantity}_error", unit, f"TCP max {quantity} error", ".3g", "tcp",
+            _TCP_SOURCE, _max_of(col), _max_abs_error_finish, compared=True, log_scale=True,
+            in_tables=False,
+            floor=TCP_FLOOR,
+            definition=f"TCP {quantity} error: {what} between the {_TCP_FK}; max, RMS and "
+            "the error at the target (final window) as for a joint",
+        ),
+        Metric(
+            f"tcp_rms_{quantity}_error", unit, f"TCP RMS {quantity} error", ".3g", "tcp",
+            _TCP_SOURCE, lambda: _squares(col), _root_mean, compared=True, log_scale=True,
+            in_tables=False,
+            floor=TCP_FLOOR,
+        ),
+        Metric(
+            f"tcp_final_{quantity}_error", unit, f"TCP {quantity} error at the target", ".3g",
+            "tcp", _TCP_SOURCE, _final_of(col), _mean, needs_completed_motion=True, in_tables=False,
+            compared=True, log_scale=True, floor=TCP_FLOOR,
+            detail=f"mean over the final window, ≤ {FINAL_WINDOW_S} s",
+        ),
+    )  # fmt: skip
+
 
 METRICS: tuple[Metric, ...] = (
     Metric(
@@ -360,11 +432,20 @@ METRICS: tuple[Metric, ...] = (
             "|applied|"
         ),
     ),
+    *_tcp_metrics("position", "mm", "position_error_mm", "|p_ref − p|"),
+    *_tcp_metrics(
+        "orientation", "mrad", "orientation_error_mrad", "the rotation angle of R_refᵀ R"
+    ),
 )  # fmt: skip
 
 BY_NAME: dict[str, Metric] = {m.name: m for m in METRICS}
 METRIC_COLUMNS: tuple[str, ...] = tuple(m.name for m in METRICS)
 COMPARED_METRICS: tuple[str, ...] = tuple(m.name for m in METRICS if m.compared)
+# The compared metrics of the joints and of the TCP.
+JOINT_COMPARED: tuple[str, ...] = tuple(
+    m.name for m in METRICS if m.compared and m.space == "joint"
+)
+TASK_COMPARED: tuple[str, ...] = tuple(m.name for m in METRICS if m.compared and m.space == "task")
 # The columns of a partials frame after ``episode, joint``, in catalog order.
 PARTIAL_COLUMNS: tuple[str, ...] = tuple(
     e.meta.output_name() for m in METRICS for e in m.partial_exprs()

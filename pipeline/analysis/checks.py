@@ -8,12 +8,13 @@ toward the duplicated instants. We say so instead.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import polars as pl
 
 from pipeline.constants import TOPIC_CONTROLLER_STATE, TOPIC_JOINT_STATES
-from pipeline.log.reader import Recording
+from pipeline.log.reader import ReadOptions, Recording
 
 
 @dataclass(frozen=True)
@@ -70,3 +71,33 @@ def duplicate_stamp_notes(rec: Recording) -> list[str]:
         if dup is not None:
             notes.append(duplicate_note(topic, dup))
     return notes
+
+
+def merged_label_notes(recordings: list[Recording], options: ReadOptions | None) -> list[Recording]:
+    """``recordings`` with a warning on each bag we did not write that shares its
+    controller label (from ``--controller``) with another such bag of its scenario and was
+    not labelled on its own (``--label``): they are averaged as repeats of one controller."""
+    if options is None or not options.controller:
+        return recordings
+    shared: dict[tuple[str, str], list[str]] = {}
+    for rec in recordings:
+        bag = rec.source.name.removesuffix(".mcap")
+        if not rec.armlab_metadata and bag not in options.labels:
+            shared.setdefault((rec.scenario, rec.controller), []).append(rec.episode)
+    merged = {e: eps for eps in shared.values() if len(eps) > 1 for e in eps}
+    return [
+        dataclasses.replace(
+            rec,
+            notes=(
+                *rec.notes,
+                f"labelled '{rec.controller}' by --controller like {len(merged[rec.episode]) - 1} "
+                "other bag(s) without our metadata ("
+                + ", ".join(e for e in merged[rec.episode] if e != rec.episode)
+                + "): their metrics are averaged as repeats of one controller; if they are "
+                "different controllers, label each with --label BAG=CONTROLLER",
+            ),
+        )
+        if rec.episode in merged
+        else rec
+        for rec in recordings
+    ]

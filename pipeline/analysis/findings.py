@@ -235,3 +235,75 @@ def unsettled_joints(metrics: pl.DataFrame) -> dict[str, str]:
         joints = row["joint"]
         out[row["episode"]] = "settled" if not joints else "not settled: " + ", ".join(joints)
     return out
+
+
+# The checks a cell of :func:`check_grid` reports on.
+CONTACTS, SATURATION, GOAL, DEAD_BAND = "contacts", "saturation", "goal", "dead band"
+
+
+@dataclass(frozen=True)
+class CheckCell:
+    """The physical checks of one controller on one joint (or, for contacts, on the whole
+    arm: ``joint`` ""), over its episodes.
+
+    Attributes:
+        controller: the controller.
+        joint: the joint ("" for the per-episode contact check).
+        findings: what the checks found.
+        not_in_bag: checks some episode's bag holds no data for (n/a, never a pass):
+            contacts without our safety settings, saturation without effort limits, the
+            goal without a planned goal, the dead band without gains and friction.
+        episodes: how many episodes the cell covers.
+    """
+
+    controller: str
+    joint: str
+    findings: tuple[Finding, ...]
+    not_in_bag: tuple[str, ...]
+    episodes: int
+
+
+def check_grid(
+    recordings: Sequence[Recording],
+    views: Mapping[str, ProtocolView],
+    metrics: pl.DataFrame,
+    checks: PhysicalChecks,
+) -> tuple[CheckCell, ...]:
+    """The physical checks as a controller × joint grid (plus one contacts cell per
+    controller, ``joint`` ""), controllers in first-seen order, joints in recorded order."""
+    rows: dict[tuple[str, str], dict[str, Any]] = {
+        (r["episode"], r["joint"]): r for r in metrics.iter_rows(named=True)
+    }
+    found: dict[tuple[str, str], list[Finding]] = {}
+    for f in checks.findings:
+        found.setdefault((f.episode, getattr(f, "joint", "")), []).append(f)
+    cells: dict[tuple[str, str], tuple[list[Finding], set[str], int]] = {}
+    for rec in recordings:
+        view = views.get(rec.episode)
+        st = view.settings if view is not None else None
+        stiffness = stiffness_nm_per_rad(st, robot_facts(rec).spec) if st is not None else None
+        for joint in ("", *rec.joint_names):
+            cell = cells.setdefault((rec.controller, joint), ([], set(), 0))
+            missing = cell[1]
+            if joint == "":
+                if st is None:
+                    missing.add(CONTACTS)
+            else:
+                m = rows.get((rec.episode, joint), {})
+                if m.get("saturation_fraction") is None:
+                    missing.add(SATURATION)
+                if st is None or m.get("final_error") is None:
+                    missing.add(GOAL)
+                k = rec.joint_names.index(joint)
+                friction = st.plant.frictionloss if st is not None else ()
+                if stiffness is None or k >= len(friction) or k >= len(stiffness):
+                    missing.add(DEAD_BAND)
+            cells[(rec.controller, joint)] = (
+                cell[0] + found.get((rec.episode, joint), []),
+                missing,
+                cell[2] + 1,
+            )
+    return tuple(
+        CheckCell(c, j, tuple(fs), tuple(sorted(missing)), n)
+        for (c, j), (fs, missing, n) in cells.items()
+    )

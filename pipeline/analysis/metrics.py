@@ -18,12 +18,14 @@ baseline x 100, null when |baseline| is below :data:`ERROR_FLOOR_RAD` or missing
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import polars as pl
 
 from pipeline.analysis.catalog import (
+    BY_NAME,
     COMPARED_METRICS,
+    ERROR_FLOOR_RAD,
     METRIC_COLUMNS,
     METRIC_SOURCES,
     METRICS,
@@ -33,6 +35,7 @@ from pipeline.analysis.catalog import (
     Frame,
 )
 from pipeline.analysis.episodes import comparable
+from pipeline.analysis.task_space import TaskSpace, tcp_errors
 from pipeline.constants import FINAL_WINDOW_S
 from pipeline.errors import ReportError, unknown_name_message
 
@@ -54,9 +57,6 @@ __all__ = [
 ]
 
 SATURATION_REL_TOL = 1e-6
-# Below this a joint error is numerical noise (a perfect-model CTC settles to ~1e-13 rad);
-# a reduction relative to it would read 1e10 %, so none is given.
-ERROR_FLOOR_RAD = 1e-9
 
 _KEY = ["episode", "joint"]
 
@@ -142,9 +142,28 @@ def _prepared_joint_states(samples: pl.DataFrame, limits: pl.DataFrame | None) -
         _time_sorted(samples)
         .join(limits, on=_KEY, how="left", maintain_order="left")
         .with_columns(
-            # Null (not counted) where no effort was recorded.
-            saturated=pl.when(eff.is_not_null()).then((at_limit | clipped).fill_null(False)),
+            # Null (not counted) where no effort was recorded or the limit is unknown (a
+            # bag without its robot: "0 % saturated" would be a pass it cannot give).
+            saturated=pl.when(eff.is_not_null() & limit.is_not_null()).then(
+                (at_limit | clipped).fill_null(False)
+            ),
         )
+    )
+
+
+def _prepared_tcp(
+    controller_states: pl.DataFrame,
+    episodes: pl.DataFrame,
+    task_space: Mapping[str, TaskSpace] | None,
+    *,
+    final_window_s: float,
+) -> pl.DataFrame:
+    """The ``tcp`` frame of the catalog: the TCP errors of each sample time (row-local)."""
+    t = pl.col("time_s")
+    return (
+        tcp_errors(controller_states, task_space)
+        .join(_episode_columns(episodes, final_window_s), on="episode", how="left")
+        .with_columns(in_final=(t >= pl.col("end_s") - pl.col("final_window_s") - 1e-9))
     )
 
 
@@ -161,6 +180,7 @@ def metric_partials(
     *,
     settling_tolerance_rad: float = SETTLING_TOLERANCE_RAD,
     final_window_s: float = FINAL_WINDOW_S,
+    task_space: Mapping[str, TaskSpace] | None = None,
 ) -> pl.DataFrame:
     """The catalog's partials over one time slice of the recorded frames.
 
@@ -179,11 +199,14 @@ def metric_partials(
         limits: ``episode, joint, effort_limit_nm`` (null where unknown); None = unknown.
         settling_tolerance_rad: band |e| must stay in to count as settled [rad].
         final_window_s: longest window at the end used for the final error [s].
+        task_space: per episode, the robot's FK and tool offset for the task-space
+            metrics (an episode without one has no ``tcp`` row).
 
     Returns:
-        One row per (episode, joint) present in either frame of the slice: ``episode``,
-        ``joint``, then one column per partial (:meth:`Metric.partial_column`; null for
-        the partials of a frame with no row of that joint in the slice).
+        One row per (episode, joint) present in any frame of the slice (the TCP as joint
+        ``tcp``): ``episode``, ``joint``, then one column per partial
+        (:meth:`Metric.partial_column`; null for the partials of a frame with no row of
+        that joint in the slice).
     """
     errors = _partials_over(
         _prepared_controller_states(
@@ -195,7 +218,12 @@ def metric_partials(
         "controller_state",
     )
     states = _partials_over(_prepared_joint_states(samples, limits), "joint_states")
+    tcp = _partials_over(
+        _prepared_tcp(controller_states, episodes, task_space, final_window_s=final_window_s),
+        "tcp",
+    )
     out = states.join(errors, on=_KEY, how="full", coalesce=True, maintain_order="left")
+    out = pl.concat([out, tcp], how="diagonal_relaxed")
     return out.select(*_KEY, *PARTIAL_COLUMNS)
 
 
@@ -221,8 +249,10 @@ def joint_metrics(
     *,
     settling_tolerance_rad: float = SETTLING_TOLERANCE_RAD,
     final_window_s: float = FINAL_WINDOW_S,
+    task_space: Mapping[str, TaskSpace] | None = None,
 ) -> pl.DataFrame:
-    """Metrics per episode and joint (columns ``episode``, ``joint``, :data:`METRIC_COLUMNS`).
+    """Metrics per episode and joint (columns ``episode``, ``joint``, :data:`METRIC_COLUMNS`;
+    the task-space metrics in the rows of joint ``tcp`` of the episodes in ``task_space``).
 
     Error-based metrics come from ``controller_states`` (full rate), velocity and effort
     metrics from ``samples`` (``/joint_states``); see :data:`METRIC_SOURCES`. The whole
@@ -236,6 +266,7 @@ def joint_metrics(
         limits: ``episode, joint, effort_limit_nm`` (null where unknown); None = unknown.
         settling_tolerance_rad: band |e| must stay in to count as settled [rad].
         final_window_s: longest window at the end used for the final error [s].
+        task_space: per episode, the robot's FK and tool offset (None: no TCP rows).
     """
     return finish_metrics(
         metric_partials(
@@ -245,6 +276,7 @@ def joint_metrics(
             limits,
             settling_tolerance_rad=settling_tolerance_rad,
             final_window_s=final_window_s,
+            task_space=task_space,
         )
     )
 
@@ -290,13 +322,16 @@ def pairs(episodes: pl.DataFrame, *, baseline: str) -> list[tuple[str, str, str]
     return sorted(out)
 
 
-def reduction_pct(baseline: pl.Expr, candidate: pl.Expr) -> pl.Expr:
-    """(baseline - candidate) / baseline x 100; null when |baseline| < :data:`ERROR_FLOOR_RAD`
-    (numerical noise: the ratio would be meaningless) or either value is missing."""
+def reduction_pct(
+    baseline: pl.Expr, candidate: pl.Expr, *, floor: float = ERROR_FLOOR_RAD
+) -> pl.Expr:
+    """(baseline - candidate) / baseline x 100; null when |baseline| < ``floor`` (numerical
+    noise: the ratio would be meaningless; a metric's :attr:`Metric.floor`) or either value
+    is missing."""
     valid = (
         baseline.is_not_null()
         & baseline.is_not_nan()
-        & (baseline.abs() >= ERROR_FLOOR_RAD)
+        & (baseline.abs() >= floor)
         & candidate.is_not_null()
     )
     return pl.when(valid).then((baseline - candidate) / baseline * 100.0).otherwise(None)
@@ -330,9 +365,11 @@ def comparisons(
     )
     out = out.with_columns(
         [
-            reduction_pct(pl.col(f"{m}_baseline"), pl.col(f"{m}_candidate")).alias(
-                f"{m}_reduction_pct"
-            )
+            reduction_pct(
+                pl.col(f"{m}_baseline"),
+                pl.col(f"{m}_candidate"),
+                floor=BY_NAME[m].floor if m in BY_NAME else ERROR_FLOOR_RAD,
+            ).alias(f"{m}_reduction_pct")
             for m in compared
         ]
     )

@@ -27,7 +27,14 @@ from pipeline.analysis.metrics import ERROR_FLOOR_RAD, pairs
 from pipeline.analysis.protocol import ProtocolView
 from pipeline.log.reader import Recording
 
-PAPER_SOURCE = "seeds/000 (UR5, ROS PID vs CTC), section 4.3: Fig. 6 text, Table 3, conclusion 2)"
+PAPER_CITATION = (
+    'Wang Hao, Fan Pingqing, Wang Yansong, Li Cong, "基于ROS平台的机械臂精确控制研究" '
+    "(Research on precise control of a manipulator based on ROS), Shanghai University of "
+    "Engineering Science, 2019"
+)
+PAPER_SOURCE = (
+    f"{PAPER_CITATION}; section 4.3 (UR5, ROS PID vs CTC): Fig. 6 text, Table 3, conclusion 2)"
+)
 
 PAPER_BASELINE = "pid"
 PAPER_CANDIDATE = "ctc"

@@ -236,7 +236,7 @@ def ik_check_cmd(
     ] = 0,
     out: Annotated[
         str,
-        typer.Option("--out", help="Folder that receives ik_check.json and error_map.png."),
+        typer.Option("--out", "-o", help="Folder that receives ik_check.json and error_map.png."),
     ] = "reports/ik-check",
     min_success_rate: Annotated[
         float,

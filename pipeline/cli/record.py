@@ -22,7 +22,7 @@ def record_cmd(
         str, typer.Option("--params", help="Scenarios, controllers and episodes (YAML).")
     ] = "params.yaml",
     out: Annotated[
-        str, typer.Option("--out", help="Directory that receives one ROS 2 bag per episode.")
+        str, typer.Option("--out", "-o", help="Directory that receives one ROS 2 bag per episode.")
     ] = "recordings",
     only: Annotated[
         list[str] | None,

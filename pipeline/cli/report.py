@@ -10,6 +10,18 @@ from rich.console import Console
 from rich.table import Table
 
 from pipeline.cli.root import app, console
+from pipeline.errors import PipelineError
+
+
+def _labels(items: list[str]) -> dict[str, str]:
+    """``--label BAG=CONTROLLER`` items as a dict (a one-line error for a bad one)."""
+    out: dict[str, str] = {}
+    for item in items:
+        bag, sep, controller = item.partition("=")
+        if not sep or not bag.strip() or not controller.strip():
+            raise PipelineError(f"--label {item}: expected BAG=CONTROLLER")
+        out[bag.strip().removesuffix(".mcap")] = controller.strip()
+    return out
 
 
 def _remaps(items: list[str]) -> dict[str, str]:
@@ -34,7 +46,7 @@ def report_cmd(
         str, typer.Option("--recordings", help="Folder of recordings (rosbag2 folders / .mcap).")
     ] = "recordings",
     out: Annotated[
-        str, typer.Option("--out", help="Folder that receives report.md, metrics.json, .rrd.")
+        str, typer.Option("--out", "-o", help="Folder that receives report.md, metrics.json, .rrd.")
     ] = "reports",
     baseline: Annotated[
         str, typer.Option("--baseline", help="Controller the others are compared against.")
@@ -59,11 +71,28 @@ def report_cmd(
             help="Controller label for bags without our metadata (default: the bag's name).",
         ),
     ] = None,
+    label: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--label",
+            help="BAG=CONTROLLER: the controller label of one bag (its folder or .mcap "
+            "name), before --controller; bags with different labels are different "
+            "controllers. Repeatable.",
+        ),
+    ] = None,
     scenario: Annotated[
         str | None,
         typer.Option(
             "--scenario",
             help="Scenario label for bags without our metadata (default: 'external').",
+        ),
+    ] = None,
+    tool_offset: Annotated[
+        str | None,
+        typer.Option(
+            "--tool-offset",
+            help="The tool centre point of the task-space metrics in the flange frame: "
+            "x,y,z [m] or x,y,z,roll,pitch,yaw [m, rad] (default: the flange).",
         ),
     ] = None,
     salvage: Annotated[
@@ -104,11 +133,13 @@ def report_cmd(
 
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
+    from pipeline.analysis.task_space import FLANGE_TOOL, ToolOffset
     from pipeline.fsutil import check_out_dir
     from pipeline.log.reader import ReadOptions
     from pipeline.stages.report import run_report
 
     check_out_dir(out)  # "" is the working folder to Path; say what was given
+    tool = FLANGE_TOOL if tool_offset is None else ToolOffset.parse(tool_offset)
     progress_console = Console(stderr=True)
     with Progress(
         TextColumn("{task.description:<24}"),
@@ -137,7 +168,9 @@ def report_cmd(
                 salvage=salvage,
                 controller=controller,
                 scenario=scenario,
+                labels=_labels(label or []),
             ),
+            tool=tool,
         )
     from rich import box
     from rich.markup import escape

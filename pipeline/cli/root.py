@@ -26,12 +26,30 @@ STATE = {"debug": False}
 """Options of the root command the commands read (``--debug``)."""
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        from pipeline import __version__
+
+        sys.stdout.write(f"armlab-pipeline {__version__}\n")
+        raise typer.Exit()
+
+
 @app.callback()
 def _root(
     debug: Annotated[
         bool, typer.Option("--debug", help="Show Python tracebacks for errors.")
     ] = False,
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version",
+            help="Print the version and exit.",
+            callback=_print_version,
+            is_eager=True,
+        ),
+    ] = False,
 ) -> None:
+    del version
     STATE["debug"] = debug
 
 

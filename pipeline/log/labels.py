@@ -65,11 +65,15 @@ def read_labels(
     notes: list[str] = []
     raw_meta = dict(collector.metadata.get(METADATA_EPISODE, {}))
     ours = METADATA_EPISODE in collector.metadata
-    labels = {"controller": options.controller, "scenario": options.scenario}
+    bag = source.name.removesuffix(".mcap")
+    labels = {
+        "controller": options.labels.get(bag) or options.controller,
+        "scenario": options.scenario,
+    }
     if not ours:
         raw_meta = {
-            "episode": source.name.removesuffix(".mcap"),
-            "controller": source.name.removesuffix(".mcap"),
+            "episode": bag,
+            "controller": bag,
             "scenario": "external",
         }
     raw_meta |= {k: v for k, v in labels.items() if v}

@@ -80,6 +80,8 @@ class ReadOptions:
         salvage: read every intact chunk before damage instead of refusing the file.
         controller: controller label (default: our metadata, else the bag's name).
         scenario: scenario label (default: our metadata, else "external").
+        labels: bag name (its folder or ``.mcap`` file name without the suffix) ->
+            controller label, before ``controller``.
         stream_above_bytes: storage files larger than this in all are read in windows
             (:mod:`pipeline.log.windowed`); None: :data:`STREAM_ABOVE_BYTES`.
         window_steps: control steps per window of a windowed read (0: the default).
@@ -89,6 +91,7 @@ class ReadOptions:
     salvage: bool = False
     controller: str | None = None
     scenario: str | None = None
+    labels: Mapping[str, str] = field(default_factory=dict)
     stream_above_bytes: int | None = None
     window_steps: int = 0
 

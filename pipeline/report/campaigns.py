@@ -28,11 +28,12 @@ from pipeline.analysis.campaign import (
     ALPHA,
     SWEPT_PREFIX,
     TABLE_DIR,
-    WILCOXON,
+    TOO_FEW,
     by_parameter,
     swept_axes,
     win_loss,
 )
+from pipeline.analysis.summary import HEADLINE_TASK_METRICS
 from pipeline.report import md
 from pipeline.report.colors import controller_colors, mpl
 from pipeline.report.figures import FigureFile, save_figure, subplot_grid
@@ -244,12 +245,35 @@ def _parameter_figure(
     return fig
 
 
-def _verdict_cell(row: dict[str, object]) -> str:
-    effect, p, verdict = row["effect_pct"], row["p_value"], row["verdict"]
-    if verdict == "n/a" or not isinstance(effect, float) or not isinstance(p, float):
+# A baseline below this many times its metric's noise floor is "near the noise": its
+# cells give the absolute difference beside the percentage.
+NEAR_NOISE_FLOORS = 1000.0
+
+
+def _verdict_cell(row: dict[str, object], m: catalog.Metric) -> str:
+    effect, hw, p, verdict = (
+        row["effect_pct"],
+        row["effect_ci95_half_width"],
+        row["p_holm"],
+        row["verdict"],
+    )
+    if verdict == "n/a" or not isinstance(effect, float):
         return "n/a"
+    if effect < md.RATIO_BELOW_PCT:
+        size = f"{1.0 - effect / 100.0:.3g}× the baseline's"
+    else:
+        size = f"{effect:+.0f} ± {hw:.0f} %" if isinstance(hw, float) else f"{effect:+.0f} %"
+    base, diff = row["baseline_mean"], row["abs_diff"]
+    if (
+        isinstance(base, float)
+        and isinstance(diff, float)
+        and abs(base) < NEAR_NOISE_FLOORS * m.floor
+    ):
+        size += f" (Δ {diff:+.2g} {m.unit})"
+    if not isinstance(p, float):
+        return f"{size} (n = {row['n']}; too few pairs for a test)"
     mark = {"wins": "**wins**", "loses": "**loses**"}.get(str(verdict), "n.s.")
-    return f"{mark} {effect:+.0f} % (p = {p:.2g}, n = {row['n']})"
+    return f"{mark} {size} (Holm p = {p:.2g}, n = {row['n']})"
 
 
 def campaign_section(
@@ -332,24 +356,23 @@ def campaign_section(
         wl_rel = f"{TABLE_DIR}/{stem}_win_loss.csv"
         wl.write_csv(out_dir / wl_rel)
         files.append(wl_rel)
-        tests = sorted(set(wl.get_column("test").to_list()))
+        tests = sorted(set(wl.get_column("test").to_list()) - {TOO_FEW})
+        n_tests = sorted(set(wl.get_column("tests").to_list()))
         lines += [
             f"### Win/loss against `{baseline}` (joint × condition)",
             "",
-            f"Each cell: the candidate **wins** or **loses** when a two-sided test gives "
-            f"p < {ALPHA:g}, else *n.s.* (not significant); the effect is the median "
-            "per-seed reduction (baseline − candidate) / baseline where seeds pair, else the "
-            "reduction of the "
-            f"medians. Tests used: {'; '.join(tests)}. Every cell: [`{wl_rel}`]({wl_rel}).",
+            "Each cell, the size: the mean per-pair reduction (baseline − candidate) / "
+            "baseline with its paired 95 % Student-t interval where seeds pair (else the "
+            "reduction of the medians), the absolute difference beside it where the "
+            "baseline is near the noise, a ratio where the candidate is more than twice the "
+            f"baseline. The sign: a two-sided test ({'; '.join(tests) or 'none'}) only where "
+            f"it can reach p < {ALPHA:g} (signed rank: {MIN_SIGNED_RANK_N} pairs), its p "
+            "Holm-corrected over the tests of its table "
+            f"({', '.join(str(c) for c in n_tests)} test(s) per table); **wins** / **loses** "
+            f"when the corrected p < {ALPHA:g}, *n.s.* when not; with fewer pairs the cell "
+            f"says *too few pairs for a test*. Every cell: [`{wl_rel}`]({wl_rel}).",
             "",
         ]
-        if WILCOXON in tests and min(wl.get_column("n").to_list()) < MIN_SIGNED_RANK_N:
-            lines += [
-                f"With fewer than {MIN_SIGNED_RANK_N} seed pairs the signed-rank test cannot "
-                f"reach p < {ALPHA:g} (its smallest two-sided p for 5 pairs is 0.0625): *n.s.* "
-                "there means too few seeds to tell, not no difference.",
-                "",
-            ]
         for metric in compared:
             m = catalog.BY_NAME[metric]
             for cand in sorted(set(wl.get_column("candidate").to_list())):
@@ -359,13 +382,14 @@ def campaign_section(
                 cells = {(r["joint"], r["condition"]): r for r in sub.iter_rows(named=True)}
                 rows = [
                     [
-                        f"{k + 1} {joint}",
+                        joint if joint == catalog.TCP_JOINT else f"{k + 1} {joint}",
                         *[
-                            _verdict_cell(cells[(joint, c)]) if (joint, c) in cells else "n/a"
+                            _verdict_cell(cells[(joint, c)], m) if (joint, c) in cells else "n/a"
                             for c in shown
                         ],
                     ]
                     for k, joint in enumerate(_joints(table))
+                    if m.applies_to(joint)
                 ]
                 lines += [
                     f"#### {m.title}: `{cand}` vs `{baseline}`",
@@ -382,10 +406,16 @@ def campaign_section(
 
     if draw:
         figures: list[FigureFile] = []
-        for metric in compared:
+        # the joints' compared metrics and the TCP's max errors (not its RMS and final)
+        drawn = [
+            x for x in compared
+            if catalog.BY_NAME[x].space == "joint" or x in HEADLINE_TASK_METRICS
+        ]  # fmt: skip
+        for metric in drawn:
             m = catalog.BY_NAME[metric]
+            sub = table.filter((pl.col("joint") == catalog.TCP_JOINT) == (m.space == "task"))
             fig = _distribution_figure(
-                table, m, shown, colors, f"{name}: {m.title.lower()} per condition and controller"
+                sub, m, shown, colors, f"{name}: {m.title.lower()} per condition and controller"
             )
             figures.append(
                 FigureFile(
@@ -394,7 +424,7 @@ def campaign_section(
                     f"(boxes: quartiles; points: episodes, up to {MAX_POINTS_PER_BOX} per box)",
                 )
             )
-            fig = _ecdf_figure(table, m, colors, f"{name}: {m.title.lower()}, ECDF")
+            fig = _ecdf_figure(sub, m, colors, f"{name}: {m.title.lower()}, ECDF")
             figures.append(
                 FigureFile(
                     save_figure(fig, out_dir, f"{stem}_{metric}_ecdf.png"),
@@ -404,7 +434,7 @@ def campaign_section(
             for axis in axes[:MAX_AXES_DRAWN]:
                 short = axis.removeprefix(SWEPT_PREFIX)
                 fig = _parameter_figure(
-                    table, axis, m, colors, f"{name}: {m.title.lower()} against {short}"
+                    sub, axis, m, colors, f"{name}: {m.title.lower()} against {short}"
                 )
                 figures.append(
                     FigureFile(

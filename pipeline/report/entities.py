@@ -61,6 +61,28 @@ def arm_path(episode: str) -> str:
     return f"{WORLD_ROOT}/{part(episode)}/arm"
 
 
+TCP_ROOT = "tcp"
+TCP_QUANTITIES = {
+    "position_error_mm": "TCP position error [mm] (FK of reference vs true state)",
+    "orientation_error_mrad": "TCP orientation error [mrad] (FK of reference vs true state)",
+}
+
+
+def tcp_quantity_path(quantity: str) -> str:
+    """Parent of every episode's series of one TCP error (a time-series view's origin)."""
+    return f"{TCP_ROOT}/{part(quantity)}"
+
+
+def tcp_series_path(quantity: str, episode: str) -> str:
+    """One episode's series of one TCP error."""
+    return f"{tcp_quantity_path(quantity)}/{part(episode)}"
+
+
+def tcp_path_path(episode: str) -> str:
+    """The TCP's path (static, FK with the tool offset) of one episode."""
+    return f"{WORLD_ROOT}/{part(episode)}/tcp_path"
+
+
 def ee_path_path(episode: str) -> str:
     """The end-effector path (static) of one episode."""
     return f"{WORLD_ROOT}/{part(episode)}/ee_path"

@@ -310,7 +310,7 @@ def _position_with_inset(data: ReportData, recs: list[Recording], scenario: str)
     ax.grid(True, lw=0.3)
     _legend(fig, data, recs, reference=True)
     first_joint = recs[0].joint_names[0]
-    fig.suptitle(f"{scenario}: joint 1 ({first_joint}) reference and actual (cf. paper Fig. 5)",
+    fig.suptitle(f"{scenario}: joint 1 ({first_joint}) reference and actual{_cf(data, recs, '5')}",
                  fontsize=10, x=0.01, ha="left", y=0.9)  # fmt: skip
     fig.subplots_adjust(top=0.8)
     return fig
@@ -336,10 +336,54 @@ def _error_joint1(data: ReportData, recs: list[Recording], scenario: str) -> Fig
     ax.set_ylabel("|error| [rad] (log)" if log else "error [rad]")
     ax.grid(True, lw=0.3)
     _legend(fig, data, recs, reference=False)
-    fig.suptitle(f"{scenario}: joint 1 tracking error, reference - actual (cf. paper Fig. 6)",
+    fig.suptitle(f"{scenario}: joint 1 tracking error, reference - actual{_cf(data, recs, '6')}",
                  fontsize=10, x=0.01, ha="left", y=0.9)  # fmt: skip
     fig.subplots_adjust(top=0.8)
     return fig
+
+
+def _tcp_errors(data: ReportData, recs: list[Recording], scenario: str) -> Figure | None:
+    """The TCP position [mm] and orientation [mrad] errors per episode (None when no
+    episode has a robot model)."""
+    series = [(rec, data.tcp_series(rec.episode)) for rec in recs]
+    series = [(rec, s) for rec, s in series if s.height]
+    if not series:
+        return None
+    fig = Figure(figsize=(7.5, 5.2))
+    axes = fig.subplots(2, 1, sharex=True)
+    for ax, column, label in (
+        (axes[0], "position_error_mm", "position error [mm]"),
+        (axes[1], "orientation_error_mrad", "orientation error [mrad]"),
+    ):
+        for rec, frame in series:
+            t, y = _thin(frame.get_column("time_s").to_numpy(), frame.get_column(column).to_numpy())
+            ax.plot(t, y, lw=1.0, color=_rgb(data.color(rec.episode)),
+                    alpha=_alpha(recs, rec.controller))  # fmt: skip
+        _motion_end(ax, recs, label=ax is axes[0])
+        ax.set_ylabel(label)
+        ax.set_ylim(bottom=0.0)
+        ax.grid(True, lw=0.3)
+    axes[1].set_xlabel("time [s]")
+    _legend(fig, data, recs, reference=False)
+    fig.suptitle(f"{scenario}: tool centre point error, FK(reference) vs FK(true state)",
+                 fontsize=10, x=0.01, ha="left", y=0.95)  # fmt: skip
+    fig.subplots_adjust(left=0.11, right=0.98, bottom=0.09, top=0.88, hspace=0.12)
+    return fig
+
+
+def _cites_paper(data: ReportData, recs: list[Recording]) -> bool:
+    """Whether the scenario is the paper's experiment (its captions cite the paper's
+    figures); an external bag's never is."""
+    views = [data.protocol.get(r.episode) for r in recs]
+    return bool(views) and all(
+        v is not None and v.settings is not None and v.settings.protocol.reproduces_paper
+        for v in views
+    )
+
+
+def _cf(data: ReportData, recs: list[Recording], fig: str) -> str:
+    """`` (cf. paper Fig. N)`` in a title of the paper's experiment, else nothing."""
+    return f" (cf. paper Fig. {fig})" if _cites_paper(data, recs) else ""
 
 
 def scenario_figures(
@@ -357,6 +401,11 @@ def scenario_figures(
     """
     recs = data.in_scenario(scenario)
     stem = stem or slug(scenario)
+    paper = _cites_paper(data, recs)
+
+    def cite(text: str, fig: str) -> str:
+        return f"{text} (paper Fig. {fig})" if paper else text
+
     out = [
         FigureFile(
             save_figure(
@@ -364,31 +413,34 @@ def scenario_figures(
                 out_dir,
                 f"{stem}_fig5_joint1_position.png",
             ),
-            "Joint 1: reference and measured position per controller, with a zoom where the "
-            "error is largest (paper Fig. 5)",
+            cite(
+                "Joint 1: reference and actual position per controller, with a zoom where the "
+                "error is largest",
+                "5",
+            ),
         ),
         FigureFile(
             save_figure(
                 _error_joint1(data, recs, scenario), out_dir, f"{stem}_fig6_joint1_error.png"
             ),
-            "Joint 1: tracking error per controller (paper Fig. 6)",
+            cite("Joint 1: tracking error per controller", "6"),
         ),
     ]
     panels = (
         (
             "error_rad",
             "error [rad]",
-            "tracking error of every joint (cf. paper Fig. 7)",
+            f"tracking error of every joint{_cf(data, recs, '7')}",
             "fig7_errors",
-            "Tracking error of every joint (paper Fig. 7)",
+            cite("Tracking error of every joint", "7"),
             False,
         ),
         (
             "velocity_rad_s",
             "velocity [rad/s]",
-            "measured joint velocities (cf. paper Fig. 8)",
+            f"measured joint velocities{_cf(data, recs, '8')}",
             "fig8_velocities",
-            "Measured joint velocities (paper Fig. 8)",
+            cite("Measured joint velocities", "8"),
             False,
         ),
         (
@@ -419,4 +471,13 @@ def scenario_figures(
         )
         caption += cut
         out.append(FigureFile(save_figure(fig, out_dir, f"{stem}_{name}.png"), caption))
+    tcp = _tcp_errors(data, recs, scenario)
+    if tcp is not None:
+        out.append(
+            FigureFile(
+                save_figure(tcp, out_dir, f"{stem}_tcp_errors.png"),
+                "Tool centre point: position and orientation error per controller "
+                "(FK of the reference against FK of the true state, measured where not recorded)",
+            )
+        )
     return out

@@ -19,6 +19,7 @@ from pipeline.analysis.aggregate import (
 from pipeline.analysis.checks import duplicate_stamp_notes
 from pipeline.analysis.episodes import comparable
 from pipeline.analysis.protocol import ProtocolView
+from pipeline.analysis.task_space import TaskSpace, tcp_errors
 from pipeline.log.reader import Recording
 from pipeline.report.colors import controller_colors
 
@@ -51,6 +52,8 @@ class ReportData:
             typed settings).
         error_series: thinned error series of the episodes whose frames were let go after
             their metrics (campaign episodes outside the sample).
+        task_space: per episode, the robot's FK and the TCP (episodes without a robot
+            model in the bag have none: task-space metrics n/a).
     """
 
     recordings: tuple[Recording, ...]
@@ -64,6 +67,26 @@ class ReportData:
     error_series: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = field(
         default_factory=dict
     )
+    task_space: dict[str, TaskSpace] = field(default_factory=dict)
+
+    def tcp_series(self, episode: str) -> pl.DataFrame:
+        """The TCP errors of an episode per ``/controller_state`` time (``time_s``,
+        ``position_error_mm``, ``orientation_error_mrad``; empty without a robot model)."""
+        model = self.task_space.get(episode)
+        rec = self.recording(episode)
+        return tcp_errors(rec.controller_states, None if model is None else {episode: model})
+
+    def tcp_path_m(self, episode: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(times [s], (M, 3) TCP positions [m]) of the position the errors use; empty
+        without a robot model."""
+        model = self.task_space.get(episode)
+        rec = self.recording(episode)
+        t = cs_times_s(rec)
+        q = cs_wide(rec, "feedback_position_rad")
+        if model is None or not t.size or model.joint_names != rec.joint_names:
+            return np.zeros(0), np.zeros((0, 3))
+        keep = np.isfinite(q).all(axis=1)
+        return t[keep], model.tcp_poses(q[keep])[:, :3, 3]
 
     def errors(self, episode: str) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(times [s], (M, n) errors) of an episode: the thinned series kept while reading

@@ -19,6 +19,7 @@ from pipeline.analysis.aggregate import CONFIDENCE, MeanCI
 from pipeline.analysis.episodes import shown_status
 from pipeline.analysis.findings import (
     SATURATION_WARN_FRACTION,
+    check_grid,
     physical_checks,
     unsettled_joints,
     worst_saturation,
@@ -41,6 +42,7 @@ from pipeline.report.md import (
 from pipeline.report.paper import versus_paper
 from pipeline.report.physical_checks import physical_checks_section
 from pipeline.report.setup import setup_section
+from pipeline.report.summary import summary_section
 
 REPORT_FILE = "report.md"
 # A campaign's mean ± CI tables are written for at most this many conditions.
@@ -95,6 +97,8 @@ def _missing(data: ReportData, rec: Recording, metric: str) -> str:
     m = catalog.metric(metric)
     if m.needs_completed_motion and not _completed(data, rec.episode):
         return _incomplete(data, rec)
+    if m.space == "task":
+        return "n/a (no robot model in the bag)"
     if m.frame == "joint_states":
         return NOT_RECORDED
     if metric == "settling_time":
@@ -152,6 +156,7 @@ def _intro(data: ReportData) -> list[str]:
         + f"Recorded by armlab-pipeline {', '.join(versions)} (git {', '.join(commits)}).",
         *_salvaged_summary(data),
         "",
+        *summary_section(data),
         "Interactive view: [`recording.rrd`](recording.rrd), next to this file: open it with "
         "`rerun recording.rrd` (per-joint time series, the arm in 3D per controller).",
         "Numbers: [`metrics.json`](metrics.json); series for `dvc plots`: "
@@ -234,7 +239,9 @@ def _intro(data: ReportData) -> list[str]:
         f"{catalog.DRIFT_FLOOR_RAD:g} rad): a transient, not a steady state (a longer "
         "`hold_s` measures the steady state).",
     ]
-    lines += physical_checks_section(physical_checks(data.recordings, data.protocol, data.metrics))
+    checks = physical_checks(data.recordings, data.protocol, data.metrics)
+    grid = check_grid(data.recordings, data.protocol, data.metrics, checks)
+    lines += physical_checks_section(checks, grid)
     failed = [r for r in recs if r.status != "ok"]
     if failed:
         lines += ["", "### Failed episodes", ""]
@@ -263,8 +270,18 @@ def _intro(data: ReportData) -> list[str]:
     return lines
 
 
-# The compared metrics: aggregate and per-episode tables with reductions.
-_ERROR_TITLES = tuple((m.name, m.heading) for m in catalog.METRICS if m.compared)
+# The compared metrics: aggregate and per-episode tables with reductions (joint space: a
+# table per metric; task space: one table, a row per metric, of the TCP rows).
+_ERROR_TITLES = tuple(
+    (m.name, m.heading) for m in catalog.METRICS if m.compared and m.space == "joint"
+)
+_TCP_METRICS = tuple(m for m in catalog.METRICS if m.compared and m.space == "task")
+_TCP_HEADING = "Task space: tool centre point (TCP)"
+
+
+def _has_tcp(data: ReportData, episodes: Sequence[str]) -> bool:
+    return any(data.metric(e, catalog.TCP_JOINT, m.name) is not None
+               for e in episodes for m in _TCP_METRICS)  # fmt: skip
 
 
 def _aggregate_tables(data: ReportData, scenario: str) -> list[str]:
@@ -325,6 +342,33 @@ def _aggregate_tables(data: ReportData, scenario: str) -> list[str]:
                 row.append(md.mean_ci_pct(ci))
             rows.append(row)
         lines += [f"##### {title}", "", md.table(header, rows), ""]
+    if not _has_tcp(data, [r.episode for r in recs]):
+        return lines
+    header = ["TCP metric", *controllers]
+    header += [f"{c} vs {data.baseline} (per pair)" for c in candidates]
+    rows = []
+    for m in _TCP_METRICS:
+        row = [m.heading]
+        for c in controllers:
+            ci = cell(
+                summary.filter(
+                    (pl.col("controller") == c)
+                    & (pl.col("joint") == catalog.TCP_JOINT)
+                    & (pl.col("metric") == m.name)
+                )
+            )
+            row.append(md.mean_ci(ci, lambda x: f"{x:.3g}", lambda x: f"{x:.1g}"))
+        for c in candidates:
+            ci = cell(
+                reductions.filter(
+                    (pl.col("controller") == c)
+                    & (pl.col("joint") == catalog.TCP_JOINT)
+                    & (pl.col("metric") == f"{m.name}_reduction_pct")
+                )
+            )
+            row.append(md.mean_ci_pct(ci))
+        rows.append(row)
+    lines += [f"##### {_TCP_HEADING}", "", md.table(header, rows), ""]
     return lines
 
 
@@ -357,6 +401,18 @@ def _error_tables(data: ReportData, scenario: str) -> list[str]:
             row += [md.pct(_reduction(data, b, c, joint, metric)) for b, c in pairs]
             rows.append(row)
         lines += [f"{level} {title}", "", md.table(header, rows), ""]
+    if _has_tcp(data, [r.episode for r in recs]):
+        header = ["TCP metric", *[_head(data, r) for r in recs]]
+        header += [f"{data.label(c)} vs {data.label(b)}" for b, c in pairs]
+        rows = []
+        for m in _TCP_METRICS:
+            row = [m.heading]
+            for r in recs:
+                v = _metric(data, r.episode, catalog.TCP_JOINT, m.name)
+                row.append(_missing(data, r, m.name) if v is None else format(v, m.fmt))
+            row += [md.pct(_reduction(data, b, c, catalog.TCP_JOINT, m.name)) for b, c in pairs]
+            rows.append(row)
+        lines += [f"{level} {_TCP_HEADING}", "", md.table(header, rows), ""]
     if pairs or repeated:
         lines.append(
             "Reduction = (baseline − candidate) / baseline × 100 (positive: the candidate "

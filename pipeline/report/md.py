@@ -16,6 +16,7 @@ MAX_ROWS = 40
 MAX_EPISODE_COLUMNS = 8
 NA = "n/a"
 NOT_RECORDED = "n/a (not recorded)"
+NOT_IN_BAG = "n/a (not in the bag)"
 ENDED_EARLY = "n/a (episode ended before the motion did)"
 SALVAGE_CUT = "n/a (recording salvaged: cut at the damage, motion end unknown)"
 FLOOR = f"{ERROR_FLOOR_RAD:.0e}".replace("e-0", "e-")  # "1e-9"

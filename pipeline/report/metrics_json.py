@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import polars as pl
 
+from pipeline.analysis import summary
 from pipeline.analysis.aggregate import CONFIDENCE
 from pipeline.analysis.catalog import BY_NAME, COMPARED_METRICS, METRIC_SOURCES, METRICS
 from pipeline.analysis.metrics import ERROR_FLOOR_RAD, SETTLING_TOLERANCE_RAD
@@ -17,6 +18,8 @@ from pipeline.constants import FINAL_WINDOW_S
 from pipeline.report.inputs import ReportData, cs_times_s, cs_wide, times_s, wide
 
 METRICS_FILE = "metrics.json"
+# The declared DVC metric: the headline reductions only (metrics.json is a plain output).
+HEADLINE_FILE = "headline.json"
 PLOTS_DIR = "plots"
 # Series CSVs are thinned to at most this many samples per episode and joint.
 MAX_CSV_POINTS = 1000
@@ -126,7 +129,9 @@ def metrics_document(data: ReportData) -> dict[str, Any]:
         joints: dict[str, Any] = {}
         if group is not None:
             for m in group.iter_rows(named=True):
-                joints[m["joint"]] = {x.name: _rounded(x.name, m[x.name]) for x in METRICS}
+                joints[m["joint"]] = {
+                    x.name: _rounded(x.name, m[x.name]) for x in METRICS if x.applies_to(m["joint"])
+                }
         episodes[ep] = {
             "controller": row["controller"],
             "scenario": row["scenario"],
@@ -157,6 +162,7 @@ def metrics_document(data: ReportData) -> dict[str, Any]:
             joints[m["joint"]] = {
                 f"{metric}_reduction_pct": number(m[f"{metric}_reduction_pct"])
                 for metric in COMPARED_METRICS
+                if BY_NAME[metric].applies_to(m["joint"])
             }
         comparisons.append(
             {"scenario": scenario, "baseline": base, "candidate": cand, "joints": joints}
@@ -171,6 +177,8 @@ def metrics_document(data: ReportData) -> dict[str, Any]:
                 f"{_FLOOR} (reduction_floor_rad)"
             ),
             "reduction_floor_rad": ERROR_FLOOR_RAD,
+            # per compared metric, in its unit (the TCP's: 1 nm, 1 nrad)
+            "reduction_floors": {m.name: m.floor for m in METRICS if m.compared},
             "confidence": CONFIDENCE,
             "metric_sources": dict(METRIC_SOURCES),
             "metric_units": {m.name: m.unit for m in METRICS},
@@ -199,6 +207,19 @@ def write_metrics(data: ReportData, out_dir: Path) -> str:
     """Write metrics.json into ``out_dir``; return its relative path."""
     (out_dir / METRICS_FILE).write_text(dumps_metrics(metrics_document(data)), encoding="utf-8")
     return METRICS_FILE
+
+
+def headline_json(data: ReportData) -> dict[str, Any]:
+    """headline.json's content: :func:`pipeline.analysis.summary.headline_document` of the
+    report's questions."""
+    joints = {g: list(r[0].joint_names) for g in data.groups() if (r := data.in_group(g))}
+    return summary.headline_document(summary.questions(data.reduction_summary, joints))
+
+
+def write_headline(data: ReportData, out_dir: Path) -> str:
+    """Write headline.json into ``out_dir``; return its relative path."""
+    (out_dir / HEADLINE_FILE).write_text(dumps_metrics(headline_json(data)), encoding="utf-8")
+    return HEADLINE_FILE
 
 
 def series_frame(data: ReportData, column: str, *, controller_state: bool = False) -> pl.DataFrame:

@@ -19,7 +19,8 @@ def versus_paper(data: ReportData) -> list[str]:
             "## Versus the paper",
             "",
             "No scenario here is marked as the paper's experiment (`reproduces_paper: true` "
-            "in params), so nothing is compared with the paper's numbers.",
+            f"in params; the paper: {paper.PAPER_CITATION}), so nothing is compared with the "
+            "paper's numbers.",
             "",
         ]
     out: list[str] = []

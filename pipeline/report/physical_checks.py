@@ -7,6 +7,7 @@ from pipeline.analysis.catalog import SETTLING_TOLERANCE_RAD
 from pipeline.analysis.findings import (
     GOAL_MISS_RAD,
     SATURATION_WARN_FRACTION,
+    CheckCell,
     ContactFinding,
     DeadBandFinding,
     Finding,
@@ -14,66 +15,71 @@ from pipeline.analysis.findings import (
     PhysicalChecks,
     SaturationFinding,
 )
-from pipeline.report.md import MAX_ROWS
+from pipeline.report.md import MAX_ROWS, NA, NOT_IN_BAG
+from pipeline.report.md import table as md_table
 
 
-def finding_text(f: Finding) -> str:
-    """One finding as the report says it (without the episode)."""
-    if isinstance(f, ContactFinding):
-        return (
-            f"{f.kind} contact {f.bodies[0]} – {f.bodies[1]}, "
-            f"{f.max_depth_m * 1e3:.2f} mm deep, t = {f.first_s:.3f} to "
-            f"{f.last_s:.3f} s from the motion start ({f.samples} samples)"
-        )
-    if isinstance(f, SaturationFinding):
-        return (
-            f"{f.joint} saturated {f.fraction * 100:.1f} % of the time (above "
-            f"{SATURATION_WARN_FRACTION * 100:.0f} %): its gains ask for more torque "
-            "than the motor has"
-        )
-    if isinstance(f, GoalMissFinding):
-        return (
-            f"{f.joint} never reaches its goal (error at the target {f.final_error_rad:.3g} "
-            f"rad > {GOAL_MISS_RAD:g} rad)"
-        )
-    assert isinstance(f, DeadBandFinding)
-    return (
-        f"`{f.controller_type}` on {f.joint}: proportional stiffness "
-        f"{f.stiffness_nm_per_rad:.3g} N m/rad against {f.friction_nm:.3g} N m of friction, "
-        f"a dead band of {f.width_rad:.3g} rad (> the "
-        f"{SETTLING_TOLERANCE_RAD:g} rad settling band): without integral action "
-        "the joint may stop anywhere in it; with it, only after the integral "
-        "breaks the friction away"
-    )
+def _short(fs: list[Finding], n: int) -> list[str]:
+    """A cell's findings, one phrase per kind: the worst value and in how many episodes."""
+    out: list[str] = []
+    kinds: dict[type, list[Finding]] = {}
+    for f in fs:
+        kinds.setdefault(type(f), []).append(f)
+    for kind, group in kinds.items():
+        k = len({f.episode for f in group})
+        share = f" ({k}/{n})" if n > 1 else ""
+        if kind is SaturationFinding:
+            worst = max(f.fraction for f in group if isinstance(f, SaturationFinding))
+            out.append(f"saturated {worst * 100:.0f} %{share}")
+        elif kind is GoalMissFinding:
+            miss = max(f.final_error_rad for f in group if isinstance(f, GoalMissFinding))
+            out.append(f"goal missed by {miss:.2g} rad{share}")
+        elif kind is DeadBandFinding:
+            width = max(f.width_rad for f in group if isinstance(f, DeadBandFinding))
+            out.append(f"dead band {width:.2g} rad{share}")
+        else:
+            depth = max(f.max_depth_m for f in group if isinstance(f, ContactFinding))
+            out.append(f"contact, {depth * 1e3:.2f} mm deep{share}")
+    return out
 
 
-def physical_checks_section(checks: PhysicalChecks) -> list[str]:
-    """Physically broken setups, per episode: never hidden, never fatal; a finding that
-    reads the same for several episodes (same gains and friction over seeds) is listed
-    once."""
-    found: dict[str, list[str]] = {}
-    for f in checks.findings:
-        found.setdefault(finding_text(f), []).append(f.episode)
+def _cell_text(cell: CheckCell | None, all_checks: int) -> str:
+    if cell is None:
+        return NA
+    parts = _short(list(cell.findings), cell.episodes)
+    if cell.not_in_bag and len(cell.not_in_bag) >= all_checks and not parts:
+        return NOT_IN_BAG
+    if not parts:
+        parts = ["ok"]
+    if cell.not_in_bag:
+        parts.append(f"{', '.join(cell.not_in_bag)} {NOT_IN_BAG}")
+    return "; ".join(parts)
+
+
+def physical_checks_section(checks: PhysicalChecks, grid: tuple[CheckCell, ...] = ()) -> list[str]:
+    """Physically broken setups as one controller × joint table (a contacts column for the
+    whole arm): never hidden, never fatal; what a bag holds no data for is n/a, never "ok"."""
     lines = ["", "## Physical checks", ""]
-    if not found:
-        return [
-            *lines,
-            f"No contact during execution, no joint saturated more than "
-            f"{SATURATION_WARN_FRACTION * 100:.0f} % of the time, every completed episode "
-            f"reached its goal within {GOAL_MISS_RAD:g} rad, no gain below the configured "
-            f"friction's dead band; {checks.stable} of {checks.episodes} episodes stable "
-            "(not diverged).",
-        ]
-    for text, episodes in list(found.items())[:MAX_ROWS]:
-        who = (
-            ", ".join(episodes)
-            if len(episodes) <= 3
-            else (f"{episodes[0]} … {episodes[-1]} ({len(episodes)} episodes)")
-        )
-        lines.append(f"- **{who}**: {text}")
-    if len(found) > MAX_ROWS:
-        lines.append(
-            f"- … {len(found) - MAX_ROWS} more findings (per episode: `saturation_fraction` "
-            "and `final_error` in metrics.json, contacts in each bag's settings)"
-        )
+    controllers = list(dict.fromkeys(c.controller for c in grid))
+    joints = list(dict.fromkeys(c.joint for c in grid if c.joint))
+    by = {(c.controller, c.joint): c for c in grid}
+    header = ["controller", "contacts", *[f"{k + 1} {j}" for k, j in enumerate(joints)]]
+    rows = [
+        [c, _cell_text(by.get((c, "")), 1), *[_cell_text(by.get((c, j)), 3) for j in joints]]
+        for c in controllers[:MAX_ROWS]
+    ]
+    lines += [
+        md_table(header, rows),
+        "",
+        f"{checks.stable} of {checks.episodes} episodes stable (not diverged). A cell is *ok* "
+        f"when, over the controller's episodes (k/n: in how many), no contact happened "
+        f"during execution, no joint sat at its effort limit more than "
+        f"{SATURATION_WARN_FRACTION * 100:.0f} % of the time, every completed episode "
+        f"reached its goal within {GOAL_MISS_RAD:g} rad and no proportional gain leaves a "
+        f"friction dead band (friction / stiffness) wider than the "
+        f"{SETTLING_TOLERANCE_RAD:g} rad settling band (without integral action the joint "
+        "may stop anywhere in it; with it, only after the integral breaks the friction "
+        f"away). *{NOT_IN_BAG}*: the recording holds no data for that check (no safety "
+        "record, effort limit, planned goal, gains or friction), so it is not a pass.",
+    ]
     return lines

@@ -98,6 +98,20 @@ def blueprint(
         )
         for k, joint in enumerate(_joints(data))
     ]
+    if data.task_space:
+        tabs.append(
+            rrb.Vertical(
+                *[
+                    rrb.TimeSeriesView(
+                        origin=ent.tcp_quantity_path(q),
+                        name=label,
+                        plot_legend=rrb.PlotLegend(visible=False),
+                    )
+                    for q, label in ent.TCP_QUANTITIES.items()
+                ],
+                name="TCP",
+            )
+        )
     position, target = eye
     return rrb.Blueprint(
         rrb.Horizontal(
@@ -242,6 +256,38 @@ def _send_arm(
         static=True,
     )
     return True
+
+
+def _send_tcp(
+    stream: rr.RecordingStream,
+    data: ReportData,
+    rec: Recording,
+    color: tuple[int, int, int],
+    *,
+    label: str,
+) -> None:
+    """The TCP errors as series and the TCP's path in 3D (nothing without a robot model)."""
+    errors = data.tcp_series(rec.episode)
+    if not errors.height:
+        return
+    t = errors.get_column("time_s").to_numpy()
+    for quantity in ent.TCP_QUANTITIES:
+        _send_series(
+            stream,
+            ent.tcp_series_path(quantity, rec.episode),
+            t,
+            errors.get_column(quantity).to_numpy(),
+            name=label,
+            color=color,
+        )
+    _, path_m = data.tcp_path_m(rec.episode)
+    if path_m.shape[0]:
+        step = max(1, path_m.shape[0] // 2000)
+        stream.log(
+            ent.tcp_path_path(rec.episode),
+            rr.LineStrips3D([path_m[::step]], radii=[0.003], colors=[color]),
+            static=True,
+        )
 
 
 def _send_bands(stream: rr.RecordingStream, data: ReportData, group: str) -> None:
@@ -501,6 +547,7 @@ def _log_all(
                         name=label,
                         color=color,
                     )
+            _send_tcp(stream, data, rec, color, label=label)
             drawn = _send_arm(stream, rec, color, offset=_offset(k), label=f"{rec.episode}: {who}")
             k += 1
             if not drawn:

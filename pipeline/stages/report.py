@@ -26,6 +26,7 @@ from pipeline.analysis.checks import (
     duplicate_note,
     duplicate_stamp_notes,
     duplicate_stamps,
+    merged_label_notes,
 )
 from pipeline.analysis.episodes import episode_table, limits_table, shown_status
 from pipeline.analysis.metrics import (
@@ -42,6 +43,7 @@ from pipeline.analysis.protocol import (
     protocol_view,
     start_state,
 )
+from pipeline.analysis.task_space import FLANGE_TOOL, TaskSpace, ToolOffset, task_space_of
 from pipeline.constants import TOPIC_CONTROLLER_STATE, TOPIC_JOINT_STATES
 from pipeline.errors import PipelineError, RecordingError, ReportError
 from pipeline.fsutil import OutputLock, check_out_dir, remove_stale
@@ -61,7 +63,12 @@ from pipeline.report.figures import (
 )
 from pipeline.report.inputs import ReportData, Skipped, cs_times_s, cs_wide
 from pipeline.report.markdown import REPORT_FILE, render_report
-from pipeline.report.metrics_json import write_episode_csvs, write_metrics, write_series_csvs
+from pipeline.report.metrics_json import (
+    write_episode_csvs,
+    write_headline,
+    write_metrics,
+    write_series_csvs,
+)
 from pipeline.report.rerun_rrd import RRD_FILE, write_rrd
 from pipeline.stages.report_commit import (
     commit,
@@ -174,8 +181,12 @@ def run_report(
     skip_bad: bool = False,
     progress: Progress = _noop,
     options: ReadOptions | None = None,
+    tool: ToolOffset = FLANGE_TOOL,
 ) -> ReportResult:
     """Read the recordings, compute metrics and write every report output.
+
+    ``tool`` places the TCP of the task-space metrics in the flange frame (default: the
+    flange).
 
     One run at a time writes a given ``out_dir`` (a second one refuses at once); staging
     folders that killed runs left beside it are removed first.
@@ -213,6 +224,7 @@ def run_report(
                 skip_bad=skip_bad,
                 progress=progress,
                 options=options,
+                tool=tool,
             )
             return dataclasses.replace(result, out_dir=shown)
     except PipelineError as err:
@@ -229,8 +241,9 @@ def _run_report_locked(
     skip_bad: bool,
     progress: Progress,
     options: ReadOptions | None,
+    tool: ToolOffset,
 ) -> ReportResult:
-    measured = _Measured()
+    measured = _Measured(tool)
     recordings, bad = read_all(
         recordings_dir,
         skip_bad=skip_bad,
@@ -239,6 +252,7 @@ def _run_report_locked(
         measure=measured.add,
         sink=measured,
     )
+    recordings = merged_label_notes(recordings, options)
     episodes = pl.concat([measured.rows[r.episode] for r in recordings], how="vertical")
     if not check_baseline(episodes, baseline) and baseline != DEFAULT_BASELINE:
         # one controller: nothing to compare, but a baseline the user named that is not
@@ -259,6 +273,7 @@ def _run_report_locked(
         recordings_dir=recordings_dir,
         protocol=measured.views,
         error_series=measured.errors,
+        task_space=measured.task_space,
     )
     data = measured.with_sample_frames(first, options)
     # The name is known before the folder exists, so an interrupt at any point (even
@@ -269,7 +284,8 @@ def _run_report_locked(
             staging.mkdir()
         except OSError as err:
             raise ReportError(f"{out_dir.parent}: cannot write the report there ({err})") from err
-        files = [write_metrics(data, staging), *write_series_csvs(data, staging)]
+        files = [write_metrics(data, staging), write_headline(data, staging)]
+        files += write_series_csvs(data, staging)
         files += write_episode_csvs(data, staging)
         sections = _campaigns(data, staging, progress)
         files += [CAMPAIGN_INDEX, *[f for sec in sections for f in (sec.table_path, *sec.files)]]
@@ -316,8 +332,9 @@ class _Streamed:
     """A long recording's windows as they are read: the protocol applied to each, their
     partial metrics, counts and duplicate stamps, and the exact state at the motion start."""
 
-    def __init__(self, header: Recording) -> None:
+    def __init__(self, header: Recording, tool: ToolOffset) -> None:
         self.protocol: Protocol = protocol_of(header)[0]
+        self.task_space = task_space_of(header, tool)
         view, _ = protocol_view(header)
         # the episode row as far as the metrics need it (motion end, end, completed)
         self.row = episode_table([view.recording], {header.episode: view})
@@ -344,7 +361,9 @@ class _Streamed:
                 old = self.duplicates.get(topic)
                 self.duplicates[topic] = dup if old is None else old + dup
         if js.height or cs.height:
-            self.partials.append(metric_partials(js, cs, self.row, self.limits))
+            self.partials.append(
+                metric_partials(js, cs, self.row, self.limits, task_space=self.task_space)
+            )
 
     def view(self, raw: Recording) -> tuple[ProtocolView, pl.DataFrame]:
         """The recording's view (decimated frames, exact counts and start state) and its
@@ -366,7 +385,9 @@ class _Streamed:
             view, recording=dataclasses.replace(rec, notes=(*rec.notes, *notes))
         )
         # nothing after the motion start: the metrics of empty frames, as a whole read has
-        parts = self.partials or [metric_partials(*self.empty, self.row, self.limits)]
+        parts = self.partials or [
+            metric_partials(*self.empty, self.row, self.limits, task_space=self.task_space)
+        ]
         return view, finish_metrics(pl.concat(parts, how="vertical_relaxed"))
 
 
@@ -378,7 +399,9 @@ class _Measured:
     It is also the reader's :class:`WindowSink`: a long recording's metrics are computed
     window by window as it is read (:class:`_Streamed`); its frames are decimated."""
 
-    def __init__(self) -> None:
+    def __init__(self, tool: ToolOffset = FLANGE_TOOL) -> None:
+        self.tool = tool
+        self.task_space: dict[str, TaskSpace] = {}
         self.views: dict[str, ProtocolView] = {}
         self.rows: dict[str, pl.DataFrame] = {}
         self.metrics: dict[str, pl.DataFrame] = {}
@@ -386,7 +409,7 @@ class _Measured:
         self.streamed: _Streamed | None = None
 
     def begin(self, header: Recording) -> None:
-        self.streamed = _Streamed(header)
+        self.streamed = _Streamed(header, self.tool)
 
     def window(self, samples: pl.DataFrame, controller_states: pl.DataFrame) -> None:
         assert self.streamed is not None
@@ -394,6 +417,7 @@ class _Measured:
 
     def add(self, raw: Recording) -> Recording:
         streamed, self.streamed = self.streamed, None
+        self.task_space.update(task_space_of(raw, self.tool))
         if raw.windows:
             assert streamed is not None
             view, metrics = streamed.view(raw)
@@ -403,7 +427,13 @@ class _Measured:
             view, _ = protocol_view(raw)
             rec = view.recording
             row = episode_table([rec], {rec.episode: view})
-            metrics = joint_metrics(rec.samples, rec.controller_states, row, limits_table([rec]))
+            metrics = joint_metrics(
+                rec.samples,
+                rec.controller_states,
+                row,
+                limits_table([rec]),
+                task_space=self.task_space,
+            )
         self.rows[rec.episode] = row
         self.metrics[rec.episode] = metrics
         if view.settings is not None and view.settings.campaign is not None:

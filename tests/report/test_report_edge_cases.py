@@ -169,11 +169,13 @@ def test_scenario_names_with_the_same_slug_get_distinct_figure_files(
     for scenario in ("a b", "a/b"):
         section = text.split(f"## Scenario `{scenario}`", 1)[1].split("\n## ", 1)[0]
         links[scenario] = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", section)
-        assert len(links[scenario]) == 5
+        assert len(links[scenario]) == 6
         for link in links[scenario]:
             assert (report.out_dir / link).is_file()
     assert not set(links["a b"]) & set(links["a/b"])
-    assert len(list((report.out_dir / "figures").glob("*.png"))) == 15
+    drawn = {p.name for p in (report.out_dir / "figures").glob("*.png")}
+    assert drawn == {Path(p).name for p in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", text)}
+    assert len(drawn) >= 15  # 5 per scenario, plus the TCP errors where the bag has a robot
 
 
 # --- 9: the planner line -----------------------------------------------------------------------
@@ -249,7 +251,11 @@ def test_near_zero_baseline_gives_no_percentage_in_tables_or_json(tmp_path: Path
     assert section.count("— (divisor ≈ 0)") == 6
     doc = json.loads((result.out_dir / "metrics.json").read_text(encoding="utf-8"))
     (cmp,) = doc["comparisons"]
+    tcp = cmp["joints"].pop("tcp")
     assert all(
         v["max_abs_error_reduction_pct"] is None and v["final_error_reduction_pct"] is None
         for v in cmp["joints"].values()
     )
+    # the TCP of a perfect tracker is below its floor too (1 nm, 1 nrad): no percentage
+    assert tcp["tcp_max_position_error_reduction_pct"] is None
+    assert tcp["tcp_max_orientation_error_reduction_pct"] is None

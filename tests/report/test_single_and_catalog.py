@@ -48,14 +48,22 @@ def test_every_catalog_metric_reaches_metrics_json_and_the_report(tmp_path: Path
     run_report(recordings_dir=rec, out_dir=tmp_path / "reports", baseline="pid")
     doc = json.loads((tmp_path / "reports" / "metrics.json").read_text(encoding="utf-8"))
     text = (tmp_path / "reports" / "report.md").read_text(encoding="utf-8")
-    joint = doc["episodes"]["p-ctc-0"]["joints"]["shoulder_pan_joint"]
-    assert set(joint) == set(catalog.METRIC_COLUMNS)
+    joints = doc["episodes"]["p-ctc-0"]["joints"]
+    for name in ("shoulder_pan_joint", catalog.TCP_JOINT):
+        assert set(joints[name]) == {m.name for m in catalog.METRICS if m.applies_to(name)}
     assert doc["parameters"]["metric_units"] == {m.name: m.unit for m in catalog.METRICS}
     for m in catalog.METRICS:
-        if m.in_tables:
+        if m.in_tables and m.space == "joint":
             assert f"#### {m.heading}" in text, m.name
-    compared = doc["comparisons"][0]["joints"]["shoulder_pan_joint"]
-    assert set(compared) == {f"{m}_reduction_pct" for m in catalog.COMPARED_METRICS}
+        elif m.space == "task":  # one task-space table, a row per metric
+            assert f"| {m.heading} |" in text, m.name
+    for name in ("shoulder_pan_joint", catalog.TCP_JOINT):
+        compared = doc["comparisons"][0]["joints"][name]
+        assert set(compared) == {
+            f"{m}_reduction_pct"
+            for m in catalog.COMPARED_METRICS
+            if catalog.metric(m).applies_to(name)
+        }
 
 
 def test_catalog_names_are_unique_and_formats_valid() -> None:
@@ -63,4 +71,4 @@ def test_catalog_names_are_unique_and_formats_valid() -> None:
     assert len(names) == len(set(names))
     for m in catalog.METRICS:
         format(1.5, m.fmt)  # a valid format spec
-        assert m.frame in ("controller_state", "joint_states")
+        assert m.frame in ("controller_state", "joint_states", "tcp")

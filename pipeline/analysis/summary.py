@@ -1,0 +1,185 @@
+"""The answer a report opens with: the headline numbers and one verdict per question.
+
+A question is "does the candidate controller track better than the baseline in this group
+(scenario or campaign condition)?", asked in joint space (max |error| per joint) and in
+task space (the TCP's max position and orientation errors). Its one test is the paired
+95 % Student-t confidence interval of the mean per-pair reduction
+(:func:`pipeline.analysis.aggregate.reduction_aggregates`): "lower" when the interval lies
+above 0, "higher" when below, "no clear difference" when it spans 0; a single pair has no
+interval and says so.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import polars as pl
+
+from pipeline.analysis.aggregate import MeanCI
+from pipeline.analysis.catalog import TCP_JOINT
+
+# The metric the headline table and the verdicts use, per space.
+HEADLINE_JOINT_METRIC = "max_abs_error"
+HEADLINE_TASK_METRICS = ("tcp_max_position_error", "tcp_max_orientation_error")
+
+Direction = Literal["lower", "higher", "no clear difference", "n/a"]
+
+
+@dataclass(frozen=True)
+class Effect:
+    """The paired reduction of one metric on one joint (or the TCP).
+
+    Attributes:
+        joint: the joint, or :data:`pipeline.analysis.catalog.TCP_JOINT`.
+        metric: the metric (``max_abs_error``, ``tcp_max_position_error``, ...).
+        reduction: the per-pair reductions (baseline − candidate) / baseline × 100 [%],
+            summarised (n = pairs).
+    """
+
+    joint: str
+    metric: str
+    reduction: MeanCI
+
+    @property
+    def direction(self) -> Direction:
+        """The candidate's error against the baseline's, by the interval (by the single
+        pair's sign when there is one pair)."""
+        ci = self.reduction
+        if ci.mean is None:
+            return "n/a"
+        if ci.half_width is None:
+            return "lower" if ci.mean > 0 else "higher" if ci.mean < 0 else "no clear difference"
+        if ci.mean - ci.half_width > 0:
+            return "lower"
+        if ci.mean + ci.half_width < 0:
+            return "higher"
+        return "no clear difference"
+
+
+@dataclass(frozen=True)
+class Question:
+    """Candidate vs baseline in one group, joint and task space.
+
+    Attributes:
+        group: the scenario or campaign condition.
+        baseline, candidate: the controllers.
+        pairing: ``seed`` (same-seed pairs) or ``all`` (every baseline run with every
+            candidate run).
+        pairs: the most pairs any effect has.
+        joint_space: :data:`HEADLINE_JOINT_METRIC` per joint, in recorded order.
+        task_space: :data:`HEADLINE_TASK_METRICS` of the TCP (empty without a robot model).
+    """
+
+    group: str
+    baseline: str
+    candidate: str
+    pairing: str
+    pairs: int
+    joint_space: tuple[Effect, ...]
+    task_space: tuple[Effect, ...]
+
+    def joints_by_direction(self) -> dict[Direction, list[int]]:
+        """Joint numbers (1-based) by direction of the joint-space effect."""
+        out: dict[Direction, list[int]] = {}
+        for k, e in enumerate(self.joint_space):
+            out.setdefault(e.direction, []).append(k + 1)
+        return out
+
+
+def _ci(row: dict[str, object]) -> MeanCI:
+    def f(key: str) -> float | None:
+        v = row.get(key)
+        return float(v) if isinstance(v, int | float) else None
+
+    n = row.get("n")
+    return MeanCI(int(n) if isinstance(n, int) else 0, f("mean"), f("std"), f("ci95_half_width"))
+
+
+def _effect(by: dict[tuple[str, str], dict[str, object]], joint: str, metric: str) -> Effect | None:
+    row = by.get((joint, f"{metric}_reduction_pct"))
+    return None if row is None else Effect(joint, metric, _ci(row))
+
+
+def questions(reduction_summary: pl.DataFrame, joints: dict[str, list[str]]) -> list[Question]:
+    """One question per (group, candidate) of
+    :func:`pipeline.analysis.aggregate.reduction_aggregates`, groups sorted.
+
+    Args:
+        reduction_summary: the paired reductions, summarised.
+        joints: per group, its joints in recorded order.
+    """
+    out: list[Question] = []
+    frame = reduction_summary.sort("scenario", maintain_order=True)
+    for (group, base, cand, pairing), rows in frame.group_by(
+        "scenario", "baseline", "controller", "pairing", maintain_order=True
+    ):
+        by = {(r["joint"], r["metric"]): r for r in rows.iter_rows(named=True)}
+
+        joint_space = [_effect(by, j, HEADLINE_JOINT_METRIC) for j in joints.get(str(group), [])]
+        task_space = [_effect(by, TCP_JOINT, m) for m in HEADLINE_TASK_METRICS]
+        found = [e for e in (*joint_space, *task_space) if e is not None]
+        out.append(
+            Question(
+                group=str(group),
+                baseline=str(base),
+                candidate=str(cand),
+                pairing=str(pairing),
+                pairs=max((e.reduction.n for e in found), default=0),
+                joint_space=tuple(e for e in joint_space if e is not None),
+                task_space=tuple(
+                    e for e in task_space if e is not None and e.reduction.mean is not None
+                ),
+            )
+        )
+    return out
+
+
+def headline_table(
+    metric_summary: pl.DataFrame, columns: list[tuple[str, str]], joints: list[str]
+) -> dict[tuple[str, str, str], MeanCI]:
+    """(group, controller, row) -> mean ± CI of the headline metric, the rows being the
+    ``joints`` (max |error| [rad]) and the TCP metrics (``tcp_max_position_error``,
+    ``tcp_max_orientation_error``)."""
+    wanted = {HEADLINE_JOINT_METRIC, *HEADLINE_TASK_METRICS}
+    frame = metric_summary.filter(pl.col("metric").is_in(wanted))
+    cols = set(columns)
+    out: dict[tuple[str, str, str], MeanCI] = {}
+    for r in frame.iter_rows(named=True):
+        if (r["scenario"], r["controller"]) not in cols:
+            continue
+        row = r["joint"] if r["metric"] == HEADLINE_JOINT_METRIC else r["metric"]
+        if row in joints or r["joint"] == TCP_JOINT:
+            out[(r["scenario"], r["controller"], row)] = _ci(r)
+    return out
+
+
+# ``dvc exp show`` / ``dvc metrics diff`` stay readable: headline.json holds at most this
+# many scalars for the default experiment (tests/report/test_headline_json.py).
+HEADLINE_MAX_SCALARS = 300
+
+
+def _row_key(e: Effect) -> str:
+    return {
+        "tcp_max_position_error": "tcp_position",
+        "tcp_max_orientation_error": "tcp_orientation",
+    }.get(e.metric, e.joint)
+
+
+def headline_document(qs: list[Question]) -> dict[str, dict[str, dict[str, dict[str, object]]]]:
+    """The small DVC metric: ``<group>.<candidate>_vs_<baseline>.<joint | tcp_position |
+    tcp_orientation>.{max_error_reduction_pct, ci95_half_width, n}`` (nested dicts of
+    scalars only: DVC skips lists). The reduction is the mean per-pair reduction of the max
+    error (max |error| per joint, the TCP's max position and orientation errors) [%], with
+    its paired 95 % half width (None for one pair) and the number of pairs."""
+    out: dict[str, dict[str, dict[str, dict[str, object]]]] = {}
+    for q in qs:
+        node = out.setdefault(q.group, {}).setdefault(f"{q.candidate}_vs_{q.baseline}", {})
+        for e in (*q.joint_space, *q.task_space):
+            ci = e.reduction
+            node[_row_key(e)] = {
+                "max_error_reduction_pct": None if ci.mean is None else round(ci.mean, 4),
+                "ci95_half_width": None if ci.half_width is None else round(ci.half_width, 4),
+                "n": ci.n,
+            }
+    return out

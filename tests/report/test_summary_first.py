@@ -1,0 +1,61 @@
+"""report.md leads with its answer; a foreign bag's missing data is n/a, never a pass."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from pipeline.stages.report import run_report
+from tests.analysis.bagfactory import paper_like, write_bag
+
+FIRST_SCREEN = 40
+
+
+def _report(root: Path, *, seeds: int, foreign: bool = False, baseline: str = "pid") -> str:
+    for seed in range(seeds):
+        for controller, scale in (("pid", 1e-3), ("ctc", 1.2e-3 + 1e-4 * seed)):
+            ep = paper_like(f"{controller}-{seed}", controller, seed=seed, error_scale=scale)
+            ep.episode_metadata = not foreign
+            write_bag(root / "recordings", ep)
+    run_report(recordings_dir=root / "recordings", out_dir=root / "reports", baseline=baseline)
+    return (root / "reports" / "report.md").read_text(encoding="utf-8")
+
+
+def test_the_first_screen_holds_the_headline_table_and_the_verdicts(tmp_path: Path) -> None:
+    text = _report(tmp_path, seeds=3)
+    screen = "\n".join(text.splitlines()[:FIRST_SCREEN])
+    assert "## Answer" in screen
+    assert "| 2 shoulder_lift_joint [rad] |" in screen
+    assert "| TCP max position error [mm] |" in screen
+    assert "| TCP max orientation error [mrad] |" in screen
+    verdict = next(line for line in screen.splitlines() if line.startswith("- **ctc vs pid**"))
+    # the one test behind it, in both spaces
+    assert "paired 95 % Student-t interval" in screen
+    assert "joint space, max |error| higher on joints 1, 2, 3, 4, 5" in verdict
+    assert "task space (TCP), max position error higher" in verdict
+    assert "## Episodes" not in screen.split("### Verdicts")[0]
+
+
+def test_physical_checks_are_one_controller_by_joint_table(tmp_path: Path) -> None:
+    text = _report(tmp_path, seeds=2)
+    section = text.split("## Physical checks", 1)[1].split("\n## ", 1)[0]
+    rows = [line for line in section.splitlines() if line.startswith("| ")]
+    assert rows[0].startswith("| controller | contacts | 1 shoulder_pan_joint |")
+    assert sorted(r.split(" | ")[0] for r in rows[2:]) == ["| ctc", "| pid"]
+    assert not any(line.startswith("- ") for line in section.splitlines())
+
+
+def test_a_foreign_bag_shows_na_for_what_it_does_not_hold_and_no_pass(tmp_path: Path) -> None:
+    text = _report(tmp_path, seeds=1, foreign=True, baseline="pid-0")
+    section = text.split("## Physical checks", 1)[1].split("\n## ", 1)[0]
+    rows = [line for line in section.splitlines() if line.startswith("| ")][2:]
+    for row in rows:
+        cells = row.strip("| ").split(" | ")
+        assert cells[1] == "n/a (not in the bag)"  # contacts: no safety record
+        # no effort limit, goal, gains or friction: nothing to check on any joint
+        assert cells[2:] == ["n/a (not in the bag)"] * 6
+    assert "No contact during execution" not in text
+    assert "paper Fig." not in text
+    # saturation without an effort limit is n/a, not 0 %
+    episodes = text.split("## Episodes", 1)[1].split("\n\n", 2)[1]
+    assert not re.search(r"\| 0\.0 % \|", episodes)
