@@ -38,8 +38,11 @@ def _short(fs: list[Finding], n: int) -> list[str]:
             width = max(f.width_rad for f in group if isinstance(f, DeadBandFinding))
             out.append(f"dead band {width:.2g} rad{share}")
         else:
-            depth = max(f.max_depth_m for f in group if isinstance(f, ContactFinding))
-            out.append(f"contact, {depth * 1e3:.2f} mm deep{share}")
+            contacts = [f for f in group if isinstance(f, ContactFinding)]
+            deepest = max(contacts, key=lambda f: f.max_depth_m)
+            pairs = sorted({f"{f.kind} contact {f.bodies[0]} – {f.bodies[1]}" for f in contacts})
+            shown = ", ".join(pairs[:3]) + (f" (+{len(pairs) - 3} more)" if len(pairs) > 3 else "")
+            out.append(f"{shown}, {deepest.max_depth_m * 1e3:.2f} mm deep{share}")
     return out
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -99,7 +100,8 @@ def test_realistic_plant_identifies_friction_and_predicts_torque(tmp_path: Path)
     record_excitation(PARAMS, variant=2, out=tmp_path / "check", **kw)  # type: ignore[arg-type]
     model = tmp_path / "model.yaml"
     fit_command([tmp_path / "fit"], out=model)
-    plant = read_recording(tmp_path / "fit").settings["plant"]
+    # an excitation's settings are its own (not the episode contract): read them raw
+    plant = json.loads(read_recording(tmp_path / "fit").metadata["settings"])["plant"]
     from pipeline.identify.model_file import load_model
 
     coulomb = np.array(load_model(model).friction.coulomb_nm)

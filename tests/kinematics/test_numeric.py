@@ -94,15 +94,24 @@ def test_joint_limits_are_respected_on_a_limited_arm():
 
 
 def test_unreachable_target_reports_the_closest_approach(ur5):
+    # inside the links' end-to-end bound (1.19 m), outside what the arm reaches
     target = np.eye(4)
-    target[:3, 3] = (2.0, 0.0, 0.3)
+    target[:3, 3] = (1.1, 0.0, 0.3)
     solver = make_solver("numeric", ur5, options=IKOptions(max_restarts=2, max_iterations=20))
     result = solver.solve(target)
     assert not result.ok and result.restarts == 2
     with pytest.raises(KinematicsError, match=r"robot 'ur5' cannot reach .* after 3 attempts"):
         result.best()
     closest = float(result.reason.split("closest: ")[1].split(" m")[0])
-    assert closest > 2.0 - 0.95  # the UR5 reaches about 0.95 m from the shoulder
+    assert closest > 1.1 - 0.95  # the UR5 reaches about 0.95 m from the shoulder
+
+
+def test_a_target_beyond_every_link_end_to_end_is_refused_without_descending(ur5):
+    target = np.eye(4)
+    target[:3, 3] = (2.0, 0.0, 0.3)
+    result = make_solver("numeric", ur5).solve(target)
+    assert not result.ok and result.iterations == 0
+    assert "beyond the arm's reach of 1.193 m" in result.reason
 
 
 def test_bad_seed_is_refused(ur5):

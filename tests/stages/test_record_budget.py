@@ -45,7 +45,7 @@ def test_estimate_counts_control_steps_and_physics_steps():
 
 
 def test_an_hour_at_100_khz_is_refused_up_front_in_one_line(tmp_path):
-    data = _data(physics_dt_s=1e-5)
+    data = _data(physics_dt_s=1e-5, control_period_steps=1)
     data["scenarios"]["paper"]["hold_s"] = 3600.0
     params = tmp_path / "params.yaml"
     params.write_text(yaml.safe_dump(data))
