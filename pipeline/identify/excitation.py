@@ -451,34 +451,20 @@ def scenario_plant(
     Returns:
         The plant's robot (drawn links, armature), its MuJoCo options, and plain settings.
     """
-    from pipeline.model.mjcf import PlantOptions
-    from pipeline.model.uncertainty import draw_plant, link_inertials, with_plant
-    from pipeline.settings import Uncertainty
+    from pipeline.model.uncertainty import link_inertials
+    from pipeline.settings import per_joint
+    from pipeline.stages.assemble import draw_scenario_plant
 
     p = scenario.plant
-    uncertainty = Uncertainty(**p.uncertainty.model_dump())
-    drawn = draw_plant(spec, uncertainty, seed=seed)
-    extra = _per_joint(p.armature, spec.dof)
-    plant_spec = with_plant(
-        drawn, link_inertials(drawn), [a + x for a, x in zip(drawn.armature, extra, strict=True)]
-    )
-    plant = PlantOptions(
-        damping=tuple(_per_joint(p.damping, spec.dof)),
-        frictionloss=tuple(_per_joint(p.frictionloss, spec.dof)),
-        payload_kg=p.payload_kg,
-    )
+    plant_spec, plant, uncertainty = draw_scenario_plant(spec, scenario, seed=seed)
     settings = {
         "links": [asdict(x) for x in link_inertials(plant_spec)],
         "armature": [float(a) for a in plant_spec.armature],
-        "damping": list(plant.damping),
-        "frictionloss": list(plant.frictionloss),
+        "damping": list(per_joint(plant.damping, spec.dof)),
+        "frictionloss": list(per_joint(plant.frictionloss, spec.dof)),
         "payload_kg": p.payload_kg,
         "position_noise_std_rad": p.position_noise_std_rad,
         "velocity_noise_std_rad_s": p.velocity_noise_std_rad_s,
         "uncertainty": asdict(uncertainty),
     }
     return plant_spec, plant, settings
-
-
-def _per_joint(value: float | list[float], dof: int) -> list[float]:
-    return [float(x) for x in value] if isinstance(value, list) else [float(value)] * dof

@@ -31,6 +31,7 @@ from pipeline.settings import (
 )
 
 if TYPE_CHECKING:
+    from pipeline.model.mjcf import PlantOptions
     from pipeline.sim.result import EpisodeResult
 
 
@@ -74,6 +75,33 @@ def spec_as_dict(spec: RobotSpec) -> dict[str, Any]:
 def param_values(value: float | list[float]) -> tuple[float, ...]:
     """A params entry given as one number or one per joint, as a tuple (not yet per joint)."""
     return tuple(value) if isinstance(value, list) else (float(value),)
+
+
+def draw_scenario_plant(
+    spec: RobotSpec, scenario: ScenarioParams, *, seed: int
+) -> tuple[RobotSpec, PlantOptions, Uncertainty]:
+    """The plant ``scenario`` draws for ``seed``, whatever motion is recorded on it.
+
+    Returns:
+        The plant's robot (drawn links, armature plus the scenario's extra armature), its
+        MuJoCo options (damping, friction, payload) and the spread the links were drawn from.
+    """
+    from pipeline.model.mjcf import PlantOptions
+    from pipeline.model.uncertainty import draw_plant, link_inertials, with_plant
+
+    p = scenario.plant
+    uncertainty = Uncertainty(**p.uncertainty.model_dump())
+    drawn = draw_plant(spec, uncertainty, seed=seed)
+    extra = per_joint(param_values(p.armature), spec.dof)
+    plant_spec = with_plant(
+        drawn, link_inertials(drawn), [a + x for a, x in zip(drawn.armature, extra, strict=True)]
+    )
+    plant = PlantOptions(
+        damping=param_values(p.damping),
+        frictionloss=param_values(p.frictionloss),
+        payload_kg=p.payload_kg,
+    )
+    return plant_spec, plant, uncertainty
 
 
 def loop_settings(scenario: ScenarioParams) -> LoopSettings:

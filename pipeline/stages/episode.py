@@ -21,12 +21,11 @@ from pipeline.fsutil import remove_stale
 from pipeline.params import Episode
 from pipeline.planning import PlannedPath, TimedTrajectory
 from pipeline.robots.spec import load_spec
-from pipeline.settings import Uncertainty, per_joint
 from pipeline.stages.assemble import (
     bag_metadata,
+    draw_scenario_plant,
     episode_settings,
     loop_settings,
-    param_values,
 )
 from pipeline.stages.plans import ScenarioPlan, obstacle_boxes
 
@@ -106,8 +105,6 @@ def _run_and_write(
     from pipeline.control import controller_origin, make_controller
     from pipeline.identify.model_file import nominal_spec
     from pipeline.log.bag import write_episode_bag
-    from pipeline.model.mjcf import PlantOptions
-    from pipeline.model.uncertainty import draw_plant, link_inertials, with_plant
     from pipeline.sim.runner import run_episode
     from pipeline.sim.safety import SKIP_WITHIN_M, assess_execution
 
@@ -123,22 +120,7 @@ def _run_and_write(
         source=f"controllers.{episode.controller_name}",
     )
     p = scenario.plant
-    uncertainty = Uncertainty(**p.uncertainty.model_dump())
-    plant_spec = draw_plant(spec, uncertainty, seed=episode.seed)
-    extra_armature = param_values(p.armature)
-    plant_spec = with_plant(
-        plant_spec,
-        link_inertials(plant_spec),
-        [
-            a + x
-            for a, x in zip(plant_spec.armature, per_joint(extra_armature, spec.dof), strict=True)
-        ],
-    )
-    plant = PlantOptions(
-        damping=param_values(p.damping),
-        frictionloss=param_values(p.frictionloss),
-        payload_kg=p.payload_kg,
-    )
+    plant_spec, plant, uncertainty = draw_scenario_plant(spec, scenario, seed=episode.seed)
     result = run_episode(
         spec,
         reference=trajectory,
