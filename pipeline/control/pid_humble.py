@@ -38,12 +38,13 @@ from pipeline.control.base import (
 from pipeline.robots.spec import RobotSpec
 
 NAME = "pid_humble"
+_PID_GAINS = {g.key: g for g in pid.GAINS}
 GAINS = (
-    GainSpec("kp", unit="N m/rad", stiffness=True, default="m_jj w^2"),
-    GainSpec("ki", unit="N m/(rad s)", default="m_jj w^2 0.1 w"),
-    GainSpec("kd", unit="N m s/rad", default="2 zeta w m_jj"),
+    _PID_GAINS["kp"],
+    _PID_GAINS["ki"],
+    _PID_GAINS["kd"],
     GainSpec("i_clamp", unit="N m", default="0 (Humble: integral off)"),
-    GainSpec("ff_velocity_scale", nonnegative=False, unit="N m s/rad", default="0"),
+    _PID_GAINS["ff_velocity_scale"],
 )
 INTEGRAL_OFF = (
     "pid_humble: i_clamp = 0 on {joints} (Humble's JTC default) switches the integral "
