@@ -57,7 +57,9 @@ class IdentificationError(PipelineError):
     """Dynamic identification cannot run: data unfit, unexcited parameters, a bad model file."""
 
 
-def unknown_name_message(kind: str, name: object, valid: Iterable[str], *, where: str = "") -> str:
+def unknown_name_message(
+    kind: str, name: object, valid: Iterable[str], *, where: str = "", also: Iterable[str] = ()
+) -> str:
     """The one wording for a name that is not among the valid ones, with the nearest.
 
     E.g. ``controllers.slow.type: unknown controller 'ctcc' (did you mean 'ctc'?); valid:
@@ -68,11 +70,17 @@ def unknown_name_message(kind: str, name: object, valid: Iterable[str], *, where
         name: the name given (any value: it may come from YAML).
         valid: the valid names, in the order to list them.
         where: the field path or file the name came from ("" for none).
+        also: further names a near miss may be (tried after ``valid``), not listed
+            (e.g. installed plug-ins, which the caller lists its own way).
     """
     names = list(valid)
-    folded = {n.lower(): n for n in names}  # a near miss in another case still matches
-    near = difflib.get_close_matches(str(name).lower(), list(folded), n=1)
-    hint = f" (did you mean '{folded[near[0]]}'?)" if near else ""
+    hint = ""
+    for pool in (names, list(also)):
+        folded = {n.lower(): n for n in pool}  # a near miss in another case still matches
+        near = difflib.get_close_matches(str(name).lower(), list(folded), n=1)
+        if near:
+            hint = f" (did you mean '{folded[near[0]]}'?)"
+            break
     prefix = f"{where}: " if where else ""
     return f"{prefix}unknown {kind} '{name}'{hint}; valid: {', '.join(names) or 'none'}"
 

@@ -14,7 +14,6 @@ which a recording keeps beside the gains.
 
 from __future__ import annotations
 
-import difflib
 import functools
 import hashlib
 import importlib
@@ -83,12 +82,8 @@ def resolve(
     except PipelineError as err:
         raise error(f"{where}{err}") from err.__cause__
     installed = installed_names(group)
-    message = unknown_name_message(what, name, sorted(builtins))
+    message = unknown_name_message(what, name, sorted(builtins), also=installed)
     extra = f"; installed ({group}): {', '.join(installed)}" if installed else ""
-    if installed and "did you mean" not in message:  # a near miss among the installed
-        near = difflib.get_close_matches(name.lower(), installed, n=1)
-        message = unknown_name_message(what, name, [*sorted(builtins), *near])
-        message = message.split("; valid: ")[0] + "; valid: " + ", ".join(sorted(builtins))
     raise error(f"{where}{message}{extra}; or 'package.module:Object'")
 
 
