@@ -163,3 +163,15 @@ def test_the_baseline_is_drawn_first_in_its_declared_colour() -> None:
         assert [t.get_text() for t in legend.get_texts()] == ["pid", "ctc", "ctc_pid"]
         # the same colour in every figure: the registry's declared one
         assert legend.get_lines()[0].get_color() == pytest.approx(baseline)
+
+
+def test_a_scenario_figures_log_error_axis_spans_a_decade_and_is_labelled() -> None:
+    from pipeline.report.figures import _log_error_axis
+
+    fig = Figure()
+    ax = fig.subplots()
+    ax.plot([0.0, 1.0], [3e-4, 6e-4])
+    _log_error_axis(ax, 3e-4, 6e-4)  # a factor of 2 apart: widened to a decade
+    low, high = ax.get_ylim()
+    assert ax.get_yscale() == "log" and high / low >= 10.0
+    assert len(_labels(ax.yaxis)) >= 2
