@@ -154,9 +154,10 @@ def headline_table(
     return out
 
 
-# ``dvc exp show`` / ``dvc metrics diff`` stay readable: headline.json holds at most this
-# many scalars for the default experiment (tests/report/test_headline_json.py).
-HEADLINE_MAX_SCALARS = 300
+# ``dvc metrics diff`` prints one line per changed scalar under a 3-line header: at most
+# this many scalars in headline.json for the default experiment keep even ``--all`` within
+# 60 lines (tests/report/test_headline_json.py, docs/report.md "Headline numbers for DVC").
+HEADLINE_MAX_SCALARS = 57
 
 
 def _row_key(e: Effect) -> str:
@@ -166,20 +167,28 @@ def _row_key(e: Effect) -> str:
     }.get(e.metric, e.joint)
 
 
-def headline_document(qs: list[Question]) -> dict[str, dict[str, dict[str, dict[str, object]]]]:
-    """The small DVC metric: ``<group>.<candidate>_vs_<baseline>.<joint | tcp_position |
-    tcp_orientation>.{max_error_reduction_pct, ci95_half_width, n}`` (nested dicts of
-    scalars only: DVC skips lists). The reduction is the mean per-pair reduction of the max
-    error (max |error| per joint, the TCP's max position and orientation errors) [%], with
-    its paired 95 % half width (None for one pair) and the number of pairs."""
-    out: dict[str, dict[str, dict[str, dict[str, object]]]] = {}
+def headline_document(qs: list[Question]) -> dict[str, dict[str, dict[str, object]]]:
+    """The small DVC metric: ``<group>.<candidate>_vs_<baseline>`` holds ``n`` (the pairs)
+    and per ``<joint | tcp_position | tcp_orientation>`` the
+    ``max_error_reduction_pct`` and, where there are two pairs or more, its
+    ``ci95_half_width`` (nested dicts of scalars only: DVC skips lists). The reduction is
+    the mean per-pair reduction of the max error (max |error| per joint, the TCP's max
+    position and orientation errors) [%], with its paired 95 % half width. A row whose
+    pairs differ from the comparison's ``n`` (a metric missing in some episodes) carries
+    its own ``n``. One ``n`` per comparison, no null half widths: every scalar can change
+    between experiments, and a gain change's ``dvc metrics diff`` stays short."""
+    out: dict[str, dict[str, dict[str, object]]] = {}
     for q in qs:
-        node = out.setdefault(q.group, {}).setdefault(f"{q.candidate}_vs_{q.baseline}", {})
+        node: dict[str, object] = {"n": q.pairs}
         for e in (*q.joint_space, *q.task_space):
             ci = e.reduction
-            node[_row_key(e)] = {
-                "max_error_reduction_pct": None if ci.mean is None else round(ci.mean, 4),
-                "ci95_half_width": None if ci.half_width is None else round(ci.half_width, 4),
-                "n": ci.n,
+            row: dict[str, object] = {
+                "max_error_reduction_pct": None if ci.mean is None else round(ci.mean, 4)
             }
+            if ci.half_width is not None:
+                row["ci95_half_width"] = round(ci.half_width, 4)
+            if ci.n != q.pairs:
+                row["n"] = ci.n
+            node[_row_key(e)] = row
+        out.setdefault(q.group, {})[f"{q.candidate}_vs_{q.baseline}"] = node
     return out

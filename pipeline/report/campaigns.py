@@ -36,7 +36,13 @@ from pipeline.analysis.campaign import (
 from pipeline.analysis.summary import HEADLINE_TASK_METRICS
 from pipeline.report import md
 from pipeline.report.colors import controller_colors, mpl
-from pipeline.report.figures import FigureFile, save_figure, subplot_grid
+from pipeline.report.figures import (
+    FigureFile,
+    readable_scale,
+    save_figure,
+    subplot_grid,
+    unit_label,
+)
 
 # Conditions drawn in a figure / listed in a Markdown table (all are in the CSV files).
 MAX_CONDITIONS_SHOWN = 12
@@ -72,6 +78,17 @@ def _values(rows: pl.DataFrame, metric: catalog.Metric) -> NDArray[np.float64]:
     return vals[vals > 0] if metric.log_scale else vals
 
 
+def _concat(parts: list[NDArray[np.float64]]) -> NDArray[np.float64]:
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def _n_range(counts: pl.Series) -> str:
+    """``n = 5`` or ``n = 3-5`` (the smallest and largest of ``counts``)."""
+    values = [int(c) for c in counts.to_list()] or [0]
+    low, high = min(values), max(values)
+    return f"n = {low}" if low == high else f"n = {low}–{high}"
+
+
 def _joints(table: pl.DataFrame) -> list[str]:
     return list(dict.fromkeys(table.get_column("joint").to_list()))
 
@@ -103,14 +120,11 @@ def _axes(n: int, *, width: float = 4.2, height: float = 3.0) -> tuple[Figure, l
     return fig, axes[:n]
 
 
-def _log(ax: Axes, which: str) -> None:
-    """A log axis with decade labels only (labelled minor ticks cost most of a draw)."""
-    from matplotlib.ticker import LogLocator, NullFormatter
-
-    axis = ax.yaxis if which == "y" else ax.xaxis
-    (ax.set_yscale if which == "y" else ax.set_xscale)("log")
-    axis.set_major_locator(LogLocator(numticks=6))
-    axis.set_minor_formatter(NullFormatter())
+def drawing_order(controllers: Sequence[str], baseline: str) -> list[str]:
+    """Controllers in the order they are drawn and listed: the baseline first (below the
+    others, leftmost in a group of boxes, first in the legend), then the rest sorted."""
+    names = sorted(set(controllers))
+    return [baseline, *(c for c in names if c != baseline)] if baseline in names else names
 
 
 def _title(ax: Axes, text: str) -> None:
@@ -126,22 +140,26 @@ def _legend(fig: Figure, colors: dict[str, tuple[int, int, int]], names: Sequenc
     fig.legend(handles, list(names), loc="upper right", ncols=len(names), fontsize=8, frameon=False)
 
 
-def _distribution_figure(
+def distribution_figure(
     table: pl.DataFrame,
     metric: catalog.Metric,
     conditions: list[str],
     colors: dict[str, tuple[int, int, int]],
     title: str,
+    *,
+    baseline: str,
 ) -> Figure:
-    """Box per (condition, controller) and joint, with the episodes as points for small n."""
+    """Box per (condition, controller) and joint, with the episodes as points for small n
+    (the baseline's box first in each group)."""
     joints = _joints(table)
-    controllers = sorted(set(table.get_column("controller").to_list()))
+    controllers = drawing_order(table.get_column("controller").to_list(), baseline)
     fig, axes = _axes(len(joints), width=max(4.2, 0.5 * len(conditions) * len(controllers)))
     ok = table.filter(pl.col("status") == "ok")
     rng = np.random.default_rng(0)  # jitter only; fixed so figures are reproducible
     width = 0.8 / max(len(controllers), 1)
     for ax, joint in zip(axes, joints, strict=True):
         sub = ok.filter(pl.col("joint") == joint)
+        drawn: list[NDArray[np.float64]] = []
         for ci, cond in enumerate(conditions):
             for k, ctrl in enumerate(controllers):
                 vals = _values(
@@ -150,6 +168,7 @@ def _distribution_figure(
                 )
                 if vals.size == 0:
                     continue
+                drawn.append(vals)
                 x = ci + (k - (len(controllers) - 1) / 2) * width
                 color = mpl(colors[ctrl])
                 box = ax.boxplot(
@@ -164,28 +183,34 @@ def _distribution_figure(
                 if vals.size <= MAX_POINTS_PER_BOX:
                     jitter = rng.uniform(-width * 0.3, width * 0.3, vals.size)
                     ax.plot(x + jitter, vals, "o", ms=2.5, color=color, alpha=0.8)
-        if metric.log_scale:
-            _log(ax, "y")
+        unit = readable_scale(ax, "y", _concat(drawn), log=metric.log_scale, unit=metric.unit)
         ax.set_xticks(range(len(conditions)))
         ax.set_xticklabels([_short(c) for c in conditions], rotation=25, ha="right", fontsize=7)
         _title(ax, joint)
         ax.tick_params(labelsize=7)
         ax.grid(True, axis="y", lw=0.3)
-        ax.set_ylabel(metric.label, fontsize=7)
+        ax.set_ylabel(unit_label(metric.label, unit), fontsize=7)
     _legend(fig, colors, controllers)
     fig.suptitle(title, fontsize=10, x=0.02, ha="left")
     return fig
 
 
-def _ecdf_figure(
-    table: pl.DataFrame, metric: catalog.Metric, colors: dict[str, tuple[int, int, int]], title: str
+def ecdf_figure(
+    table: pl.DataFrame,
+    metric: catalog.Metric,
+    colors: dict[str, tuple[int, int, int]],
+    title: str,
+    *,
+    baseline: str,
 ) -> Figure:
-    """Empirical CDF per joint and controller (every condition pooled)."""
+    """Empirical CDF per joint and controller (every condition pooled), each step rising
+    from 0 at its smallest value; the baseline drawn first."""
     joints = _joints(table)
-    controllers = sorted(set(table.get_column("controller").to_list()))
+    controllers = drawing_order(table.get_column("controller").to_list(), baseline)
     fig, axes = _axes(len(joints))
     ok = table.filter(pl.col("status") == "ok")
     for ax, joint in zip(axes, joints, strict=True):
+        drawn: list[NDArray[np.float64]] = []
         for ctrl in controllers:
             vals = np.sort(
                 _values(
@@ -194,12 +219,14 @@ def _ecdf_figure(
             )
             if vals.size == 0:
                 continue
-            ax.step(vals, np.arange(1, vals.size + 1) / vals.size, where="post",
-                    color=mpl(colors[ctrl]), lw=1.2)  # fmt: skip
-        if metric.log_scale:
-            _log(ax, "x")
+            drawn.append(vals)
+            # (v0, 0), (v0, 1/n), (v1, 2/n), ...: the share of episodes at or below x
+            ax.step(np.concatenate([vals[:1], vals]), np.arange(vals.size + 1) / vals.size,
+                    where="post", color=mpl(colors[ctrl]), lw=1.2)  # fmt: skip
+        unit = readable_scale(ax, "x", _concat(drawn), log=metric.log_scale, unit=metric.unit)
+        ax.set_ylim(0.0, 1.02)
         _title(ax, joint)
-        ax.set_xlabel(metric.label, fontsize=7)
+        ax.set_xlabel(unit_label(metric.label, unit), fontsize=7)
         ax.set_ylabel("share of episodes", fontsize=7)
         ax.tick_params(labelsize=7)
         ax.grid(True, lw=0.3)
@@ -208,20 +235,25 @@ def _ecdf_figure(
     return fig
 
 
-def _parameter_figure(
+def parameter_figure(
     table: pl.DataFrame,
+    stats: pl.DataFrame,
     axis: str,
     metric: catalog.Metric,
     colors: dict[str, tuple[int, int, int]],
     title: str,
+    *,
+    baseline: str,
 ) -> Figure:
-    """Mean with its 95 % CI band against one swept parameter, per joint and controller:
-    where the bands cross is where one controller stops winning."""
-    stats = by_parameter(table, axis, metric.name)
+    """Mean with its 95 % CI band against one swept parameter, per joint and controller
+    (``stats``: :func:`~pipeline.analysis.campaign.by_parameter` of ``table``): where the
+    bands cross is where one controller stops winning. The baseline is drawn first."""
     joints = _joints(table)
-    controllers = sorted(set(stats.get_column("controller").to_list()))
+    controllers = drawing_order(stats.get_column("controller").to_list(), baseline)
     fig, axes = _axes(len(joints))
+    log = metric.log_scale and bool((stats.get_column("mean") > 0).all())
     for ax, joint in zip(axes, joints, strict=True):
+        drawn: list[NDArray[np.float64]] = []
         for ctrl in controllers:
             s = stats.filter((pl.col("joint") == joint) & (pl.col("controller") == ctrl))
             if not s.height:
@@ -233,11 +265,11 @@ def _parameter_figure(
             color = mpl(colors[ctrl])
             ax.fill_between(x, low, high, color=color, alpha=0.25, lw=0)
             ax.plot(x, mean, "o-", color=color, ms=3, lw=1.2)
-        if metric.log_scale and bool((stats.get_column("mean") > 0).all()):
-            _log(ax, "y")
+            drawn += [mean, low, high]
+        unit = readable_scale(ax, "y", _concat(drawn), log=log, unit=metric.unit)
         _title(ax, joint)
         ax.set_xlabel(axis.removeprefix(SWEPT_PREFIX), fontsize=7)
-        ax.set_ylabel(metric.label, fontsize=7)
+        ax.set_ylabel(unit_label(metric.label, unit), fontsize=7)
         ax.tick_params(labelsize=7)
         ax.grid(True, lw=0.3)
     _legend(fig, colors, controllers)
@@ -302,7 +334,7 @@ def campaign_section(
     table = pl.scan_parquet(table_path).collect()
     conditions = _conditions(table)
     shown = conditions[:MAX_CONDITIONS_SHOWN]
-    controllers = sorted(set(table.get_column("controller").to_list()))
+    controllers = drawing_order(table.get_column("controller").to_list(), baseline)
     colors = controller_colors(controllers)
     episodes = table.unique("episode", maintain_order=True)
     n_eps = episodes.height
@@ -411,37 +443,52 @@ def campaign_section(
             x for x in compared
             if catalog.BY_NAME[x].space == "joint" or x in HEADLINE_TASK_METRICS
         ]  # fmt: skip
+        ok = episodes.filter(pl.col("status") == "ok")
+        per_box = _n_range(ok.group_by("condition", "controller").len().get_column("len"))
+        per_controller = _n_range(ok.group_by("controller").len().get_column("len"))
+        first = f"`{baseline}` (the baseline) drawn first" if baseline in controllers else ""
         for metric in drawn:
             m = catalog.BY_NAME[metric]
             sub = table.filter((pl.col("joint") == catalog.TCP_JOINT) == (m.space == "task"))
-            fig = _distribution_figure(
-                sub, m, shown, colors, f"{name}: {m.title.lower()} per condition and controller"
-            )
+            fig = distribution_figure(
+                sub, m, shown, colors, f"{name}: {m.title.lower()} per condition and controller",
+                baseline=baseline,
+            )  # fmt: skip
             figures.append(
                 FigureFile(
                     save_figure(fig, out_dir, f"{stem}_{metric}_distribution.png"),
-                    f"{m.title}: distribution per condition, joint and controller "
-                    f"(boxes: quartiles; points: episodes, up to {MAX_POINTS_PER_BOX} per box)",
+                    f"{m.title}: distribution per condition, joint and controller over the "
+                    f"completed episodes ({per_box} per box). Shaded box: the 25th to 75th "
+                    "percentile, line: the median, whiskers: the furthest episode within "
+                    f"1.5 × the box's height; points: every episode (up to {MAX_POINTS_PER_BOX} "
+                    "per box, else the outliers)" + (f"; {first}, leftmost" if first else ""),
                 )
             )
-            fig = _ecdf_figure(sub, m, colors, f"{name}: {m.title.lower()}, ECDF")
+            fig = ecdf_figure(sub, m, colors, f"{name}: {m.title.lower()}, ECDF", baseline=baseline)
             figures.append(
                 FigureFile(
                     save_figure(fig, out_dir, f"{stem}_{metric}_ecdf.png"),
-                    f"{m.title}: empirical CDF per joint and controller (conditions pooled)",
+                    f"{m.title}: empirical CDF per joint and controller, every condition "
+                    f"pooled ({per_controller} completed episodes per controller): the share "
+                    "of episodes at or below each value, from 0" + (f"; {first}" if first else ""),
                 )
             )
             for axis in axes[:MAX_AXES_DRAWN]:
                 short = axis.removeprefix(SWEPT_PREFIX)
-                fig = _parameter_figure(
-                    sub, axis, m, colors, f"{name}: {m.title.lower()} against {short}"
-                )
+                stats = by_parameter(sub, axis, m.name)
+                fig = parameter_figure(
+                    sub, stats, axis, m, colors, f"{name}: {m.title.lower()} against {short}",
+                    baseline=baseline,
+                )  # fmt: skip
                 figures.append(
                     FigureFile(
                         save_figure(fig, out_dir, f"{stem}_{metric}_vs_{short}.png"),
-                        f"{m.title} against `{short}`: mean and 95 % CI band per controller "
-                        "(other swept values pooled); where the bands cross, the better "
-                        "controller changes",
+                        f"{m.title} against `{short}`, per joint and controller: points, the "
+                        "mean over the completed episodes at that value (other swept values "
+                        "pooled); shaded band, its 95 % Student-t confidence interval "
+                        f"({_n_range(stats.get_column('n'))} per point; no band where n < 2). "
+                        "Where the bands cross, the better controller changes"
+                        + (f"; {first}" if first else ""),
                     )
                 )
         files += [f.relpath for f in figures]

@@ -11,7 +11,7 @@ import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import matplotlib
 
@@ -20,7 +20,14 @@ matplotlib.use("Agg")
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
-from matplotlib.ticker import MaxNLocator
+from matplotlib.ticker import (
+    FuncFormatter,
+    LogLocator,
+    MaxNLocator,
+    NullFormatter,
+    NullLocator,
+    ScalarFormatter,
+)
 from numpy.typing import NDArray
 
 from pipeline.log.reader import Recording
@@ -76,6 +83,67 @@ def _thin(t: NDArray[np.float64], y: NDArray[np.float64]) -> tuple[NDArray[Any],
 
 def _rgb(color: tuple[int, int, int]) -> tuple[float, float, float]:
     return (color[0] / 255, color[1] / 255, color[2] / 255)
+
+
+# A log axis needs its positive values to span at least this ratio (a decade): under it a
+# log axis shows one tick label or none, so the axis is linear.
+LOG_MIN_RATIO = 10.0
+# Up to this many decades a log axis labels 1, 2 and 5 of each decade, beyond it decades.
+LOG_LABEL_SUBS_DECADES = 3.0
+# A linear axis in rad whose values stay under this is labelled in mrad.
+MRAD_BELOW_RAD = 0.1
+
+
+def readable_scale(
+    ax: Axes, which: Literal["x", "y"], values: NDArray[np.float64], *, log: bool, unit: str
+) -> str:
+    """Scale one axis so that its ticks carry labels, and return the unit they are in.
+
+    A log axis when ``log`` and the positive ``values`` span a decade or more, labelled at
+    1, 2 and 5 of each decade up to :data:`LOG_LABEL_SUBS_DECADES` decades (at the decades
+    beyond), its limits the values' with a margin; otherwise linear, in mrad when ``unit``
+    is rad and every value is under :data:`MRAD_BELOW_RAD` (labels like "0.25", not
+    "2.5e-4" or an offset).
+
+    Args:
+        which: the axis ("x" or "y").
+        values: what is drawn along it (non-finite values ignored; only positive ones
+            count for a log axis).
+        log: the data call for a log axis (a metric's ``log_scale``).
+        unit: the values' unit, as the axis label gives it.
+    """
+    axis = ax.xaxis if which == "x" else ax.yaxis
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    pos = v[v > 0]
+    if log and pos.size and float(pos.max()) >= LOG_MIN_RATIO * float(pos.min()):
+        low, high = float(pos.min()), float(pos.max())
+        (ax.set_xscale if which == "x" else ax.set_yscale)("log")
+        if np.log10(high / low) > LOG_LABEL_SUBS_DECADES:
+            axis.set_major_locator(LogLocator(base=10.0, numticks=8))
+            axis.set_minor_locator(LogLocator(base=10.0, subs=(2.0, 5.0), numticks=8))
+        else:
+            axis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0), numticks=12))
+            axis.set_minor_locator(NullLocator())
+        # "0.002", "5e-05": plain text (mathtext labels cost most of a figure's draw)
+        axis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:.3g}"))
+        axis.set_minor_formatter(NullFormatter())
+        (ax.set_xlim if which == "x" else ax.set_ylim)(low / 1.3, high * 1.3)
+        return unit
+    (ax.set_xscale if which == "x" else ax.set_yscale)("linear")
+    if unit == "rad" and v.size and float(np.abs(v).max()) < MRAD_BELOW_RAD:
+        axis.set_major_formatter(FuncFormatter(lambda x, _: f"{x * 1e3:.3g}"))
+        return "mrad"
+    plain = ScalarFormatter()
+    plain.set_powerlimits((-3, 4))
+    axis.set_major_formatter(plain)
+    return unit
+
+
+def unit_label(label: str, unit: str) -> str:
+    """``label`` (``title [old unit]``) with ``unit`` in its brackets."""
+    title, sep, _ = label.rpartition(" [")
+    return f"{title} [{unit}]" if sep else label
 
 
 def subplot_grid(n: int) -> tuple[int, int]:
@@ -205,11 +273,12 @@ def _joint_grid_figure(
                 alpha=_alpha(recs, rec.controller),
             )  # fmt: skip
         if log:
-            ax.set_yscale("log")
             top = max(highs, default=1.0)
             if top > 0:
                 # at most 6 decades: below that is integration noise, not tracking
-                ax.set_ylim(max(top * 1e-6, min(smallest, default=top * 1e-6)) * 0.8, top * 1.5)
+                _log_error_axis(ax, max(top * 1e-6, min(smallest, default=top * 1e-6)), top)
+            else:
+                ax.set_yscale("log")
         else:
             ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))
         if limits:
@@ -241,6 +310,12 @@ def _joint_grid_figure(
     # Fixed margins: a layout engine would draw every figure twice.
     fig.subplots_adjust(left=0.07, right=0.98, bottom=0.1, top=0.86, wspace=0.25, hspace=0.3)
     return fig
+
+
+def _log_error_axis(ax: Axes, low: float, high: float) -> None:
+    """A log |error| y axis from ``low`` to ``high`` [rad], at least a decade (so that two
+    or more of its ticks are labelled)."""
+    readable_scale(ax, "y", np.array([min(low, high / LOG_MIN_RATIO), high]), log=True, unit="rad")
 
 
 def _limit_note(ax: Axes, limit: float, lows: list[float], highs: list[float]) -> None:
@@ -321,16 +396,23 @@ def _error_joint1(data: ReportData, recs: list[Recording], scenario: str) -> Fig
     are orders of magnitude apart)."""
     fig, ax = _single()
     log = _log_error(recs, 0)
+    drawn: list[NDArray[np.float64]] = []
     for rec in recs:
         t, y = _thin(cs_times_s(rec), cs_wide(rec, "error_rad")[:, 0])
+        y = np.abs(y) if log else y
+        drawn.append(y)
         ax.plot(
-            t, np.abs(y) if log else y, lw=1.0, color=_rgb(data.color(rec.episode)),
+            t, y, lw=1.0, color=_rgb(data.color(rec.episode)),
             alpha=_alpha(recs, rec.controller),
         )  # fmt: skip
     if log:
-        ax.set_yscale("log")
-        lo, hi = ax.get_ylim()
-        ax.set_ylim(bottom=max(lo, hi * 1e-6))
+        values = np.concatenate(drawn)
+        values = values[np.isfinite(values) & (values > 0)]
+        if values.size:
+            top = float(values.max())
+            _log_error_axis(ax, max(float(values.min()), top * 1e-6), top)
+        else:
+            ax.set_yscale("log")
     _motion_end(ax, recs)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("|error| [rad] (log)" if log else "error [rad]")

@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+import pytest
 import yaml
 
 from pipeline.analysis.summary import HEADLINE_MAX_SCALARS
@@ -34,7 +35,20 @@ def _default_experiment_shape() -> dict[str, tuple[list[str], int]]:
     return groups
 
 
-def test_headline_json_of_the_default_experiments_shape_stays_small(tmp_path: Path) -> None:
+# What DVC prints (measured; docs/report.md "Headline numbers for DVC"): `dvc metrics diff`
+# one header line, then a line per changed scalar (`--all`: per scalar); `dvc exp show
+# --only-changed --csv` the Experiment, rev, typ and Created columns, then one per changed
+# param, changed dependency (`recordings`, the report's) and changed metric.
+METRICS_DIFF_MAX_LINES = 60
+EXP_SHOW_MAX_COLUMNS = 40
+EXP_SHOW_FIXED_COLUMNS = 4
+CHANGED_DEPS = 1
+
+
+@pytest.fixture(scope="module")
+def headline(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """headline.json of a report on recordings shaped like the default experiment's."""
+    root = tmp_path_factory.mktemp("headline")
     for group, (controllers, seeds) in _default_experiment_shape().items():
         for controller in controllers:
             for seed in range(seeds):
@@ -43,20 +57,53 @@ def test_headline_json_of_the_default_experiments_shape_stays_small(tmp_path: Pa
                     duration_s=0.6, motion_end_s=0.4,
                     error_scale=1e-3 * (1 + 0.1 * seed) * (1.5 if controller != "pid" else 1),
                 )  # fmt: skip
-                write_bag(tmp_path / "recordings", ep)
-    run_report(recordings_dir=tmp_path / "recordings", out_dir=tmp_path / "reports")
-    doc = json.loads((tmp_path / "reports" / "headline.json").read_text(encoding="utf-8"))
-    leaves = _leaves(doc)
+                write_bag(root / "recordings", ep)
+    run_report(recordings_dir=root / "recordings", out_dir=root / "reports")
+    doc: dict[str, Any] = json.loads((root / "reports" / "headline.json").read_text("utf-8"))
+    return doc
+
+
+def _keys(x: Any, prefix: str = "") -> list[str]:
+    if isinstance(x, dict):
+        return [k for key, value in x.items() for k in _keys(value, f"{prefix}.{key}")]
+    return [prefix.lstrip(".")]
+
+
+def test_headline_json_of_the_default_experiments_shape_stays_small(
+    headline: dict[str, Any],
+) -> None:
+    leaves = _leaves(headline)
     assert all(v is None or isinstance(v, int | float) for v in leaves)
     assert 0 < len(leaves) <= HEADLINE_MAX_SCALARS
-    node = doc["paper-realistic"]["ctc_vs_pid"]
+    # `dvc metrics diff --all` prints every scalar: it fits too
+    assert 1 + len(leaves) <= METRICS_DIFF_MAX_LINES
+    node = headline["paper-realistic"]["ctc_vs_pid"]
     assert set(node) == {
-        "shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
+        "n", "shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
         "wrist_2_joint", "wrist_3_joint", "tcp_position", "tcp_orientation",
     }  # fmt: skip
+    assert node["n"] == 5
     cell = node["tcp_position"]
-    assert set(cell) == {"max_error_reduction_pct", "ci95_half_width", "n"}
-    assert cell["n"] == 5 and cell["max_error_reduction_pct"] < 0
+    assert set(cell) == {"max_error_reduction_pct", "ci95_half_width"}
+    assert cell["max_error_reduction_pct"] < 0
+    # one pair: no interval, and no null scalar standing in for it
+    assert set(headline["paper"]["ctc_vs_pid"]["tcp_position"]) == {"max_error_reduction_pct"}
+    assert headline["paper"]["ctc_vs_pid"]["n"] == 1
+
+
+def test_a_gain_change_fits_dvc_metrics_diff_and_exp_show(headline: dict[str, Any]) -> None:
+    """The README's two experiments. A CTC gain change (`-S controllers.ctc.gains.kp=...
+    -S ...kd=...`) changes the comparisons CTC is in; the gain sweep (PID's
+    `omega_n_rad_s` with CTC's kp and kd) changes the baseline, so every comparison: its
+    table drops the half widths (`--drop '.*ci95_half_width'`)."""
+    keys = [k for k in _keys(headline) if not k.endswith(".n")]  # pairs do not change
+    ctc = [k for k in keys if "ctc_vs_" in k or "_vs_ctc." in k]
+    assert 1 + len(keys) <= METRICS_DIFF_MAX_LINES  # either experiment's metrics diff
+    assert EXP_SHOW_FIXED_COLUMNS + 2 + CHANGED_DEPS + len(ctc) <= EXP_SHOW_MAX_COLUMNS
+    reductions = [k for k in keys if not k.endswith(".ci95_half_width")]
+    assert EXP_SHOW_FIXED_COLUMNS + 3 + CHANGED_DEPS + len(reductions) <= EXP_SHOW_MAX_COLUMNS
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    assert "dvc exp show --only-changed --drop '.*ci95_half_width'" in readme
 
 
 def test_dvc_declares_the_headline_as_its_metric_and_metrics_json_as_an_output() -> None:
