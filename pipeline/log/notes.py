@@ -87,6 +87,12 @@ def read_notes(scanned: Scanned, roles: Roles) -> tuple[list[str], float | None]
     for path, s in scanned.salvaged:
         note, lost_pct = salvage_note(path, s, scanned.size, scanned.unread, scanned.unread_bytes)
         notes.append(note)
+    for dec in (roles.cs_dec, roles.js_dec):
+        if dec.reordered_count:
+            notes.append(
+                f"{dec.topic}: {dec.reordered_count} message(s) list the joints in another "
+                "order than the first: matched by name"
+            )
     if len(roles.js_dec.groups) > 1 or len(roles.js_group.names) > len(roles.names):
         notes.append(
             f"{roles.js_dec.topic}: analysing {', '.join(roles.names)} (the joints of "
