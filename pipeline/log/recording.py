@@ -140,9 +140,12 @@ class Recording:
         topic_counts: messages per topic in the file.
         decoded_messages: messages decoded into ``samples`` (both control-rate topics).
         notes: non-fatal oddities (unparseable settings, dropped samples, salvage).
-        salvaged: read with ``salvage`` from a damaged file: what follows the damage is lost.
-        salvage_lost_pct: share of the recording the salvage could not read [%] (bytes of
-            an MCAP file, messages of a ``.db3``; None when not salvaged or unknown).
+        salvaged: read with ``salvage`` from a damaged file (what follows the damage is
+            lost), or from one holding fewer messages than it declares.
+        salvage_lost_pct: share of the recording the salvage could not read [%]: of the
+            messages its ``metadata.yaml`` or MCAP Statistics record declares, else a
+            ``.db3``'s rows or header-stated bytes; None when not salvaged or unknown (a
+            truncated bare MCAP file declares nothing).
         armlab_metadata: the bag carries our ``armlab.episode`` metadata record; without
             it nothing (robot, limits, settings) is taken from our built-in robot files.
         decimation: 1 when the frames hold every message; k > 1 for a long recording read

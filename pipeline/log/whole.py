@@ -34,7 +34,7 @@ def read_whole(
 ) -> Recording:
     mcap_path = files[0]
     collector = Collector(options.topics)
-    scanned = scan_storage(files, collector, salvage=options.salvage, copies=copies)
+    scanned = scan_storage(files, collector, salvage=options.salvage, copies=copies, source=source)
     roles = pick_roles(collector, scanned.present, mcap_path, scanned.salvaged)
     js_t, js_all = roles.js_group.concat()
     cs_t, cs_a = roles.cs_group.concat()
@@ -123,7 +123,7 @@ def read_whole(
         + (truth.count if truth else 0),
         notes=(*notes, *labels.settings_notes),
         has_ground_truth=truth is not None,
-        salvaged=bool(scanned.salvaged),
+        salvaged=scanned.damaged,
         salvage_lost_pct=lost_pct,
         armlab_metadata=labels.ours,
     )

@@ -523,7 +523,7 @@ def read_windowed(
     limit = STREAM_ABOVE_BYTES if options.stream_above_bytes is None else options.stream_above_bytes
     mcap_path = files[0]
     first = _Pass1(dict(options.topics))
-    scanned = scan_storage(files, first, salvage=options.salvage, copies=copies)
+    scanned = scan_storage(files, first, salvage=options.salvage, copies=copies, source=source)
     roles = pick_roles(first, scanned.present, mcap_path, scanned.salvaged)
     js_topic, cs_topic = roles.js_dec.topic, roles.cs_dec.topic
     js_stats = first.stats[(js_topic, roles.js_group.names)]
@@ -590,7 +590,7 @@ def read_windowed(
         decoded_messages=js_stats.count + cs_stats.count + (gt_stats.count if gt_stats else 0),
         notes=(*header_notes, *labels.notes, *labels.settings_notes),
         has_ground_truth=gt is not None,
-        salvaged=bool(scanned.salvaged),
+        salvaged=scanned.damaged,
         salvage_lost_pct=lost_pct,
         armlab_metadata=labels.ours,
         decimation=facts.decimation,
