@@ -5,10 +5,12 @@ the bag's name), its settings under the recording contract, its URDF and the not
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+from xml.etree import ElementTree
 
 from pipeline.constants import METADATA_EPISODE, TOPIC_ROBOT_DESCRIPTION
 from pipeline.log.collect import Collector, robot_description
@@ -16,7 +18,19 @@ from pipeline.log.recording import ReadOptions
 from pipeline.model.urdf_xml import urdf_effort_limits, urdf_robot_name
 from pipeline.settings import EpisodeSettings, SettingsError
 
-__all__ = ["Labels", "read_labels", "typed_settings"]
+__all__ = [
+    "URDF_MAX_CHARS",
+    "URDF_MAX_DEPTH",
+    "Labels",
+    "read_labels",
+    "typed_settings",
+    "urdf_problem",
+]
+
+# A bag's robot description beyond these is not a URDF we read (the largest robots' URDFs,
+# meshes referenced by file, are a few MB and a dozen levels deep).
+URDF_MAX_CHARS = 16 * 1024 * 1024
+URDF_MAX_DEPTH = 64
 
 
 @dataclass(frozen=True)
@@ -78,11 +92,20 @@ def read_labels(
         }
     raw_meta |= {k: v for k, v in labels.items() if v}
     urdf = robot_description(collector, chosen["robot_description"])
+    problem = urdf_problem(urdf) if urdf is not None else None
+    if problem is not None:
+        # dropped, so nothing downstream (names, limits, a 3D model) parses it again
+        urdf = None
+        notes.append(
+            f"{chosen['robot_description'] or TOPIC_ROBOT_DESCRIPTION}: malformed URDF "
+            f"({problem}): ignored; the robot's name, effort limits and saturation at the "
+            "limit are n/a"
+        )
     if not ours and urdf is not None:
         robot = urdf_robot_name(urdf)
         if robot:
             raw_meta["robot"] = robot
-    if not ours:
+    if not ours and problem is None:
         notes.append(_limits_note(urdf, names, chosen["robot_description"]))
     settings: dict[str, Any] = {}
     if "settings" in raw_meta:
@@ -109,6 +132,61 @@ def read_labels(
         )
     typed, why = typed_settings(settings)
     return Labels(raw_meta, typed, urdf, tuple(notes), (why,) if why else (), ours)
+
+
+def _short(text: str, most: int = 60) -> str:
+    return text if len(text) <= most else text[:most] + "..."
+
+
+def urdf_problem(urdf: str) -> str | None:
+    """Why a bag's robot description is not a URDF to read (None: it is one): too large,
+    entity declarations (a URDF needs none; entity bombs use them), not XML, not a
+    ``<robot>``, nested too deep, or a joint limit or mass that is not a number or not
+    physical (NaN, infinite, a negative effort, velocity or mass, lower above upper)."""
+    if len(urdf) > URDF_MAX_CHARS:
+        return f"{len(urdf):,} characters, more than the {URDF_MAX_CHARS:,} read"
+    if "<!ENTITY" in urdf:
+        return "it declares XML entities (<!ENTITY>), which a URDF never needs"
+    try:
+        root = ElementTree.fromstring(urdf)
+    except ElementTree.ParseError as err:
+        return f"not XML: {_short(str(err), 120)}"
+    if root.tag != "robot":
+        return f"its root element is <{_short(root.tag)}>, expected <robot>"
+    stack = [(root, 1)]
+    while stack:
+        element, depth = stack.pop()
+        if depth > URDF_MAX_DEPTH:
+            return f"elements nested more than {URDF_MAX_DEPTH} levels deep"
+        stack.extend((child, depth + 1) for child in element)
+    limit_keys: tuple[str, ...] = ("effort", "velocity", "lower", "upper")
+    checks: list[tuple[str, ElementTree.Element | None, tuple[str, ...]]] = [
+        (f"joint {_short(j.get('name', '?'))}: limit", j.find("limit"), limit_keys)
+        for j in root.iter("joint")
+    ]
+    checks += [
+        (f"link {_short(link.get('name', '?'))}: mass", link.find("inertial/mass"), ("value",))
+        for link in root.iter("link")
+    ]
+    for where, found, keys in checks:
+        if found is None:
+            continue
+        values: dict[str, float] = {}
+        for key in keys:
+            text = found.get(key)
+            if text is None:
+                continue
+            try:
+                values[key] = float(text)
+            except ValueError:
+                return f"{where} {key}={_short(text)!r} is not a number"
+            if not math.isfinite(values[key]) or (
+                key in ("effort", "velocity", "value") and values[key] < 0
+            ):
+                return f"{where} {key}={_short(text)!r} is not physical"
+        if values.get("lower", -math.inf) > values.get("upper", math.inf):
+            return f"{where} lower={values['lower']:g} is above upper={values['upper']:g}"
+    return None
 
 
 def _limits_note(urdf: str | None, joints: Sequence[str], topic: str | None) -> str:

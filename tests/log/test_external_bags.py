@@ -66,6 +66,7 @@ def write_external_bag(
     js_offset_ns: int = 0,
     js_every: int = 1,
     cs_flip_at: int | None = None,
+    urdf: str | None = None,
 ) -> dict[str, np.ndarray]:
     """A Humble or Jazzy robot's bag: JTC state + joint_states (arm+gripper in shuffled order,
     plus a gripper-only publisher at a lower rate) + a URDF. ``js_offset_ns`` stamps the
@@ -103,7 +104,7 @@ def write_external_bag(
     multi = Multi(
         transforms=[], velocities=[], accelerations=[], time_from_start=Duration(sec=0, nanosec=0)
     )
-    urdf = (
+    urdf = urdf or (
         f'<robot name="{robot_name}">'
         + "".join(
             f'<joint name="{j}" type="revolute"><limit effort="{e:g}" velocity="3" '
