@@ -12,17 +12,23 @@ from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree
 
+import numpy as np
+from numpy.typing import NDArray
+
 from pipeline.constants import METADATA_EPISODE, TOPIC_ROBOT_DESCRIPTION
 from pipeline.log.collect import Collector, robot_description
-from pipeline.log.recording import ReadOptions
+from pipeline.log.recording import PlannedTrajectory, ReadOptions
 from pipeline.model.urdf_xml import urdf_effort_limits, urdf_robot_name
 from pipeline.settings import EpisodeSettings, SettingsError
 
 __all__ = [
     "URDF_MAX_CHARS",
     "URDF_MAX_DEPTH",
+    "DurationCheck",
     "Labels",
+    "check_trajectory_duration",
     "read_labels",
+    "reference_end_s",
     "typed_settings",
     "urdf_problem",
 ]
@@ -205,3 +211,80 @@ def _limits_note(urdf: str | None, joints: Sequence[str], topic: str | None) -> 
         + (f" [N m]: {shown}" if shown else ": none declared")
         + (f"; none for {', '.join(missing)} (saturation at the limit n/a)" if missing else "")
     )
+
+
+@dataclass(frozen=True)
+class DurationCheck:
+    """A recorded ``planner.trajectory_duration_s`` that the recording's data contradict.
+
+    Attributes:
+        duration_s: the trajectory's duration the data give [s] (the planned trajectory
+            topic's last point, else when the reference stops moving); None when they give
+            none: the motion end is then unknown.
+        note: what was contradicted, by what, and what is used instead.
+    """
+
+    duration_s: float | None
+    note: str
+
+
+def reference_end_s(
+    stamps_ns: NDArray[np.int64], reference: NDArray[np.float64], t0_ns: int
+) -> float | None:
+    """When the reference position last changes, from ``t0_ns`` [s] (None: no rows)."""
+    if stamps_ns.size < 2:
+        return None
+    moved = np.flatnonzero(np.any(np.abs(np.diff(reference, axis=0)) > 1e-12, axis=1))
+    last = int(stamps_ns[moved[-1] + 1]) if moved.size else int(stamps_ns[0])
+    return (last - t0_ns) * 1e-9
+
+
+def check_trajectory_duration(
+    settings: EpisodeSettings | None,
+    planned: PlannedTrajectory | None,
+    *,
+    end_s: float | None,
+    salvaged: bool,
+    control_period_s: float,
+    reference_end: float | None = None,
+    planned_topic: str = "the planned trajectory",
+) -> DurationCheck | None:
+    """Check the recorded trajectory duration against the data (None: not contradicted).
+
+    In order: the planned trajectory topic's last ``time_from_start`` (recorded with the
+    motion) must equal it within 1 ms (0.1 %); without that topic the reference must stop
+    moving by the motion end it implies (within two control periods and 1 %); and an
+    ``ok``, unsalvaged recording must not end before that motion end (the recorder records
+    past it).
+    """
+    if settings is None:
+        return None
+    duration = settings.planner.trajectory_duration_s
+    start = settings.protocol.motion_start_s
+    said = f"settings planner.trajectory_duration_s = {duration:g} s"
+    if planned is not None and planned.times_s.size:
+        planned_s = float(planned.times_s[-1])
+        if abs(duration - planned_s) <= max(1e-3, 1e-3 * planned_s):
+            return None
+        return DurationCheck(
+            planned_s,
+            f"{said} is contradicted by {planned_topic}, whose last point is at "
+            f"{planned_s:.3f} s: the motion end is taken from {planned_topic}",
+        )
+    slack = 2 * control_period_s + 0.01 * duration
+    if reference_end is not None and reference_end - start > duration + slack:
+        moving = reference_end - start
+        return DurationCheck(
+            moving,
+            f"{said} is contradicted by the reference, which moves until {moving:.3f} s "
+            "after the motion start: the motion end is taken from the reference's stamps",
+        )
+    ok = settings.status == "ok" and not salvaged
+    if ok and end_s is not None and end_s < start + duration - slack:
+        return DurationCheck(
+            None,
+            f"{said} is contradicted by the stamps: the recording ends at {end_s:.3f} s, "
+            f"before the motion end it implies ({start + duration:.6g} s): the motion end is "
+            "unknown (final error, overshoot and settling time n/a)",
+        )
+    return None
