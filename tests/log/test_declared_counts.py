@@ -158,6 +158,11 @@ def test_a_rosbags_bag_whose_metadata_yaml_counts_more_is_refused(
     rec = read_recording(path, SALVAGE)
     assert rec.salvaged and any("metadata.yaml declares" in x for x in rec.notes)
     assert rec.salvage_lost_pct is not None and 0 < rec.salvage_lost_pct < 2
+    # the windowed read (long recordings) checks the same
+    with pytest.raises(RecordingError, match="declares"):
+        read_recording(path, ReadOptions(stream_above_bytes=0))
+    streamed = read_recording(path, ReadOptions(stream_above_bytes=0, salvage=True))
+    assert streamed.salvaged and streamed.salvage_lost_pct == rec.salvage_lost_pct
 
 
 def test_a_salvaged_bag_reports_its_loss_against_what_it_declares(
