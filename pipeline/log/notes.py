@@ -50,7 +50,6 @@ def salvage_note(
     s: Salvage,
     size: int,
     unread: Sequence[Path],
-    unread_bytes: int,
     declared: tuple[str, float] | None = None,
 ) -> tuple[str, float | None]:
     """The note on a salvaged file and the share of the recording lost [%] (None: unknown).
@@ -112,9 +111,7 @@ def read_notes(scanned: Scanned, roles: Roles) -> tuple[list[str], float | None]
     lost_pct: float | None = None
     for path, s in scanned.salvaged:
         declared = declared_lost(scanned.declared, scanned.found)
-        note, lost_pct = salvage_note(
-            path, s, scanned.size, scanned.unread, scanned.unread_bytes, declared
-        )
+        note, lost_pct = salvage_note(path, s, scanned.size, scanned.unread, declared)
         notes.append(note)
     if scanned.shortfall is not None:
         words, lost_pct = declared_lost(scanned.shortfall, scanned.shortfall_found) or ("", None)
