@@ -100,9 +100,10 @@ def report_cmd(
         typer.Option(
             "--salvage",
             help="Read a truncated or damaged bag up to the damage (every intact MCAP "
-            "chunk, a .db3's message rows before the first unreadable one); its status "
-            "reads 'ok (salvaged: N % lost)' and, cut before the motion end, it is not "
-            "compared. Default: refuse it.",
+            "chunk, a .db3's message rows before the first unreadable one), or one holding "
+            "fewer messages than its metadata.yaml or Statistics record declares; its "
+            "status reads 'ok (salvaged: N % lost)', N % of the messages it declares, and, "
+            "cut before the motion end, it is not compared. Default: refuse it.",
         ),
     ] = False,
 ) -> None:

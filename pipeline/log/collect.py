@@ -17,7 +17,7 @@ from __future__ import annotations
 import hashlib
 import struct
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -31,11 +31,13 @@ from pipeline.log.decode import DecodeError, Group, TopicDecoder, Want, leaf_row
 from pipeline.log.mcap import MESSAGE_PREFIX, McapChannel, McapScan, Salvage
 from pipeline.log.msgdef import MsgTypes, parse_msgdef, root_type_name
 from pipeline.log.recording import PlannedTrajectory, SinkError
+from pipeline.log.rosbag2 import declared_counts
 from pipeline.log.topics import OUR_TOPICS, ROLES
 
 __all__ = [
     "WANT",
     "Collector",
+    "Declared",
     "Roles",
     "Scanned",
     "pick_roles",
@@ -255,9 +257,39 @@ def robot_description(collector: Collector, topic: str | None) -> str | None:
     return value if isinstance(value, str) else None
 
 
+@dataclass(frozen=True)
+class Declared:
+    """The messages per topic a recording declares it holds.
+
+    Attributes:
+        file: the file that declares them (``metadata.yaml``, or an MCAP file).
+        what: how the notes name the declaration ("metadata.yaml", "its Statistics record").
+        counts: messages per topic.
+    """
+
+    file: Path
+    what: str
+    counts: dict[str, int]
+
+    @property
+    def total(self) -> int:
+        return sum(self.counts.values())
+
+    def short(self, found: Mapping[str, int]) -> dict[str, tuple[int, int]]:
+        """Topics with fewer messages found than declared: (declared, found)."""
+        return {
+            t: (n, found.get(t, 0)) for t, n in sorted(self.counts.items()) if found.get(t, 0) < n
+        }
+
+
 @dataclass
 class Scanned:
-    """What scanning a recording's storage files gave besides the collector's messages."""
+    """What scanning a recording's storage files gave besides the collector's messages.
+
+    ``declared``: the counts the recording declares (its ``metadata.yaml``, else a lone
+    MCAP file's Statistics record), None if it declares none; ``shortfall``: a declaration
+    the messages found fall short of (read with ``salvage``; refused without).
+    """
 
     size: int
     sha256: str
@@ -266,6 +298,15 @@ class Scanned:
     notes: list[str]  # the storage readers' notes
     unread: list[Path]  # split files after a salvaged one
     unread_bytes: int
+    found: dict[str, int] = field(default_factory=dict)  # messages per topic
+    declared: Declared | None = None
+    shortfall: Declared | None = None
+    shortfall_found: dict[str, int] = field(default_factory=dict)  # in its scope
+
+    @property
+    def damaged(self) -> bool:
+        """Read with ``salvage`` from a damaged recording, or one missing declared messages."""
+        return bool(self.salvaged) or self.shortfall is not None
 
 
 def scan_storage(
@@ -274,10 +315,16 @@ def scan_storage(
     *,
     salvage: bool,
     copies: Mapping[Path, Path] | None = None,
+    source: Path | None = None,
 ) -> Scanned:
     """Stream every storage file into ``collector`` (stopping after a salvaged one).
 
     ``copies``: ``.db3`` files copied with their ``-wal`` (:func:`pipeline.log.db3.wal_copies`).
+    ``source``: the recording, to check the messages found against the counts it declares
+    (its ``metadata.yaml``, each MCAP file's Statistics record); None: not checked.
+
+    Raises:
+        RecordingError: besides damage, fewer messages than declared, without ``salvage``.
     """
     sha = hashlib.sha256()
     size = 0
@@ -286,6 +333,7 @@ def scan_storage(
     notes: list[str] = []
     unread: list[Path] = []
     unread_bytes = 0
+    per_file: list[tuple[Declared, dict[str, int]]] = []
     for path in files:
         collector.path = path
         scan: McapScan | Db3Scan
@@ -302,6 +350,9 @@ def scan_storage(
         for topic, count in scan.topic_counts.items():
             collector.topic_counts[topic] = collector.topic_counts.get(topic, 0) + count
         collector.metadata.update(scan.metadata)
+        if scan.declared_counts is not None:
+            stats = Declared(path, "its Statistics record", scan.declared_counts)
+            per_file.append((stats, dict(scan.topic_counts)))
         notes += scan.notes
         if scan.salvaged is not None:
             salvaged.append((path, scan.salvaged))
@@ -310,7 +361,35 @@ def scan_storage(
             unread_bytes = sum(p.stat().st_size for p in unread)
             break
     collector.path = files[0]
-    return Scanned(size, sha.hexdigest(), present, salvaged, notes, unread, unread_bytes)
+    found = dict(collector.topic_counts)
+    scanned = Scanned(size, sha.hexdigest(), present, salvaged, notes, unread, unread_bytes, found)
+    if source is None:
+        return scanned
+    in_yaml = declared_counts(source) if source.is_dir() else None
+    checks = list(per_file)
+    if in_yaml:  # the whole bag's: checked first
+        checks.insert(0, (Declared(source / "metadata.yaml", "metadata.yaml", in_yaml), found))
+    if checks and (in_yaml or len(files) == 1):
+        scanned.declared = checks[0][0]
+    if salvaged:  # damaged: the salvage note says what was lost against the declaration
+        return scanned
+    hit = next(((d, got) for d, got in checks if d.short(got)), None)
+    if hit is not None:
+        if not salvage:
+            raise _shortfall_error(*hit)
+        scanned.shortfall, scanned.shortfall_found = hit
+    return scanned
+
+
+def _shortfall_error(declared: Declared, found: Mapping[str, int]) -> RecordingError:
+    short = declared.short(found)
+    topic, (n, got) = next(iter(short.items()))
+    others = f" (and {len(short) - 1} other topic(s))" if len(short) > 1 else ""
+    return RecordingError(
+        f"{declared.file}: {declared.what} declares {n} messages on {topic}, the recording "
+        f"holds {got}{others}: messages were removed or lost; --salvage reads the messages "
+        "that are there"
+    )
 
 
 @dataclass

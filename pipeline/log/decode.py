@@ -58,6 +58,10 @@ class Group:
     stamps: list[NDArray[np.int64]] = field(default_factory=list)
     arrays: dict[str, list[F64]] = field(default_factory=dict)
     count: int = 0
+    # Another order of an existing group's joints: its rows go to that group, columns
+    # reordered by name (``cols[i]``: this group's column of the target's joint i).
+    target: Group | None = None
+    cols: NDArray[np.intp] | None = None
 
     def __post_init__(self) -> None:
         # The check bytes as 4-byte words (with a mask for the bytes of a word outside the
@@ -120,6 +124,9 @@ class TopicDecoder:
     types: MsgTypes
     want: Want
     groups: list[Group] = field(default_factory=list)
+    # joint lists that reorder a group's joints (their rows are that group's)
+    reordered: list[Group] = field(default_factory=list)
+    reordered_count: int = 0
     # the generic path's groups by the bytes of their joint-name list
     _by_name_bytes: dict[bytes, Group] = field(default_factory=dict, repr=False)
 
@@ -145,7 +152,7 @@ class TopicDecoder:
             s0 = int(data_start[0])
             self._group(first, u8[s0 : s0 + first.size])
         left = np.ones(starts.size, dtype=bool)
-        for group in self.groups:
+        for group in (*self.groups, *self.reordered):
             if not left.any():
                 break
             sel = left & (lengths == group.layout.size)
@@ -187,7 +194,7 @@ class TopicDecoder:
                 same = (rows == rows[0]).all(axis=1)
                 key = rows[0].tobytes()  # equal name bytes: equal names
                 group = self._by_name_bytes.get(key)
-                if group is None or not any(g is group for g in self.groups):
+                if group is None or not any(g is group for g in (*self.groups, *self.reordered)):
                     i = int(sel[0])
                     s, n = int(starts[i]), int(sizes[i])
                     group = self._group(self._walk(buf, s, n), u8[s : s + n])
@@ -203,7 +210,8 @@ class TopicDecoder:
             return values_at(u8, dtype)[off[idx]]
 
         n = idx.size
-        group.stamps.append(
+        dest = self._dest(group, n)
+        dest.stamps.append(
             column(STAMP_SEC).astype(np.int64) * 1_000_000_000 + column(STAMP_NSEC).astype(np.int64)
         )
         width = len(group.names)
@@ -225,8 +233,17 @@ class TopicDecoder:
                 if take.any():
                     out[take] = values_at(u8, dtype, width)[off[idx[take]]]
                     todo &= ~take
-            group.arrays.setdefault(key, []).append(out)
-        group.count += n
+            dest.arrays.setdefault(key, []).append(
+                out if group.cols is None else out[:, group.cols]
+            )
+        dest.count += n
+
+    def _dest(self, group: Group, n: int) -> Group:
+        """The group that keeps ``group``'s rows: itself, or the one whose joints it reorders."""
+        if group.target is None:
+            return group
+        self.reordered_count += n
+        return group.target
 
     def _walk(self, buf: bytes, start: int, length: int) -> Layout:
         data = buf[start : start + length]
@@ -238,14 +255,30 @@ class TopicDecoder:
             ) from err
 
     def _group(self, layout: Layout, data: NDArray[np.uint8]) -> Group:
+        """The group of a message's joint list; a new order of a known list's joints (a
+        driver that lists them differently from one message to the next) gets a group of
+        its own shape whose rows, reordered by name, are the known list's."""
         names = self._names(layout)
-        for g in self.groups:
+        for g in (*self.groups, *self.reordered):
             if g.names == names:
                 return g
         self._check_fields(layout)
         cols = layout.check_cols()
         group = Group(names, layout, cols, data[cols].copy())
-        self.groups.append(group)
+        same = next(
+            (
+                g
+                for g in self.groups
+                if sorted(g.names) == sorted(names) and len(set(names)) == len(names)
+            ),
+            None,
+        )
+        if same is not None:
+            group.target = same
+            group.cols = np.array([names.index(n) for n in same.names], dtype=np.intp)
+            self.reordered.append(group)
+        else:
+            self.groups.append(group)
         return group
 
     def _append(
@@ -253,14 +286,18 @@ class TopicDecoder:
     ) -> None:
         lay = layout or group.layout
         n = matrix.shape[0]
-        group.stamps.append(
+        dest = self._dest(group, n)
+        dest.stamps.append(
             _column(lay, matrix, STAMP_SEC)[:, 0].astype(np.int64) * 1_000_000_000
             + _column(lay, matrix, STAMP_NSEC)[:, 0].astype(np.int64)
         )
         width = len(group.names)
         for key, aliases in self.want.arrays.items():
-            group.arrays.setdefault(key, []).append(_leaf_matrix(lay, matrix, aliases, width, n))
-        group.count += n
+            values = _leaf_matrix(lay, matrix, aliases, width, n)
+            dest.arrays.setdefault(key, []).append(
+                values if group.cols is None else values[:, group.cols]
+            )
+        dest.count += n
 
     def _check_fields(self, layout: Layout) -> None:
         """Refuse a schema that lacks a field the report cannot do without."""

@@ -5,18 +5,38 @@ the bag's name), its settings under the recording contract, its URDF and the not
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+from xml.etree import ElementTree
+
+import numpy as np
+from numpy.typing import NDArray
 
 from pipeline.constants import METADATA_EPISODE, TOPIC_ROBOT_DESCRIPTION
 from pipeline.log.collect import Collector, robot_description
-from pipeline.log.recording import ReadOptions
+from pipeline.log.recording import PlannedTrajectory, ReadOptions
 from pipeline.model.urdf_xml import urdf_effort_limits, urdf_robot_name
 from pipeline.settings import EpisodeSettings, SettingsError
 
-__all__ = ["Labels", "read_labels", "typed_settings"]
+__all__ = [
+    "URDF_MAX_CHARS",
+    "URDF_MAX_DEPTH",
+    "DurationCheck",
+    "Labels",
+    "check_trajectory_duration",
+    "read_labels",
+    "reference_end_s",
+    "typed_settings",
+    "urdf_problem",
+]
+
+# A bag's robot description beyond these is not a URDF we read (the largest robots' URDFs,
+# meshes referenced by file, are a few MB and a dozen levels deep).
+URDF_MAX_CHARS = 16 * 1024 * 1024
+URDF_MAX_DEPTH = 64
 
 
 @dataclass(frozen=True)
@@ -78,11 +98,20 @@ def read_labels(
         }
     raw_meta |= {k: v for k, v in labels.items() if v}
     urdf = robot_description(collector, chosen["robot_description"])
+    problem = urdf_problem(urdf) if urdf is not None else None
+    if problem is not None:
+        # dropped, so nothing downstream (names, limits, a 3D model) parses it again
+        urdf = None
+        notes.append(
+            f"{chosen['robot_description'] or TOPIC_ROBOT_DESCRIPTION}: malformed URDF "
+            f"({problem}): ignored; the robot's name, effort limits and saturation at the "
+            "limit are n/a"
+        )
     if not ours and urdf is not None:
         robot = urdf_robot_name(urdf)
         if robot:
             raw_meta["robot"] = robot
-    if not ours:
+    if not ours and problem is None:
         notes.append(_limits_note(urdf, names, chosen["robot_description"]))
     settings: dict[str, Any] = {}
     if "settings" in raw_meta:
@@ -111,6 +140,61 @@ def read_labels(
     return Labels(raw_meta, typed, urdf, tuple(notes), (why,) if why else (), ours)
 
 
+def _short(text: str, most: int = 60) -> str:
+    return text if len(text) <= most else text[:most] + "..."
+
+
+def urdf_problem(urdf: str) -> str | None:
+    """Why a bag's robot description is not a URDF to read (None: it is one): too large,
+    entity declarations (a URDF needs none; entity bombs use them), not XML, not a
+    ``<robot>``, nested too deep, or a joint limit or mass that is not a number or not
+    physical (NaN, infinite, a negative effort, velocity or mass, lower above upper)."""
+    if len(urdf) > URDF_MAX_CHARS:
+        return f"{len(urdf):,} characters, more than the {URDF_MAX_CHARS:,} read"
+    if "<!ENTITY" in urdf:
+        return "it declares XML entities (<!ENTITY>), which a URDF never needs"
+    try:
+        root = ElementTree.fromstring(urdf)
+    except ElementTree.ParseError as err:
+        return f"not XML: {_short(str(err), 120)}"
+    if root.tag != "robot":
+        return f"its root element is <{_short(root.tag)}>, expected <robot>"
+    stack = [(root, 1)]
+    while stack:
+        element, depth = stack.pop()
+        if depth > URDF_MAX_DEPTH:
+            return f"elements nested more than {URDF_MAX_DEPTH} levels deep"
+        stack.extend((child, depth + 1) for child in element)
+    limit_keys: tuple[str, ...] = ("effort", "velocity", "lower", "upper")
+    checks: list[tuple[str, ElementTree.Element | None, tuple[str, ...]]] = [
+        (f"joint {_short(j.get('name', '?'))}: limit", j.find("limit"), limit_keys)
+        for j in root.iter("joint")
+    ]
+    checks += [
+        (f"link {_short(link.get('name', '?'))}: mass", link.find("inertial/mass"), ("value",))
+        for link in root.iter("link")
+    ]
+    for where, found, keys in checks:
+        if found is None:
+            continue
+        values: dict[str, float] = {}
+        for key in keys:
+            text = found.get(key)
+            if text is None:
+                continue
+            try:
+                values[key] = float(text)
+            except ValueError:
+                return f"{where} {key}={_short(text)!r} is not a number"
+            if not math.isfinite(values[key]) or (
+                key in ("effort", "velocity", "value") and values[key] < 0
+            ):
+                return f"{where} {key}={_short(text)!r} is not physical"
+        if values.get("lower", -math.inf) > values.get("upper", math.inf):
+            return f"{where} lower={values['lower']:g} is above upper={values['upper']:g}"
+    return None
+
+
 def _limits_note(urdf: str | None, joints: Sequence[str], topic: str | None) -> str:
     """Where a bag without our metadata gets its effort limits (saturation) from."""
     topic = topic or TOPIC_ROBOT_DESCRIPTION
@@ -127,3 +211,80 @@ def _limits_note(urdf: str | None, joints: Sequence[str], topic: str | None) -> 
         + (f" [N m]: {shown}" if shown else ": none declared")
         + (f"; none for {', '.join(missing)} (saturation at the limit n/a)" if missing else "")
     )
+
+
+@dataclass(frozen=True)
+class DurationCheck:
+    """A recorded ``planner.trajectory_duration_s`` that the recording's data contradict.
+
+    Attributes:
+        duration_s: the trajectory's duration the data give [s] (the planned trajectory
+            topic's last point, else when the reference stops moving); None when they give
+            none: the motion end is then unknown.
+        note: what was contradicted, by what, and what is used instead.
+    """
+
+    duration_s: float | None
+    note: str
+
+
+def reference_end_s(
+    stamps_ns: NDArray[np.int64], reference: NDArray[np.float64], t0_ns: int
+) -> float | None:
+    """When the reference position last changes, from ``t0_ns`` [s] (None: no rows)."""
+    if stamps_ns.size < 2:
+        return None
+    moved = np.flatnonzero(np.any(np.abs(np.diff(reference, axis=0)) > 1e-12, axis=1))
+    last = int(stamps_ns[moved[-1] + 1]) if moved.size else int(stamps_ns[0])
+    return (last - t0_ns) * 1e-9
+
+
+def check_trajectory_duration(
+    settings: EpisodeSettings | None,
+    planned: PlannedTrajectory | None,
+    *,
+    end_s: float | None,
+    salvaged: bool,
+    control_period_s: float,
+    reference_end: float | None = None,
+    planned_topic: str = "the planned trajectory",
+) -> DurationCheck | None:
+    """Check the recorded trajectory duration against the data (None: not contradicted).
+
+    In order: the planned trajectory topic's last ``time_from_start`` (recorded with the
+    motion) must equal it within 1 ms (0.1 %); without that topic the reference must stop
+    moving by the motion end it implies (within two control periods and 1 %); and an
+    ``ok``, unsalvaged recording must not end before that motion end (the recorder records
+    past it).
+    """
+    if settings is None:
+        return None
+    duration = settings.planner.trajectory_duration_s
+    start = settings.protocol.motion_start_s
+    said = f"settings planner.trajectory_duration_s = {duration:g} s"
+    if planned is not None and planned.times_s.size:
+        planned_s = float(planned.times_s[-1])
+        if abs(duration - planned_s) <= max(1e-3, 1e-3 * planned_s):
+            return None
+        return DurationCheck(
+            planned_s,
+            f"{said} is contradicted by {planned_topic}, whose last point is at "
+            f"{planned_s:.3f} s: the motion end is taken from {planned_topic}",
+        )
+    slack = 2 * control_period_s + 0.01 * duration
+    if reference_end is not None and reference_end - start > duration + slack:
+        moving = reference_end - start
+        return DurationCheck(
+            moving,
+            f"{said} is contradicted by the reference, which moves until {moving:.3f} s "
+            "after the motion start: the motion end is taken from the reference's stamps",
+        )
+    ok = settings.status == "ok" and not salvaged
+    if ok and end_s is not None and end_s < start + duration - slack:
+        return DurationCheck(
+            None,
+            f"{said} is contradicted by the stamps: the recording ends at {end_s:.3f} s, "
+            f"before the motion end it implies ({start + duration:.6g} s): the motion end is "
+            "unknown (final error, overshoot and settling time n/a)",
+        )
+    return None

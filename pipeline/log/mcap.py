@@ -56,6 +56,9 @@ ZSTD_LEVEL = 1
 
 # zstd's largest expansion: a 128 KiB block stored as one repeated byte takes 4 bytes
 _ZSTD_MAX_RATIO = 32 * 1024 + 1
+# A damaged file's summary (indexes and statistics, a few bytes per chunk) read from its end
+# for the counts it declares: larger is not a summary worth trusting.
+_SUMMARY_MAX_BYTES = 64 << 20
 
 
 class Op(enum.IntEnum):
@@ -438,6 +441,8 @@ class StorageScan:
         size: bytes read.
         salvaged: where a ``salvage`` scan stopped (None: intact).
         notes: non-fatal oddities for the report.
+        declared_counts: messages per topic as the file's own summary declares them (an
+            MCAP Statistics record; None when the file declares none).
     """
 
     def __init__(self, path: Path, *, salvage: bool = False) -> None:
@@ -451,6 +456,7 @@ class StorageScan:
         self.salvage = salvage
         self.salvaged: Salvage | None = None
         self.notes: list[str] = []
+        self.declared_counts: dict[str, int] | None = None
 
     def on_messages(self, channel: McapChannel, buf: bytes, starts: NDArray[np.int64]) -> None:
         """Messages of ``channel`` in ``buf``: record bodies start at ``starts`` (the channel
@@ -507,6 +513,7 @@ class McapScan(StorageScan):
         with contextlib.suppress(RecordingError):
             self._flush()
         self._deliver()
+        self.declared_counts = self._declared_from_end()
         self.salvaged = Salvage(
             at_byte=at,
             problem=problem.removeprefix(f"{self.path}: "),
@@ -614,15 +621,77 @@ class McapScan(StorageScan):
                 f"corrupt: the footer's summary_start ({start}) is not where the data section "
                 f"ends (byte {pos})"
             )
-        if not expected or start == 0:
-            return  # no summary, or no CRC recorded for it
-        covered = rest[start - pos : len(rest) - 8 - 4]  # up to the footer's CRC field
-        crc = zlib.crc32(covered)
-        if crc != expected:
-            raise self._fail(
-                f"corrupt: summary section CRC mismatch (recorded {expected:#010x}, "
-                f"computed {crc:#010x})"
-            )
+        if start == 0:
+            return  # no summary
+        if expected:
+            covered = rest[start - pos : len(rest) - 8 - 4]  # up to the footer's CRC field
+            crc = zlib.crc32(covered)
+            if crc != expected:
+                raise self._fail(
+                    f"corrupt: summary section CRC mismatch (recorded {expected:#010x}, "
+                    f"computed {crc:#010x})"
+                )
+        self.declared_counts = self._summary_counts(rest[start - pos : len(rest) - 8])
+
+    def _declared_from_end(self) -> dict[str, int] | None:
+        """The Statistics of a damaged file whose end is intact (footer, magic, summary):
+        what it held before the damage; None when its end is lost too."""
+        tail = FOOTER_RECORD + 8
+        try:
+            with open(self.path, "rb") as fh:
+                if self.size < 8 + tail:
+                    return None
+                fh.seek(self.size - tail)
+                footer = fh.read(tail)
+                if footer[-8:] != MAGIC or footer[0] != Op.FOOTER:
+                    return None
+                (start,) = struct.unpack_from("<Q", footer, 9)
+                end = self.size - tail
+                if not 8 < start < end or end - start > _SUMMARY_MAX_BYTES:
+                    return None
+                fh.seek(start)
+                return self._summary_counts(fh.read(end - start) + footer[:-8])
+        except OSError:
+            return None
+
+    def _summary_counts(self, summary: bytes) -> dict[str, int] | None:
+        """Messages per topic from the summary section's Statistics record (topics from its
+        Channel records, else the data section's); None without one or when it cannot be
+        read (the data section has been checked: a damaged summary is not fatal)."""
+        topics = {cid: c.topic for cid, c in self.channels.items()}
+        counts: dict[int, int] | None = None
+        total = 0
+        off = 0
+        try:
+            while off + 9 <= len(summary):
+                op = summary[off]
+                (length,) = struct.unpack_from("<Q", summary, off + 1)
+                body = summary[off + 9 : off + 9 + length]
+                if len(body) != length:
+                    return None
+                if op == Op.CHANNEL:
+                    (cid,) = struct.unpack_from("<H", body, 0)
+                    topics[cid], _ = self._str(body, 4)
+                elif op == Op.STATISTICS:
+                    (total,) = struct.unpack_from("<Q", body, 0)
+                    (nbytes,) = struct.unpack_from("<I", body, 42)
+                    if 46 + nbytes > length or nbytes % 10:
+                        return None
+                    counts = {}
+                    for k in range(46, 46 + nbytes, 10):
+                        cid, n = struct.unpack_from("<HQ", body, k)
+                        counts[cid] = n
+                off += 9 + length
+        except (struct.error, ValueError, UnicodeDecodeError):
+            return None
+        if counts is None or (not counts and total):
+            return None  # no Statistics, or no per-channel counts in it
+        if any(cid not in topics for cid in counts):
+            return None
+        out: dict[str, int] = {}
+        for cid, n in counts.items():
+            out[topics[cid]] = out.get(topics[cid], 0) + n
+        return out
 
     # ---- record bodies
     @staticmethod

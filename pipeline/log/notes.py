@@ -7,19 +7,20 @@ Shared by the whole read (:mod:`pipeline.log.whole`) and the windowed one
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from pipeline.constants import TOPIC_CONTROLLER_STATE, TOPIC_GROUND_TRUTH, TOPIC_JOINT_STATES
 from pipeline.errors import RecordingError
-from pipeline.log.collect import Roles, Scanned
+from pipeline.log.collect import Declared, Roles, Scanned
 from pipeline.log.mcap import Salvage
 from pipeline.log.recording import F64
 
 __all__ = [
     "JS_OPTIONAL",
+    "declared_lost",
     "dropped_note",
     "empty_array_notes",
     "missing_array_notes",
@@ -33,23 +34,45 @@ __all__ = [
 JS_OPTIONAL = {"velocity": "velocity", "effort": "effort"}
 
 
+def declared_lost(declared: Declared | None, found: Mapping[str, int]) -> tuple[str, float] | None:
+    """What a damaged recording lost against the messages it declares: the words and the
+    share [%]; None when it declares none."""
+    if declared is None or not declared.total:
+        return None
+    total = declared.total
+    lost = sum(n - min(found.get(t, 0), n) for t, n in declared.counts.items())
+    pct = 100 * lost / total
+    return f"{lost} of the {total} messages {declared.what} declares ({pct:.1f} %) are missing", pct
+
+
 def salvage_note(
-    path: Path, s: Salvage, size: int, unread: Sequence[Path], unread_bytes: int
+    path: Path,
+    s: Salvage,
+    size: int,
+    unread: Sequence[Path],
+    declared: tuple[str, float] | None = None,
 ) -> tuple[str, float | None]:
-    """The note on a salvaged file and the share of the recording lost [%] (None: unknown)."""
+    """The note on a salvaged file and the share of the recording lost [%] (None: unknown).
+
+    The share is of what the recording declares (``declared``, from
+    :func:`declared_lost`): messages its ``metadata.yaml`` or Statistics record counts, else a
+    ``.db3``'s rows or page count. Bytes left after the damage of a file that declares
+    nothing (a truncated MCAP loses its summary) are a floor, not a share: None.
+    """
     later = (
         f"; the {len(unread)} later split file(s) ({', '.join(p.name for p in unread)}) "
         "were not read"
         if unread
         else ""
     )
+    against = f"; {declared[0]}" if declared else ""
     if s.read_messages is None:  # MCAP: bytes
-        lost_bytes = s.lost_bytes + unread_bytes
-        share = 100 * lost_bytes / max(size + unread_bytes, 1)
         return (
             f"salvaged: {path.name} is damaged at byte {s.at_byte} ({s.problem}); "
-            f"{s.lost_bytes} bytes after it ({share:.1f} % of the recording) were not read" + later,
-            share,
+            f"{s.lost_bytes} bytes after it were not read"
+            + (against or "; it declares no message count, so the share lost is unknown")
+            + later,
+            declared[1] if declared else None,
         )
     pct: float | None = None
     if s.lost_messages is None:
@@ -65,10 +88,12 @@ def salvage_note(
             f"{s.lost_messages} of {s.read_messages + s.lost_messages} message rows "
             f"({pct:.1f} %) after it were lost"
         )
+    if declared:
+        pct = declared[1]
     return (
         f"salvaged: {path.name} is damaged ({s.problem}); {s.read_messages} message rows read "
-        f"up to stamp {s.lost_after_ns} ns, {lost_text}" + later,
-        None if unread else pct,
+        f"up to stamp {s.lost_after_ns} ns, {lost_text}" + against + later,
+        None if unread and not declared else pct,
     )
 
 
@@ -85,8 +110,21 @@ def read_notes(scanned: Scanned, roles: Roles) -> tuple[list[str], float | None]
     notes: list[str] = list(scanned.notes)
     lost_pct: float | None = None
     for path, s in scanned.salvaged:
-        note, lost_pct = salvage_note(path, s, scanned.size, scanned.unread, scanned.unread_bytes)
+        declared = declared_lost(scanned.declared, scanned.found)
+        note, lost_pct = salvage_note(path, s, scanned.size, scanned.unread, declared)
         notes.append(note)
+    if scanned.shortfall is not None:
+        words, lost_pct = declared_lost(scanned.shortfall, scanned.shortfall_found) or ("", None)
+        notes.append(
+            f"salvaged: {scanned.shortfall.file.name}: {words} (removed or lost): what is "
+            "there is read"
+        )
+    for dec in (roles.cs_dec, roles.js_dec):
+        if dec.reordered_count:
+            notes.append(
+                f"{dec.topic}: {dec.reordered_count} message(s) list the joints in another "
+                "order than the first: matched by name"
+            )
     if len(roles.js_dec.groups) > 1 or len(roles.js_group.names) > len(roles.names):
         notes.append(
             f"{roles.js_dec.topic}: analysing {', '.join(roles.names)} (the joints of "

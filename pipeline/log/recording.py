@@ -140,9 +140,12 @@ class Recording:
         topic_counts: messages per topic in the file.
         decoded_messages: messages decoded into ``samples`` (both control-rate topics).
         notes: non-fatal oddities (unparseable settings, dropped samples, salvage).
-        salvaged: read with ``salvage`` from a damaged file: what follows the damage is lost.
-        salvage_lost_pct: share of the recording the salvage could not read [%] (bytes of
-            an MCAP file, messages of a ``.db3``; None when not salvaged or unknown).
+        salvaged: read with ``salvage`` from a damaged file (what follows the damage is
+            lost), or from one holding fewer messages than it declares.
+        salvage_lost_pct: share of the recording the salvage could not read [%]: of the
+            messages its ``metadata.yaml`` or MCAP Statistics record declares, else a
+            ``.db3``'s rows or header-stated bytes; None when not salvaged or unknown (a
+            truncated bare MCAP file declares nothing).
         armlab_metadata: the bag carries our ``armlab.episode`` metadata record; without
             it nothing (robot, limits, settings) is taken from our built-in robot files.
         decimation: 1 when the frames hold every message; k > 1 for a long recording read
@@ -158,6 +161,9 @@ class Recording:
             :func:`pipeline.analysis.protocol.protocol_view` cut the pre-roll); None: from
             the frames.
         control_period_s: median ``/controller_state`` period [s]; None: from the frames.
+        duration_contradicted: the settings' trajectory duration is contradicted by the
+            data (a note says how); :attr:`trajectory_duration_s` is then
+            ``data_trajectory_duration_s``, the data's (None: unknown).
     """
 
     source: Path
@@ -184,6 +190,8 @@ class Recording:
     controller_sample_count: int | None = None
     end_s: float | None = None
     control_period_s: float | None = None
+    duration_contradicted: bool = False
+    data_trajectory_duration_s: float | None = None
 
     @property
     def episode(self) -> str:
@@ -229,9 +237,13 @@ class Recording:
     def trajectory_duration_s(self) -> float | None:
         """When the reference stops, counted from the motion start [s]: the planned
         trajectory's duration (settings.planner.trajectory_duration_s, else the last planned
-        point's time_from_start), None if unknown. On the recording's own ``time_s`` axis the
-        motion ends this much after ``protocol.motion_start_s`` (the pre-roll), which is what
+        point's time_from_start), None if unknown; the data's when they contradict the
+        settings (:func:`pipeline.log.labels.check_trajectory_duration`). On the recording's
+        own ``time_s`` axis the motion ends this much after ``protocol.motion_start_s``
+        (the pre-roll), which is what
         :attr:`pipeline.settings.EpisodeSettings.motion_end_from_first_sample_s` gives."""
+        if self.duration_contradicted:  # the data's (a note says why)
+            return self.data_trajectory_duration_s
         if self.settings is not None:
             return self.settings.planner.trajectory_duration_s
         if self.planned is not None and self.planned.times_s.size:

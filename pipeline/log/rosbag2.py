@@ -314,3 +314,26 @@ def storage_files(source: Path) -> list[Path]:
                 f"{path}: unknown storage file (expected {' or '.join(STORAGE_SUFFIXES)})"
             )
     return paths
+
+
+def declared_counts(source: Path) -> dict[str, int] | None:
+    """Messages per topic as a rosbag2 directory's ``metadata.yaml`` declares them
+    (``topics_with_message_count``); None for a bare file, or a metadata file without
+    counts (its other fields were checked by :func:`storage_files`)."""
+    meta = source / METADATA_FILE
+    if not meta.is_file():
+        return None
+    try:
+        loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+        info = yaml.load(meta.read_text(encoding="utf-8"), Loader=loader)
+        entries = info["rosbag2_bagfile_information"]["topics_with_message_count"]
+        counts: dict[str, int] = {}
+        for entry in entries:
+            topic = str(entry["topic_metadata"]["name"])
+            count = entry["message_count"]
+            if not isinstance(count, int) or isinstance(count, bool) or count < 0:
+                return None
+            counts[topic] = counts.get(topic, 0) + count
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError):
+        return None
+    return counts or None

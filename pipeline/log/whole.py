@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.log.collect import Collector, pick_roles, planned_trajectory, scan_storage
-from pipeline.log.labels import read_labels
+from pipeline.log.labels import check_trajectory_duration, read_labels, reference_end_s
 from pipeline.log.notes import (
     JS_OPTIONAL,
     dropped_note,
@@ -34,7 +34,7 @@ def read_whole(
 ) -> Recording:
     mcap_path = files[0]
     collector = Collector(options.topics)
-    scanned = scan_storage(files, collector, salvage=options.salvage, copies=copies)
+    scanned = scan_storage(files, collector, salvage=options.salvage, copies=copies, source=source)
     roles = pick_roles(collector, scanned.present, mcap_path, scanned.salvaged)
     js_t, js_all = roles.js_group.concat()
     cs_t, cs_a = roles.cs_group.concat()
@@ -63,6 +63,17 @@ def read_whole(
     )
     if truth is not None:
         notes += truth_note(cs_t.size - rows_cs_gt.size, cs_topic)
+    planned = planned_trajectory(collector, roles.chosen["planned_trajectory"])
+    contradicted = check_trajectory_duration(
+        labels.settings,
+        planned,
+        end_s=(int(max(js_t[-1], cs_t[-1])) - t0_ns) * 1e-9,
+        salvaged=scanned.damaged,
+        control_period_s=float(np.median(np.diff(cs_t))) * 1e-9 if cs_t.size > 1 else 0.0,
+        reference_end=reference_end_s(cs_t, cs_all["reference_position"], t0_ns),
+        planned_topic=str(roles.chosen["planned_trajectory"]),
+    )
+    notes += [contradicted.note] if contradicted else []
     every_cs = rows_cs.size == cs_t.size and bool(np.all(rows_cs == np.arange(cs_t.size)))
     every_js = rows_js.size == js_t.size and bool(np.all(rows_js == np.arange(js_t.size)))
 
@@ -115,7 +126,7 @@ def read_whole(
         joint_names=names,
         samples=samples,
         controller_states=controller_states,
-        planned=planned_trajectory(collector, roles.chosen["planned_trajectory"]),
+        planned=planned,
         robot_description=labels.urdf,
         topic_counts=dict(collector.topic_counts),
         decoded_messages=roles.js_group.count
@@ -123,7 +134,9 @@ def read_whole(
         + (truth.count if truth else 0),
         notes=(*notes, *labels.settings_notes),
         has_ground_truth=truth is not None,
-        salvaged=bool(scanned.salvaged),
+        salvaged=scanned.damaged,
         salvage_lost_pct=lost_pct,
         armlab_metadata=labels.ours,
+        duration_contradicted=contradicted is not None,
+        data_trajectory_duration_s=contradicted.duration_s if contradicted else None,
     )

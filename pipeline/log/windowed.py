@@ -53,7 +53,7 @@ from pipeline.log.collect import (
 )
 from pipeline.log.db3 import Db3Scan
 from pipeline.log.decode import DecodeError, TopicDecoder
-from pipeline.log.labels import read_labels
+from pipeline.log.labels import check_trajectory_duration, read_labels
 from pipeline.log.mcap import McapChannel, McapScan
 from pipeline.log.notes import (
     JS_OPTIONAL,
@@ -523,7 +523,7 @@ def read_windowed(
     limit = STREAM_ABOVE_BYTES if options.stream_above_bytes is None else options.stream_above_bytes
     mcap_path = files[0]
     first = _Pass1(dict(options.topics))
-    scanned = scan_storage(files, first, salvage=options.salvage, copies=copies)
+    scanned = scan_storage(files, first, salvage=options.salvage, copies=copies, source=source)
     roles = pick_roles(first, scanned.present, mcap_path, scanned.salvaged)
     js_topic, cs_topic = roles.js_dec.topic, roles.cs_dec.topic
     js_stats = first.stats[(js_topic, roles.js_group.names)]
@@ -572,6 +572,16 @@ def read_windowed(
     )
     windows = _Windows(facts, js, cs, gt)
     header_notes, lost_pct = read_notes(scanned, roles)
+    planned = planned_trajectory(first, roles.chosen["planned_trajectory"])
+    contradicted = check_trajectory_duration(
+        labels.settings,
+        planned,
+        end_s=(facts.end_ns - facts.t0_ns) * 1e-9,
+        salvaged=scanned.damaged,
+        control_period_s=cs_period * 1e-9 if cs_stats.count > 1 else 0.0,
+        planned_topic=str(roles.chosen["planned_trajectory"]),
+    )
+    header_notes += [contradicted.note] if contradicted else []
     empty = np.zeros(0, dtype=np.int64)
     no_rows = np.zeros((0, len(roles.names)))
     header = Recording(
@@ -584,19 +594,21 @@ def read_windowed(
         joint_names=roles.names,
         samples=windows._tidy(empty, dict.fromkeys(_SAMPLE_VALUES, no_rows)),
         controller_states=windows._tidy(empty, dict.fromkeys(_CS_VALUES, no_rows)),
-        planned=planned_trajectory(first, roles.chosen["planned_trajectory"]),
+        planned=planned,
         robot_description=labels.urdf,
         topic_counts=dict(first.topic_counts),
         decoded_messages=js_stats.count + cs_stats.count + (gt_stats.count if gt_stats else 0),
         notes=(*header_notes, *labels.notes, *labels.settings_notes),
         has_ground_truth=gt is not None,
-        salvaged=bool(scanned.salvaged),
+        salvaged=scanned.damaged,
         salvage_lost_pct=lost_pct,
         armlab_metadata=labels.ours,
         decimation=facts.decimation,
         controller_sample_count=cs_stats.count,
         end_s=(facts.end_ns - facts.t0_ns) * 1e-9,
         control_period_s=cs_period * 1e-9 if cs_stats.count > 1 else 0.0,
+        duration_contradicted=contradicted is not None,
+        data_trajectory_duration_s=contradicted.duration_s if contradicted else None,
     )
     del first
     if sink is not None:

@@ -295,8 +295,10 @@ def write_bag(
             counts["/robot_description"] = 1
         if "/planned_trajectory" in topics:
             end_s = ep.motion_end_s if ep.motion_end_s is not None else 1.0
-            times = np.linspace(0.0, end_s, 5)
-            idx = np.searchsorted(ep.stamp_ns / 1e9, times).clip(0, len(ep.stamp_ns) - 1)
+            # time_from_start counts from the motion start, as the record stage writes it
+            times = np.linspace(0.0, end_s - ep.motion_start_s, 5)
+            at = times + ep.motion_start_s
+            idx = np.searchsorted(ep.stamp_ns / 1e9, at).clip(0, len(ep.stamp_ns) - 1)
             pts = [
                 _point(ep.q_ref[i], ep.qd_ref[i], t_ns=round(t * 1e9))
                 for i, t in zip(idx, times, strict=True)

@@ -65,11 +65,14 @@ def write_external_bag(
     urdf_effort_nm: tuple[float, float, float] = (40.0, 50.0, 60.0),
     js_offset_ns: int = 0,
     js_every: int = 1,
+    cs_flip_at: int | None = None,
+    urdf: str | None = None,
 ) -> dict[str, np.ndarray]:
     """A Humble or Jazzy robot's bag: JTC state + joint_states (arm+gripper in shuffled order,
     plus a gripper-only publisher at a lower rate) + a URDF. ``js_offset_ns`` stamps the
     joint states that much after the controller state they go with; ``js_every``: joint
-    states every k-th control step only."""
+    states every k-th control step only; ``cs_flip_at``: the controller state lists its
+    joints in reverse order from that message on."""
     store = store_for(distro)
     s = signals(t0_ns)
     T = store.types
@@ -101,7 +104,7 @@ def write_external_bag(
     multi = Multi(
         transforms=[], velocities=[], accelerations=[], time_from_start=Duration(sec=0, nanosec=0)
     )
-    urdf = (
+    urdf = urdf or (
         f'<robot name="{robot_name}">'
         + "".join(
             f'<joint name="{j}" type="revolute"><limit effort="{e:g}" velocity="3" '
@@ -125,14 +128,18 @@ def write_external_bag(
         w.write(c_rd, int(s["t_ns"][0]), store.serialize_cdr(Str(data=urdf), Str.__msgtype__))
         for k in range(N):
             ns = int(s["t_ns"][k])
-            ref, q, err = s["ref"][k], s["q"][k], s["err"][k]
+            ref, q, err, eff_k = s["ref"][k], s["q"][k], s["err"][k], s["effort"][k]
+            cs_joints = list(joints)
+            if cs_flip_at is not None and k >= cs_flip_at:
+                ref, q, err, eff_k = (np.ascontiguousarray(a[::-1]) for a in (ref, q, err, eff_k))
+                cs_joints.reverse()
             points = {
                 "reference": point(ref),
                 "feedback": point(q),
                 "error": point(err),
-                "output": point(eff=s["effort"][k]),
+                "output": point(eff=eff_k),
             }
-            fields: dict[str, Any] = {"header": header(ns), "joint_names": list(joints)}
+            fields: dict[str, Any] = {"header": header(ns), "joint_names": cs_joints}
             if distro == "humble":
                 points |= {"desired": point(ref), "actual": point(q)}
             else:
@@ -144,6 +151,7 @@ def write_external_bag(
             w.write(c_cs, ns, store.serialize_cdr(msg, CS.__msgtype__))
             if c_x is not None:
                 w.write(c_x, ns, store.serialize_cdr(msg, CS.__msgtype__))
+            q = s["q"][k]
             pos = np.array([0.01 if j == "gripper" else q[joints.index(j)] for j in js_order])
             eff = np.array(
                 [0.0 if j == "gripper" else s["effort"][k][joints.index(j)] for j in js_order]

@@ -15,9 +15,11 @@ from typing import Any
 
 import numpy as np
 import pytest
+import yaml
 from rosbags.rosbag2 import StoragePlugin
 
 from pipeline.log import bag
+from pipeline.log.reader import ReadOptions, read_recording
 from pipeline.robots import RobotSpec
 from tests.log.test_external_bags import write_external_bag
 from tests.log.test_salvage import chunk_offsets
@@ -35,6 +37,11 @@ def report(tmp_path: Path, *args: str) -> subprocess.CompletedProcess[str]:
         timeout=300,
         check=False,
     )
+
+
+def bag_counts(bag_dir: Path) -> int:
+    info = yaml.safe_load((bag_dir / "metadata.yaml").read_text())
+    return int(info["rosbag2_bagfile_information"]["message_count"])
 
 
 def episode_rows(out: Path) -> dict[str, dict[str, str]]:
@@ -80,8 +87,12 @@ def test_a_truncated_bag_of_ours_is_salvaged_marked_and_not_compared(
     done = report(tmp_path, "--baseline", "pid", "--salvage")
     assert done.returncode == 0, done.stderr
     out = tmp_path / "reports"
-    # lost: the third chunk's bytes up to the cut, of the bytes in the file
-    lost_pct = 100 * (cut - starts[2]) / cut
+    # lost: the messages metadata.yaml counts that were not read (not the bytes after the
+    # damage of the bytes that survived, issue 20)
+    declared = bag_counts(recordings / "ctc_paper")
+    read = read_recording(recordings / "ctc_paper", ReadOptions(salvage=True)).topic_counts
+    lost_pct = 100 * (declared - sum(read.values())) / declared
+    assert lost_pct > 100 * (cut - starts[2]) / cut
     shown = f"ok (salvaged: {lost_pct:.1f} % lost; cut before the motion end, not compared)"
     text = (out / "report.md").read_text()
     assert markdown_status(text, "ctc_paper") == shown
@@ -175,3 +186,30 @@ def test_a_foreign_ur5_takes_its_effort_limits_from_its_urdf(tmp_path: Path) -> 
     text = (tmp_path / "out" / "report.md").read_text()
     assert "effort limits from the bag's /robot_description URDF [N m]: " in text
     assert "shoulder_pan_joint 4, shoulder_lift_joint 4.5, elbow_joint 300" in text
+
+
+@pytest.mark.slow
+def test_a_bag_missing_declared_messages_is_refused_unless_salvaged(tmp_path: Path) -> None:
+    """A rosbags bag whose metadata.yaml counts 39 more joint states than it holds: the
+    report refuses it in one line, and with --salvage marks it salvaged with the share."""
+    bags = tmp_path / "bags"
+    write_external_bag(bags / "pid", distro="jazzy", storage=StoragePlugin.MCAP)
+    write_external_bag(bags / "ctc", distro="jazzy", storage=StoragePlugin.MCAP)
+    meta = bags / "ctc" / "metadata.yaml"
+    info = yaml.safe_load(meta.read_text())
+    for entry in info["rosbag2_bagfile_information"]["topics_with_message_count"]:
+        if entry["topic_metadata"]["name"] == "/joint_states":
+            entry["message_count"] += 39
+    meta.write_text(yaml.safe_dump(info))
+    args = ("--recordings", "bags", "--out", "out", "--baseline", "pid")
+    refused = report(tmp_path, *args)
+    assert refused.returncode == 1
+    assert refused.stderr.count("\n") == 1 and "Traceback" not in refused.stderr
+    assert "metadata.yaml declares" in refused.stderr and "--salvage" in refused.stderr
+    assert not (tmp_path / "out").exists()
+
+    done = report(tmp_path, *args, "--salvage")
+    assert done.returncode == 0, done.stderr
+    rows = episode_rows(tmp_path / "out")
+    assert rows["ctc"]["salvaged"] == "true" and rows["pid"]["salvaged"] == "false"
+    assert 0 < float(rows["ctc"]["salvage_lost_pct"]) < 2

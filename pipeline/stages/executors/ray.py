@@ -76,10 +76,13 @@ class RayExecutor:
                     address=self.address, include_dashboard=False, log_to_driver=False,
                     configure_logging=False,
                 )  # fmt: skip
-            except (ConnectionError, RuntimeError, ValueError) as err:
+            except Exception as err:  # Ray raises a bare Exception on a
+                # start-up timeout (a loaded machine, a support process that died)
                 where = self.address or "a local instance"
+                lines = str(err).strip().splitlines()
                 raise PipelineError(
-                    f"--executor ray: cannot start or join {where} ({err})"
+                    f"--executor ray: cannot start or join {where} "
+                    f"({lines[0] if lines else type(err).__name__})"
                 ) from err
             finally:
                 if threading.current_thread() is threading.main_thread() and on_sigterm is not None:
