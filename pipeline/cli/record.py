@@ -14,6 +14,7 @@ from pipeline.cli.root import app, console, print_json
 from pipeline.errors import (
     PipelineError,
 )
+from pipeline.report.numbers import sci
 
 
 @app.command("record")
@@ -116,8 +117,8 @@ def record_cmd(
         table.add_row(
             o.name,
             o.status if o.status == "ok" else f"[red]{o.status}[/red]",
-            f"{o.max_abs_error_rad:.3e}",
-            f"{o.final_abs_error_rad:.3e}",
+            sci(o.max_abs_error_rad),
+            sci(o.final_abs_error_rad),
             f"{o.duration_s:.2f}",
             f"{o.wall_s:.2f}",
         )
@@ -272,7 +273,7 @@ def _record_campaign(
         for o in outcomes:
             table.add_row(
                 o.name, o.status if o.status == "ok" else f"[red]{o.status}[/red]",
-                f"{o.max_abs_error_rad:.3e}", f"{o.final_abs_error_rad:.3e}", f"{o.wall_s:.2f}",
+                sci(o.max_abs_error_rad), sci(o.final_abs_error_rad), f"{o.wall_s:.2f}",
             )  # fmt: skip
         console.print(table)
     counts: dict[str, int] = {}

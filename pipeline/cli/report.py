@@ -11,6 +11,7 @@ from rich.table import Table
 
 from pipeline.cli.root import app, console
 from pipeline.errors import PipelineError
+from pipeline.report.numbers import sci
 
 
 def _labels(items: list[str]) -> dict[str, str]:
@@ -203,7 +204,7 @@ def report_cmd(
             else f"[yellow]{status}[/yellow]"
             if str(row["status"]).startswith("ok (salvaged")
             else f"[red]{status}[/red]",
-            *("n/a" if c is None else f"{c:.3e}" for c in cells),
+            *(sci(c) for c in cells),
         )
     console.print(table)
     for source, problem in result.skipped:
