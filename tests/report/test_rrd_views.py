@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import rerun.blueprint as rrb
 
-from pipeline.report import rerun_rrd
 from pipeline.report import entities as ent
+from pipeline.report import rerun_rrd
 from pipeline.stages.report import run_report
 from tests.analysis.bagfactory import paper_like, write_bag
 
