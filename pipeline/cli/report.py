@@ -10,8 +10,8 @@ from rich.console import Console
 from rich.table import Table
 
 from pipeline.cli.root import app, console
+from pipeline.constants import ERROR_FORMAT
 from pipeline.errors import PipelineError
-from pipeline.report.numbers import sci
 
 
 def _labels(items: list[str]) -> dict[str, str]:
@@ -204,7 +204,7 @@ def report_cmd(
             else f"[yellow]{status}[/yellow]"
             if str(row["status"]).startswith("ok (salvaged")
             else f"[red]{status}[/red]",
-            *(sci(c) for c in cells),
+            *("n/a" if c is None else format(c, ERROR_FORMAT) for c in cells),
         )
     console.print(table)
     for source, problem in result.skipped:

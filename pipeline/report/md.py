@@ -8,14 +8,14 @@ from typing import Any
 
 from pipeline.analysis.aggregate import MeanCI
 from pipeline.analysis.metrics import ERROR_FLOOR_RAD
-from pipeline.report.numbers import NA as NA
-from pipeline.report.numbers import sci as sci
+from pipeline.constants import ERROR_FORMAT
 
 # Lists (episodes, warnings, findings, recordings) show at most this many rows; the rest are
 # in episodes.csv / recordings.csv / metrics.json, so report.md stays bounded whatever N is.
 MAX_ROWS = 40
 # A scenario with more episodes than this gets no per-episode tables (only the summaries).
 MAX_EPISODE_COLUMNS = 8
+NA = "n/a"
 NOT_RECORDED = "n/a (not recorded)"
 NOT_IN_BAG = "n/a (not in the bag)"
 ENDED_EARLY = "n/a (episode ended before the motion did)"
@@ -39,6 +39,12 @@ def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
     lines.append("|" + "|".join(" --- " for _ in header) + "|")
     lines += ["| " + " | ".join(esc(c) for c in row) + " |" for row in rows]
     return "\n".join(lines)
+
+
+def sci(x: Any, digits: int | None = None) -> str:
+    """``1.234e-03`` (:data:`pipeline.constants.ERROR_FORMAT`, or ``digits`` decimals);
+    n/a for None."""
+    return NA if x is None else format(float(x), ERROR_FORMAT if digits is None else f".{digits}e")
 
 
 def num(x: Any, fmt: str = ".3g") -> str:

@@ -7,13 +7,13 @@ every episode of a large group. Colours are per controller (:mod:`pipeline.repor
 the reference is light grey (visible on the viewer's dark theme), legends are hidden in
 the plots and given once as a text panel.
 
-The arm is drawn from the robot's geometry (the capsules of :func:`pipeline.model.chain.chain`,
-as in the MJCF) posed by forward kinematics of the recorded joint positions at
-:data:`ARM_RATE_HZ`; each episode stands on its own base, a group's side by side in one
-row, and the 3D view's camera frames them all; with no robot model in any bag there is no
-3D view. Errors are plotted in mrad, and the error, effort and TCP views get a y range
-with readable ticks (:func:`readable_range`). The colour key is plain Markdown with the
-colours named. Series are sent as whole columns (``send_columns``). Nothing is spawned or
+The 3D scene (:mod:`pipeline.report.rrd_scene`) draws each episode's arm from the robot's
+geometry, posed by forward kinematics of its recorded joints, on its own base: a group's
+episodes side by side in rows, and the 3D view's camera frames them all; with no robot
+model in any bag there is no 3D view. Errors are plotted in mrad, and the error, effort
+and TCP views get a y range with readable ticks (:func:`readable_range`). The colour key
+is plain Markdown with the colours named. Series are sent as whole columns
+(``send_columns``). Nothing is spawned or
 served: the stream goes to a file sink only.
 """
 
@@ -34,33 +34,15 @@ import rerun.blueprint as rrb
 import rerun_bindings as rr_bindings
 from numpy.typing import NDArray
 
-from pipeline.analysis.episodes import robot_spec
 from pipeline.log.reader import Recording
-from pipeline.model.chain import chain
-from pipeline.model.dh import link_frames
 from pipeline.report import entities as ent
+from pipeline.report import rrd_scene as scene
 from pipeline.report.colors import REFERENCE_RGB, color_name, hex_color
 from pipeline.report.figures import MAX_FIGURE_JOINTS
 from pipeline.report.inputs import ReportData, cs_times_s, cs_wide, times_s, wide
-from pipeline.robots import RobotSpec
 
 RRD_FILE = "recording.rrd"
 APPLICATION_ID = "armlab_report"
-ARM_RATE_HZ = 30.0
-# Episodes stand this far apart in the 3D view [m] (a UR5 reaches ~0.85 m).
-SPACING_M = 1.6
-# A group's episodes stand in rows of at most this many (a narrow 3D panel fits a squarish
-# block of arms better than one long row).
-ROW_LENGTH = 3
-# Every other episode's label sits this much lower [m], so neighbours' labels stay apart.
-LABEL_STAGGER_M = 0.3
-# The 3D camera looks at the arms from this side (x right, -y front, z up) ...
-VIEW_DIRECTION = (0.2, -1.0, 0.55)
-# ... and fits them within this angle of its axis [deg] (Rerun's default field of view is
-# 55 deg high; a narrow panel sees less across, hence the margin) ...
-VIEW_HALF_ANGLE_DEG = 22.0
-# ... with this much room around them.
-FRAME_MARGIN = 1.05
 # Groups (scenarios, campaign conditions) drawn; the rest are in the CSV/Parquet files.
 MAX_RRD_GROUPS = 12
 BAND_LEVELS = (("p05", 5.0), ("p50", 50.0), ("p95", 95.0))
@@ -222,57 +204,6 @@ def _send_series(
     )
 
 
-def _z_to(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Quaternions (x, y, z, w) turning +Z onto each row of unit vectors ``v``."""
-    z = np.array([0.0, 0.0, 1.0])
-    q = np.concatenate([np.cross(z, v), 1.0 + v @ z[:, None]], axis=1)
-    flip = q[:, 3] < 1e-9  # v = -Z: half a turn about X
-    q[flip] = [1.0, 0.0, 0.0, 0.0]
-    out: NDArray[np.float64] = q / np.linalg.norm(q, axis=1, keepdims=True)
-    return out
-
-
-def _arm_capsules(
-    spec: RobotSpec, q: NDArray[np.float64]
-) -> tuple[
-    NDArray[np.float64],
-    NDArray[np.float64],
-    NDArray[np.float64],
-    NDArray[np.float32],
-    NDArray[np.float64],
-]:
-    """Link capsules in world (DH base) coordinates for each row of ``q``.
-
-    Returns:
-        translations (F*S, 3), quaternions (F*S, 4), lengths (F*S,), radii (F*S,) and the
-        flange positions (F, 3); S segments per frame.
-    """
-    links = chain(spec)
-    segs = [
-        (i, s)
-        for i, link in enumerate(links)
-        for s in link.segments_dh
-        if np.linalg.norm(np.subtract(s.end, s.start)) > 1e-9
-    ]
-    starts = np.array([[*s.start, 1.0] for _, s in segs]).reshape(-1, 4)
-    ends = np.array([[*s.end, 1.0] for _, s in segs]).reshape(-1, 4)
-    owner = [i for i, _ in segs]
-    radii = np.array([s.radius for _, s in segs], dtype=np.float32)
-    a = np.empty((q.shape[0], len(segs), 3))
-    b = np.empty_like(a)
-    flange = np.empty((q.shape[0], 3))
-    for f, qf in enumerate(q):
-        frames = link_frames(spec, qf)
-        for k, i in enumerate(owner):
-            a[f, k] = (frames[i] @ starts[k])[:3]
-            b[f, k] = (frames[i] @ ends[k])[:3]
-        flange[f] = frames[-1][:3, 3]
-    starts_w, ends_w = a.reshape(-1, 3), b.reshape(-1, 3)
-    lengths = np.linalg.norm(ends_w - starts_w, axis=1)
-    quats = _z_to((ends_w - starts_w) / lengths[:, None])
-    return starts_w, quats, lengths, np.tile(radii, q.shape[0]), flange
-
-
 @dataclass(frozen=True)
 class _Series:
     """One series to send, and the view (origin) it is drawn in."""
@@ -284,86 +215,6 @@ class _Series:
     name: str
     color: tuple[int, int, int]
     width: float = 1.5
-
-
-@dataclass(frozen=True)
-class _Arm:
-    """An episode's arm, posed at :data:`ARM_RATE_HZ`, on its own base."""
-
-    episode: str
-    offset: NDArray[np.float64]
-    label: str
-    label_z_m: float
-    color: tuple[int, int, int]
-    t: NDArray[np.float64]
-    translations: NDArray[np.float64]
-    quaternions: NDArray[np.float64]
-    lengths: NDArray[np.float64]
-    radii: NDArray[np.float32]
-    flange: NDArray[np.float64]
-
-    def corners(self) -> list[NDArray[np.float64]]:
-        """Two corners of a box around everything drawn for it, in world coordinates."""
-        pts = np.vstack([self.translations, self.flange, [[0.0, 0.0, self.label_z_m]]])
-        pad = float(self.radii.max()) if self.radii.size else 0.0
-        return [pts.min(axis=0) - pad + self.offset, pts.max(axis=0) + pad + self.offset]
-
-
-def _arm(
-    rec: Recording,
-    color: tuple[int, int, int],
-    *,
-    offset: NDArray[np.float64],
-    label: str,
-    label_z_m: float,
-) -> _Arm | None:
-    """The episode's arm (None: no robot spec or no samples)."""
-    spec = robot_spec(rec)
-    if spec is None or spec.joint_names != rec.joint_names:
-        return None
-    t = times_s(rec)
-    if t.size == 0:
-        return None
-    wanted = np.arange(t[0], t[-1], 1.0 / ARM_RATE_HZ)
-    idx = np.unique(np.append(np.searchsorted(t, wanted).clip(0, t.size - 1), t.size - 1))
-    q = wide(rec, "position_rad")[idx]
-    if not np.isfinite(q).all():
-        q = np.nan_to_num(q)
-    trans, quats, lengths, radii, flange = _arm_capsules(spec, q)
-    if lengths.size // max(idx.size, 1) == 0:
-        return None
-    return _Arm(rec.episode, offset, label, label_z_m, color, t[idx], trans, quats, lengths,
-                radii, flange)  # fmt: skip
-
-
-def _send_arm(stream: rr.RecordingStream, arm: _Arm) -> None:
-    """Draw the episode's arm on its own base, with its flange path and its label."""
-    root = ent.episode_root(arm.episode)
-    stream.log(root, rr.Transform3D(translation=arm.offset.tolist()), static=True)
-    per_frame = arm.lengths.size // arm.t.size
-    stream.send_columns(
-        ent.arm_path(arm.episode),
-        indexes=[rr.TimeColumn(ent.TIMELINE, duration=arm.t)],
-        columns=rr.Capsules3D.columns(
-            translations=arm.translations,
-            quaternions=arm.quaternions,
-            lengths=arm.lengths,
-            radii=arm.radii,
-            colors=np.tile(np.array(arm.color, dtype=np.uint8), (arm.lengths.size, 1)),
-        ).partition(lengths=[per_frame] * arm.t.size),
-    )
-    stream.log(
-        ent.ee_path_path(arm.episode),
-        rr.LineStrips3D([arm.flange], radii=[0.004], colors=[arm.color]),
-        static=True,
-    )
-    stream.log(
-        ent.label_path(arm.episode),
-        rr.Points3D(
-            [[0.0, 0.0, arm.label_z_m]], radii=[0.02], colors=[arm.color], labels=[arm.label]
-        ),
-        static=True,
-    )
 
 
 def _tcp_series(
@@ -470,12 +321,6 @@ def _layout(data: ReportData) -> list[tuple[str, list[Recording]]]:
         if recs:
             out.append((group, recs))
     return out[:MAX_RRD_GROUPS]
-
-
-def _offset(row: int, column: int) -> NDArray[np.float64]:
-    """An episode's base: rows :data:`SPACING_M` apart, front to back, and so are the
-    episodes in a row."""
-    return np.array([column * SPACING_M, -row * SPACING_M, 0.0])
 
 
 def _save(stream: rr.RecordingStream, path: Path, layout: rrb.Blueprint) -> Callable[[], None]:
@@ -607,7 +452,7 @@ def _write_rrd(data: ReportData, path: Path) -> list[str]:
     layout = _layout(data)
     series, arms, no_arm = _plan(data, layout)
     corners = [c for arm in arms for c in arm.corners()]
-    layout_bp = blueprint(data, eye=_eye(corners) if arms else None, ranges=_ranges(series))
+    layout_bp = blueprint(data, eye=scene.eye(corners) if arms else None, ranges=_ranges(series))
     stream = rr.RecordingStream(
         APPLICATION_ID, recording_id=_recording_id(data), send_properties=False
     )
@@ -617,7 +462,7 @@ def _write_rrd(data: ReportData, path: Path) -> list[str]:
             _send_series(stream, s.path, s.t, s.values, name=s.name, color=s.color,
                          width=s.width)  # fmt: skip
         for arm in arms:
-            _send_arm(stream, arm)
+            scene.send_arm(stream, arm)
         for _, recs in layout:
             for rec in recs:
                 _send_tcp_path(stream, data, rec, data.color(rec.episode))
@@ -666,10 +511,10 @@ def _ranges(series: list[_Series]) -> dict[str, tuple[float, float]]:
 
 def _plan(
     data: ReportData, layout: list[tuple[str, list[Recording]]]
-) -> tuple[list[_Series], list[_Arm], list[str]]:
+) -> tuple[list[_Series], list[scene.Arm], list[str]]:
     """Everything the .rrd draws: the series, the arms, and the episodes without an arm."""
     series: list[_Series] = []
-    arms: list[_Arm] = []
+    arms: list[scene.Arm] = []
     no_arm: list[str] = []
     roles = data.sample_roles
     row = -1
@@ -691,7 +536,7 @@ def _plan(
             )
         series += _band_series(data, group)
         for k, rec in enumerate(recs):
-            column = k % ROW_LENGTH
+            column = k % scene.ROW_LENGTH
             if column == 0:  # each group starts a row
                 row += 1
             t = times_s(rec)
@@ -718,13 +563,13 @@ def _plan(
                         )
                     )
             series += _tcp_series(data, rec, color, label=label)
-            arm = _arm(
+            arm = scene.make_arm(
                 rec,
                 color,
-                offset=_offset(row, column),
+                offset=scene.offset(row, column),
                 label=_arm_label(rec, role),
                 # alternate label heights, so neighbours' labels do not overlap
-                label_z_m=-0.08 - LABEL_STAGGER_M * (column % 2),
+                label_z_m=-0.08 - scene.LABEL_STAGGER_M * (column % 2),
             )
             if arm is None:
                 no_arm.append(rec.episode)
@@ -738,27 +583,3 @@ def _arm_label(rec: Recording, role: str) -> str:
     name = rec.episode if rec.controller in rec.episode else f"{rec.episode}: {rec.controller}"
     extra = [x for x in (role, "salvaged" if rec.salvaged else "") if x]
     return f"{name} ({', '.join(extra)})" if extra else name
-
-
-def _eye(points: list[NDArray[np.float64]]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """A camera that frames every arm (``points``: corners of what is drawn): looking at
-    the centre of their box from the front-right and above (:data:`VIEW_DIRECTION`), just
-    far enough for every corner of the box to be inside :data:`VIEW_HALF_ANGLE_DEG` of
-    the view's axis, sideways and up-down."""
-    if not points:
-        return np.array([2.0, -2.0, 1.5]), np.zeros(3)
-    allp = np.vstack(points)
-    low, high = allp.min(axis=0), allp.max(axis=0)
-    centre = (low + high) / 2
-    back = np.asarray(VIEW_DIRECTION, dtype=np.float64)
-    back /= np.linalg.norm(back)  # from the target towards the camera
-    right = np.cross(back, [0.0, 0.0, 1.0])
-    right /= np.linalg.norm(right)
-    up = np.cross(right, back)
-    tan = np.tan(np.radians(VIEW_HALF_ANGLE_DEG))
-    box = np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1])
-                    for z in (low[2], high[2])]) - centre  # fmt: skip
-    # a corner p is in view from distance D when max(|p.right|, |p.up|) <= (D - p.back) tan
-    need = box @ back + np.maximum(np.abs(box @ right), np.abs(box @ up)) / tan
-    distance = max(float(need.max()) * FRAME_MARGIN, 0.5)
-    return centre + back * distance, centre
