@@ -25,6 +25,11 @@ DEFAULT_REPORTS_DIR = "reports"
 
 # "Error at the target": mean |error| over the last min(FINAL_WINDOW_S, hold / 2) seconds.
 FINAL_WINDOW_S = 0.5
+# A sample this close before the final window's start is inside it [s] (float noise).
+FINAL_EDGE_S = 1e-9
+# How an error is printed by every printer (the record and report consoles, report.md), so
+# they agree to the printed digit: 4 significant digits.
+ERROR_FORMAT = ".3e"
 
 # Seeds: OMPL seeds are 32-bit and must be non-zero, and the planner passes seed + 1.
 MAX_SEED = 2**32 - 2

@@ -36,7 +36,7 @@ from pipeline.analysis.catalog import (
 )
 from pipeline.analysis.episodes import comparable
 from pipeline.analysis.task_space import TaskSpace, tcp_errors
-from pipeline.constants import FINAL_WINDOW_S
+from pipeline.constants import FINAL_EDGE_S, FINAL_WINDOW_S
 from pipeline.errors import ReportError, unknown_name_message
 
 __all__ = [
@@ -110,8 +110,8 @@ def _prepared_controller_states(
         .join(_episode_columns(episodes, final_window_s), on="episode", how="left")
         .with_columns(
             after_motion=(t >= pl.col("motion_end_s")),
-            in_final=(t >= pl.col("end_s") - pl.col("final_window_s") - 1e-9),
-            final_late=(t >= pl.col("end_s") - pl.col("final_window_s") / 2 - 1e-9),
+            in_final=(t >= pl.col("end_s") - pl.col("final_window_s") - FINAL_EDGE_S),
+            final_late=(t >= pl.col("end_s") - pl.col("final_window_s") / 2 - FINAL_EDGE_S),
         )
         .with_columns(
             violating=(pl.col("after_motion") & (e.abs() > settling_tolerance_rad)).fill_null(
@@ -163,7 +163,7 @@ def _prepared_tcp(
     return (
         tcp_errors(controller_states, task_space)
         .join(_episode_columns(episodes, final_window_s), on="episode", how="left")
-        .with_columns(in_final=(t >= pl.col("end_s") - pl.col("final_window_s") - 1e-9))
+        .with_columns(in_final=(t >= pl.col("end_s") - pl.col("final_window_s") - FINAL_EDGE_S))
     )
 
 

@@ -11,6 +11,7 @@ from rich.console import Console
 from rich.table import Table
 
 from pipeline.cli.root import app, console, print_json
+from pipeline.constants import ERROR_FORMAT
 from pipeline.errors import (
     PipelineError,
 )
@@ -116,8 +117,8 @@ def record_cmd(
         table.add_row(
             o.name,
             o.status if o.status == "ok" else f"[red]{o.status}[/red]",
-            f"{o.max_abs_error_rad:.3e}",
-            f"{o.final_abs_error_rad:.3e}",
+            format(o.max_abs_error_rad, ERROR_FORMAT),
+            format(o.final_abs_error_rad, ERROR_FORMAT),
             f"{o.duration_s:.2f}",
             f"{o.wall_s:.2f}",
         )
@@ -272,7 +273,8 @@ def _record_campaign(
         for o in outcomes:
             table.add_row(
                 o.name, o.status if o.status == "ok" else f"[red]{o.status}[/red]",
-                f"{o.max_abs_error_rad:.3e}", f"{o.final_abs_error_rad:.3e}", f"{o.wall_s:.2f}",
+                format(o.max_abs_error_rad, ERROR_FORMAT),
+                format(o.final_abs_error_rad, ERROR_FORMAT), f"{o.wall_s:.2f}",
             )  # fmt: skip
         console.print(table)
     counts: dict[str, int] = {}

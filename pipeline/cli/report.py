@@ -10,6 +10,7 @@ from rich.console import Console
 from rich.table import Table
 
 from pipeline.cli.root import app, console
+from pipeline.constants import ERROR_FORMAT
 from pipeline.errors import PipelineError
 
 
@@ -204,7 +205,7 @@ def report_cmd(
             else f"[yellow]{status}[/yellow]"
             if str(row["status"]).startswith("ok (salvaged")
             else f"[red]{status}[/red]",
-            *("n/a" if c is None else f"{c:.3e}" for c in cells),
+            *("n/a" if c is None else format(c, ERROR_FORMAT) for c in cells),
         )
     console.print(table)
     for source, problem in result.skipped:

@@ -33,6 +33,12 @@ PALETTE: tuple[tuple[int, int, int], ...] = (
     (219, 219, 141),
     (158, 218, 229),
 )
+# What a key calls each palette colour.
+PALETTE_NAMES = (
+    "blue", "orange", "green", "red", "purple", "brown", "pink", "grey", "olive", "cyan",
+    "light blue", "light orange", "light green", "light red", "light purple", "light brown",
+    "light pink", "light olive", "light cyan",
+)  # fmt: skip
 # The built-in controllers' declared colours (pipeline.control.registry), by name.
 FIXED: dict[str, tuple[int, int, int]] = {
     name: entry.color for name, entry in sorted(CONTROLLERS.items()) if entry.color is not None
@@ -54,6 +60,18 @@ def controller_colors(names: Iterable[str]) -> dict[str, tuple[int, int, int]]:
     for k, name in enumerate(sorted(n for n in set(names) if n not in out)):
         out[name] = free[k % len(free)]
     return out
+
+
+def color_name(rgb: tuple[int, int, int]) -> str:
+    """A word for ``rgb``: its palette name, the nearest one's for another colour ("light
+    grey" for the reference)."""
+    if rgb == REFERENCE_RGB:
+        return "light grey"
+    k = min(
+        range(len(PALETTE)),
+        key=lambda i: sum((a - b) ** 2 for a, b in zip(PALETTE[i], rgb, strict=True)),
+    )
+    return PALETTE_NAMES[k]
 
 
 def hex_color(rgb: tuple[int, int, int]) -> str:

@@ -4,16 +4,21 @@ from __future__ import annotations
 
 import re
 
+from pipeline.analysis.protocol import ERROR_SOURCE_MEASURED, ERROR_SOURCE_TRUE
+
 TIMELINE = "sim_time"
 SERIES_ROOT = "joints"
 WORLD_ROOT = "world"
 QUANTITIES = ("position", "error", "velocity", "effort")
+# A view's title: ``{state}`` is the state the metrics use (:func:`state_words`).
 QUANTITY_LABELS = {
-    "position": "position [rad]",
-    "error": "error = reference - measured [rad]",
-    "velocity": "velocity [rad/s]",
+    "position": "position, {state} [rad]",
+    "error": "error = reference − {state} [mrad]",
+    "velocity": "velocity, {state} [rad/s]",
     "effort": "applied effort [N m]",
 }
+# Factor from the recorded unit to the plotted one (the error in mrad: a few ticks, not "0").
+QUANTITY_SCALES = {"error": 1e3}
 
 _UNSAFE = re.compile(r"[^A-Za-z0-9_\-.]+")
 
@@ -63,9 +68,18 @@ def arm_path(episode: str) -> str:
 
 TCP_ROOT = "tcp"
 TCP_QUANTITIES = {
-    "position_error_mm": "TCP position error [mm] (FK of reference vs true state)",
-    "orientation_error_mrad": "TCP orientation error [mrad] (FK of reference vs true state)",
+    "position_error_mm": "TCP position error [mm] (FK of reference vs {state})",
+    "orientation_error_mrad": "TCP orientation error [mrad] (FK of reference vs {state})",
 }
+
+
+def state_words(sources: set[str]) -> str:
+    """What the plotted state is, from the episodes' error sources (``error_source`` of
+    :class:`pipeline.analysis.protocol.ProtocolView`)."""
+    true, measured = ERROR_SOURCE_TRUE in sources, ERROR_SOURCE_MEASURED in sources
+    if true and measured:
+        return "true state (measured where the bag has none)"
+    return "measured state" if measured else "true state"
 
 
 def tcp_quantity_path(quantity: str) -> str:

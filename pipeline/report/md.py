@@ -8,6 +8,7 @@ from typing import Any
 
 from pipeline.analysis.aggregate import MeanCI
 from pipeline.analysis.metrics import ERROR_FLOOR_RAD
+from pipeline.constants import ERROR_FORMAT
 
 # Lists (episodes, warnings, findings, recordings) show at most this many rows; the rest are
 # in episodes.csv / recordings.csv / metrics.json, so report.md stays bounded whatever N is.
@@ -40,9 +41,10 @@ def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
     return "\n".join(lines)
 
 
-def sci(x: Any, digits: int = 3) -> str:
-    """``1.234e-03``; n/a for None."""
-    return NA if x is None else f"{float(x):.{digits}e}"
+def sci(x: Any, digits: int | None = None) -> str:
+    """``1.234e-03`` (:data:`pipeline.constants.ERROR_FORMAT`, or ``digits`` decimals);
+    n/a for None."""
+    return NA if x is None else format(float(x), ERROR_FORMAT if digits is None else f".{digits}e")
 
 
 def num(x: Any, fmt: str = ".3g") -> str:

@@ -7,11 +7,14 @@ every episode of a large group. Colours are per controller (:mod:`pipeline.repor
 the reference is light grey (visible on the viewer's dark theme), legends are hidden in
 the plots and given once as a text panel.
 
-The arm is drawn from the robot's geometry (the capsules of :func:`pipeline.model.chain.chain`,
-as in the MJCF) posed by forward kinematics of the recorded joint positions at
-:data:`ARM_RATE_HZ`; each episode stands on its own base, side by side, and the 3D view's
-camera frames them all. Series are sent as whole columns (``send_columns``). Nothing is
-spawned or served: the stream goes to a file sink only.
+The 3D scene (:mod:`pipeline.report.rrd_scene`) draws each episode's arm from the robot's
+geometry, posed by forward kinematics of its recorded joints, on its own base: a group's
+episodes side by side in rows, and the 3D view's camera frames them all; with no robot
+model in any bag there is no 3D view. Errors are plotted in mrad, and the error, effort
+and TCP views get a y range with readable ticks (:func:`readable_range`). The colour key
+is plain Markdown with the colours named. Series are sent as whole columns
+(``send_columns``). Nothing is spawned or
+served: the stream goes to a file sink only.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import threading
 import time
 import uuid
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -30,21 +34,15 @@ import rerun.blueprint as rrb
 import rerun_bindings as rr_bindings
 from numpy.typing import NDArray
 
-from pipeline.analysis.episodes import robot_spec
 from pipeline.log.reader import Recording
-from pipeline.model.chain import chain
-from pipeline.model.dh import link_frames
 from pipeline.report import entities as ent
-from pipeline.report.colors import REFERENCE_RGB, hex_color
+from pipeline.report import rrd_scene as scene
+from pipeline.report.colors import REFERENCE_RGB, color_name, hex_color
 from pipeline.report.figures import MAX_FIGURE_JOINTS
 from pipeline.report.inputs import ReportData, cs_times_s, cs_wide, times_s, wide
-from pipeline.robots import RobotSpec
 
 RRD_FILE = "recording.rrd"
 APPLICATION_ID = "armlab_report"
-ARM_RATE_HZ = 30.0
-# Episodes stand this far apart in the 3D view [m] (a UR5 reaches ~0.85 m).
-SPACING_M = 1.6
 # Groups (scenarios, campaign conditions) drawn; the rest are in the CSV/Parquet files.
 MAX_RRD_GROUPS = 12
 BAND_LEVELS = (("p05", 5.0), ("p50", 50.0), ("p95", 95.0))
@@ -79,18 +77,34 @@ def _drawn(names: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def blueprint(
-    data: ReportData, *, eye: tuple[NDArray[np.float64], NDArray[np.float64]]
+    data: ReportData,
+    *,
+    eye: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+    ranges: dict[str, tuple[float, float]] | None = None,
 ) -> rrb.Blueprint:
-    """Default layout: the arms in 3D (camera at ``eye`` = (position, target)) and the colour
-    key, beside one tab per joint (position, error, velocity, effort stacked), built only
-    from :mod:`pipeline.report.entities` paths."""
+    """Default layout: the arms in 3D (camera at ``eye`` = (position, target); no 3D view
+    when ``eye`` is None: no arm to draw) and the colour key, beside one tab per joint
+    (position, error, velocity, effort stacked), built only from
+    :mod:`pipeline.report.entities` paths. ``ranges``: a view origin's y range (a few
+    readable ticks, :func:`readable_range`)."""
+    ranges = ranges or {}
+    state = _state(data)
+
+    def plot(origin: str, title: str) -> rrb.TimeSeriesView:
+        y = ranges.get(origin)
+        return rrb.TimeSeriesView(
+            origin=origin,
+            name=title,
+            plot_legend=rrb.PlotLegend(visible=False),
+            axis_y=rrb.ScalarAxis(range=y) if y is not None else None,
+        )
+
     tabs = [
         rrb.Vertical(
             *[
-                rrb.TimeSeriesView(
-                    origin=ent.quantity_path(joint, q),
-                    name=f"{joint}: {ent.QUANTITY_LABELS[q]}",
-                    plot_legend=rrb.PlotLegend(visible=False),
+                plot(
+                    ent.quantity_path(joint, q),
+                    f"{joint}: {ent.QUANTITY_LABELS[q].format(state=state)}",
                 )
                 for q in ent.QUANTITIES
             ],
@@ -102,15 +116,16 @@ def blueprint(
         tabs.append(
             rrb.Vertical(
                 *[
-                    rrb.TimeSeriesView(
-                        origin=ent.tcp_quantity_path(q),
-                        name=label,
-                        plot_legend=rrb.PlotLegend(visible=False),
-                    )
+                    plot(ent.tcp_quantity_path(q), label.format(state=state))
                     for q, label in ent.TCP_QUANTITIES.items()
                 ],
                 name="TCP",
             )
+        )
+    key = rrb.TextDocumentView(origin=ent.LEGEND, name="colour key")
+    if eye is None:  # no robot model in any bag: no empty 3D panel
+        return rrb.Blueprint(
+            rrb.Vertical(rrb.Tabs(*tabs), key, row_shares=[6, 1]), collapse_panels=True
         )
     position, target = eye
     return rrb.Blueprint(
@@ -123,7 +138,7 @@ def blueprint(
                         position=position.tolist(), look_target=target.tolist(), eye_up=[0, 0, 1]
                     ),
                 ),
-                rrb.TextDocumentView(origin=ent.LEGEND, name="colour key"),
+                key,
                 row_shares=[4, 1],
             ),
             rrb.Tabs(*tabs),
@@ -131,6 +146,38 @@ def blueprint(
         ),
         collapse_panels=True,
     )
+
+
+def _state(data: ReportData) -> str:
+    """The state the plotted errors, positions and velocities are of (the metrics')."""
+    sources = {
+        data.protocol[r.episode].error_source for r in data.sample() if r.episode in data.protocol
+    }
+    return ent.state_words(sources)
+
+
+# A y range reaches this share of itself beyond its end ticks.
+RANGE_PAD = 0.06
+
+
+def readable_range(lo: float, hi: float, *, max_steps: int = 3) -> tuple[float, float]:
+    """A y range holding [lo, hi] whose ends are multiples of a power of ten, at most
+    ``max_steps`` of it apart: Rerun ticks powers of ten only, and labels them only when
+    they are far enough apart, so a series spanning six steps of 0.1 gets the one tick "0"
+    (issue 20); this range gets two to four labelled ticks, :data:`RANGE_PAD` inside
+    its ends."""
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return (-1.0, 1.0)
+    if hi - lo <= 0:
+        pad = 10.0 ** np.floor(np.log10(abs(lo))) if lo else 1.0
+        lo, hi = lo - pad, hi + pad
+    step = 10.0 ** np.floor(np.log10(hi - lo))
+    while True:
+        a, b = np.floor(lo / step + 1e-9) * step, np.ceil(hi / step - 1e-9) * step
+        if round((b - a) / step) <= max_steps:
+            pad = RANGE_PAD * (b - a)  # ticks at the very ends are cut off
+            return (float(a - pad), float(b + pad))
+        step *= 10.0
 
 
 def _recording_id(data: ReportData) -> str:
@@ -157,129 +204,44 @@ def _send_series(
     )
 
 
-def _z_to(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Quaternions (x, y, z, w) turning +Z onto each row of unit vectors ``v``."""
-    z = np.array([0.0, 0.0, 1.0])
-    q = np.concatenate([np.cross(z, v), 1.0 + v @ z[:, None]], axis=1)
-    flip = q[:, 3] < 1e-9  # v = -Z: half a turn about X
-    q[flip] = [1.0, 0.0, 0.0, 0.0]
-    out: NDArray[np.float64] = q / np.linalg.norm(q, axis=1, keepdims=True)
-    return out
+@dataclass(frozen=True)
+class _Series:
+    """One series to send, and the view (origin) it is drawn in."""
+
+    path: str
+    view: str
+    t: NDArray[np.float64]
+    values: NDArray[np.float64]
+    name: str
+    color: tuple[int, int, int]
+    width: float = 1.5
 
 
-def _arm_capsules(
-    spec: RobotSpec, q: NDArray[np.float64]
-) -> tuple[
-    NDArray[np.float64],
-    NDArray[np.float64],
-    NDArray[np.float64],
-    NDArray[np.float32],
-    NDArray[np.float64],
-]:
-    """Link capsules in world (DH base) coordinates for each row of ``q``.
-
-    Returns:
-        translations (F*S, 3), quaternions (F*S, 4), lengths (F*S,), radii (F*S,) and the
-        flange positions (F, 3); S segments per frame.
-    """
-    links = chain(spec)
-    segs = [
-        (i, s)
-        for i, link in enumerate(links)
-        for s in link.segments_dh
-        if np.linalg.norm(np.subtract(s.end, s.start)) > 1e-9
-    ]
-    starts = np.array([[*s.start, 1.0] for _, s in segs]).reshape(-1, 4)
-    ends = np.array([[*s.end, 1.0] for _, s in segs]).reshape(-1, 4)
-    owner = [i for i, _ in segs]
-    radii = np.array([s.radius for _, s in segs], dtype=np.float32)
-    a = np.empty((q.shape[0], len(segs), 3))
-    b = np.empty_like(a)
-    flange = np.empty((q.shape[0], 3))
-    for f, qf in enumerate(q):
-        frames = link_frames(spec, qf)
-        for k, i in enumerate(owner):
-            a[f, k] = (frames[i] @ starts[k])[:3]
-            b[f, k] = (frames[i] @ ends[k])[:3]
-        flange[f] = frames[-1][:3, 3]
-    starts_w, ends_w = a.reshape(-1, 3), b.reshape(-1, 3)
-    lengths = np.linalg.norm(ends_w - starts_w, axis=1)
-    quats = _z_to((ends_w - starts_w) / lengths[:, None])
-    return starts_w, quats, lengths, np.tile(radii, q.shape[0]), flange
-
-
-def _send_arm(
-    stream: rr.RecordingStream,
-    rec: Recording,
-    color: tuple[int, int, int],
-    *,
-    offset: NDArray[np.float64],
-    label: str,
-) -> bool:
-    """Draw the episode's arm on its own base (False: no robot spec or no samples)."""
-    spec = robot_spec(rec)
-    if spec is None or spec.joint_names != rec.joint_names:
-        return False
-    t = times_s(rec)
-    if t.size == 0:
-        return False
-    wanted = np.arange(t[0], t[-1], 1.0 / ARM_RATE_HZ)
-    idx = np.unique(np.append(np.searchsorted(t, wanted).clip(0, t.size - 1), t.size - 1))
-    q = wide(rec, "position_rad")[idx]
-    if not np.isfinite(q).all():
-        q = np.nan_to_num(q)
-    trans, quats, lengths, radii, flange = _arm_capsules(spec, q)
-    per_frame = lengths.size // max(idx.size, 1)
-    if per_frame == 0:
-        return False
-    root = ent.episode_root(rec.episode)
-    stream.log(root, rr.Transform3D(translation=offset.tolist()), static=True)
-    stream.send_columns(
-        ent.arm_path(rec.episode),
-        indexes=[rr.TimeColumn(ent.TIMELINE, duration=t[idx])],
-        columns=rr.Capsules3D.columns(
-            translations=trans,
-            quaternions=quats,
-            lengths=lengths,
-            radii=radii,
-            colors=np.tile(np.array(color, dtype=np.uint8), (lengths.size, 1)),
-        ).partition(lengths=[per_frame] * idx.size),
-    )
-    stream.log(
-        ent.ee_path_path(rec.episode),
-        rr.LineStrips3D([flange], radii=[0.004], colors=[color]),
-        static=True,
-    )
-    stream.log(
-        ent.label_path(rec.episode),
-        rr.Points3D([[0.0, 0.0, -0.05]], radii=[0.02], colors=[color], labels=[label]),
-        static=True,
-    )
-    return True
-
-
-def _send_tcp(
-    stream: rr.RecordingStream,
-    data: ReportData,
-    rec: Recording,
-    color: tuple[int, int, int],
-    *,
-    label: str,
-) -> None:
-    """The TCP errors as series and the TCP's path in 3D (nothing without a robot model)."""
+def _tcp_series(
+    data: ReportData, rec: Recording, color: tuple[int, int, int], *, label: str
+) -> list[_Series]:
+    """The TCP errors as series (none without a robot model)."""
     errors = data.tcp_series(rec.episode)
     if not errors.height:
-        return
+        return []
     t = errors.get_column("time_s").to_numpy()
-    for quantity in ent.TCP_QUANTITIES:
-        _send_series(
-            stream,
+    return [
+        _Series(
             ent.tcp_series_path(quantity, rec.episode),
+            ent.tcp_quantity_path(quantity),
             t,
             errors.get_column(quantity).to_numpy(),
-            name=label,
-            color=color,
+            label,
+            color,
         )
+        for quantity in ent.TCP_QUANTITIES
+    ]
+
+
+def _send_tcp_path(
+    stream: rr.RecordingStream, data: ReportData, rec: Recording, color: tuple[int, int, int]
+) -> None:
+    """The TCP's path in 3D (nothing without a robot model)."""
     _, path_m = data.tcp_path_m(rec.episode)
     if path_m.shape[0]:
         step = max(1, path_m.shape[0] // 2000)
@@ -290,12 +252,14 @@ def _send_tcp(
         )
 
 
-def _send_bands(stream: rr.RecordingStream, data: ReportData, group: str) -> None:
+def _band_series(data: ReportData, group: str) -> list[_Series]:
     """5/50/95 % of the error over every episode of a large (group, controller)."""
     by_ctrl: dict[str, list[Recording]] = {}
     for rec in data.in_group(group):
         if rec.status == "ok" and not rec.salvaged:  # a cut series would cut every band
             by_ctrl.setdefault(rec.controller, []).append(rec)
+    out: list[_Series] = []
+    scale = ent.QUANTITY_SCALES.get("error", 1.0)
     for ctrl, recs in by_ctrl.items():
         if len(recs) <= 3:
             continue
@@ -309,28 +273,42 @@ def _send_bands(stream: rr.RecordingStream, data: ReportData, group: str) -> Non
         color = data.controller_color(ctrl)
         for j, joint in enumerate(_drawn(recs[0].joint_names)):
             for (name, _), values in zip(BAND_LEVELS, levels, strict=True):
-                _send_series(
-                    stream,
-                    ent.band_path(joint, group, ctrl, name),
-                    t,
-                    values[:, j],
-                    name=f"{ctrl} {name} of {len(recs)} [{group}]",
-                    color=color,
-                    width=2.5 if name == "p50" else 0.6,
+                out.append(
+                    _Series(
+                        ent.band_path(joint, group, ctrl, name),
+                        ent.quantity_path(joint, "error"),
+                        t,
+                        values[:, j] * scale,
+                        f"{ctrl} {name} of {len(recs)} [{group}]",
+                        color,
+                        2.5 if name == "p50" else 0.6,
+                    )
                 )
+    return out
 
 
-def _legend(data: ReportData) -> str:
-    rows = [f"- <span style='color:{hex_color(REFERENCE_RGB)}'>■</span> reference (light grey)"]
+def _legend(data: ReportData, *, arms: bool) -> str:
+    """The colour key: plain Markdown (Rerun's text view renders no HTML), colours named."""
+    rows = [f"- reference: {color_name(REFERENCE_RGB)} ({hex_color(REFERENCE_RGB)})"]
     for ctrl in data.controllers():
-        rows.append(f"- **{ctrl}**: {hex_color(data.controller_color(ctrl))}")
+        rgb = data.controller_color(ctrl)
+        rows.append(f"- **{ctrl}**: {color_name(rgb)} ({hex_color(rgb)})")
+    where = (
+        "Each episode stands on its own base (a scenario or condition starts a row), labelled "
+        "`episode (role)`. "
+        if arms
+        else "No bag holds a robot model, so no arm is drawn. "
+    )
     return (
-        "Colours: one per controller, in every plot and arm.\n\n"
+        "Colours: one per controller, in every plot"
+        + (" and arm" if arms else "")
+        + ".\n\n"
         + "\n".join(rows)
-        + "\n\nEach episode stands on its own base, labelled `episode: controller (role)`; "
-        "role *median* / *worst* (by max |error|) for large groups, whose error is also drawn "
-        "as thin 5 % / 95 % and thick 50 % percentile lines (`band_*`). Hide an episode in "
-        "the blueprint panel to compare others."
+        + f"\n\nErrors are reference − {_state(data)}, in mrad. "
+        + where
+        + "Role *median* / *worst* (by max |error|) for large groups, whose error is also "
+        "drawn as thin 5 % / 95 % and thick 50 % percentile lines (`band_*`). Hide an "
+        "episode in the blueprint panel to compare others."
     )
 
 
@@ -343,21 +321,6 @@ def _layout(data: ReportData) -> list[tuple[str, list[Recording]]]:
         if recs:
             out.append((group, recs))
     return out[:MAX_RRD_GROUPS]
-
-
-def _offset(k: int) -> NDArray[np.float64]:
-    """The k-th episode's base: rows of six, :data:`SPACING_M` apart."""
-    return np.array([(k % 6) * SPACING_M, -(k // 6) * SPACING_M, 0.0])
-
-
-def _reach_m(data: ReportData) -> float:
-    """How far any drawn arm reaches from its base [m] (sum of the DH lengths)."""
-    reach = 0.0
-    for rec in data.sample():
-        spec = robot_spec(rec)
-        if spec is not None:
-            reach = max(reach, spec.reach_m())
-    return reach or 1.0
 
 
 def _save(stream: rr.RecordingStream, path: Path, layout: rrb.Blueprint) -> Callable[[], None]:
@@ -487,15 +450,28 @@ def _write_rrd(data: ReportData, path: Path) -> list[str]:
     """:func:`write_rrd`'s work, in the calling thread (flushes wait at most
     :data:`FLUSH_TIMEOUT_S`)."""
     layout = _layout(data)
-    n = sum(len(recs) for _, recs in layout)
-    reach = _reach_m(data)
-    corners = [_offset(k) + sign * reach for k in range(max(n, 1)) for sign in (-1.0, 1.0)]
+    series, arms, no_arm = _plan(data, layout)
+    corners = [c for arm in arms for c in arm.corners()]
+    layout_bp = blueprint(data, eye=scene.eye(corners) if arms else None, ranges=_ranges(series))
     stream = rr.RecordingStream(
         APPLICATION_ID, recording_id=_recording_id(data), send_properties=False
     )
-    close_blueprint = _save(stream, path, blueprint(data, eye=_eye(corners)))
+    close_blueprint = _save(stream, path, layout_bp)
     try:
-        return _log_all(stream, data, layout)
+        for s in series:
+            _send_series(stream, s.path, s.t, s.values, name=s.name, color=s.color,
+                         width=s.width)  # fmt: skip
+        for arm in arms:
+            scene.send_arm(stream, arm)
+        for _, recs in layout:
+            for rec in recs:
+                _send_tcp_path(stream, data, rec, data.color(rec.episode))
+        stream.log(
+            ent.LEGEND,
+            rr.TextDocument(_legend(data, arms=bool(arms)), media_type="text/markdown"),
+            static=True,
+        )
+        return no_arm
     finally:
         stream.flush(timeout_sec=FLUSH_TIMEOUT_S)
         stream.disconnect()
@@ -505,28 +481,64 @@ def _write_rrd(data: ReportData, path: Path) -> list[str]:
         rr_bindings.flush_and_cleanup_orphaned_recordings()
 
 
-def _log_all(
-    stream: rr.RecordingStream, data: ReportData, layout: list[tuple[str, list[Recording]]]
-) -> list[str]:
+# Views whose y range is set (:func:`readable_range`): the errors and efforts, whose
+# auto range often gets a single tick; positions and velocities span whole decades.
+_RANGED = ("error", "effort")
+# ... of these, the ones whose range holds 0 (an error axis is read against 0)
+_FROM_ZERO = ("error",)
+
+
+def _ranges(series: list[_Series]) -> dict[str, tuple[float, float]]:
+    """Each ranged view's y range, from every series drawn in it."""
+    tcp = {ent.tcp_quantity_path(q) for q in ent.TCP_QUANTITIES}
+    lows: dict[str, float] = {}
+    highs: dict[str, float] = {}
+    for s in series:
+        if s.view not in tcp and s.view.rsplit("/", 1)[-1] not in _RANGED:
+            continue
+        finite = s.values[np.isfinite(s.values)]
+        if finite.size:
+            lows[s.view] = min(lows.get(s.view, np.inf), float(finite.min()))
+            highs[s.view] = max(highs.get(s.view, -np.inf), float(finite.max()))
+    out = {}
+    for view, lo in lows.items():
+        hi = highs[view]
+        if view in tcp or view.rsplit("/", 1)[-1] in _FROM_ZERO:
+            lo, hi = min(lo, 0.0), max(hi, 0.0)
+        out[view] = readable_range(lo, hi)
+    return out
+
+
+def _plan(
+    data: ReportData, layout: list[tuple[str, list[Recording]]]
+) -> tuple[list[_Series], list[scene.Arm], list[str]]:
+    """Everything the .rrd draws: the series, the arms, and the episodes without an arm."""
+    series: list[_Series] = []
+    arms: list[scene.Arm] = []
     no_arm: list[str] = []
     roles = data.sample_roles
-    k = 0
+    row = -1
     for group, recs in layout:
         ref = recs[0]
         t_ref = cs_times_s(ref)
         q_ref = cs_wide(ref, "reference_position_rad")
         for j, joint in enumerate(_drawn(ref.joint_names)):
-            _send_series(
-                stream,
-                ent.reference_path(joint, group),
-                t_ref,
-                q_ref[:, j],
-                name=f"reference ({group})",
-                color=REFERENCE_RGB,
-                width=2.0,
+            series.append(
+                _Series(
+                    ent.reference_path(joint, group),
+                    ent.quantity_path(joint, "position"),
+                    t_ref,
+                    q_ref[:, j],
+                    f"reference ({group})",
+                    REFERENCE_RGB,
+                    2.0,
+                )
             )
-        _send_bands(stream, data, group)
-        for rec in recs:
+        series += _band_series(data, group)
+        for k, rec in enumerate(recs):
+            column = k % scene.ROW_LENGTH
+            if column == 0:  # each group starts a row
+                row += 1
             t = times_s(rec)
             color = data.color(rec.episode)
             role = roles.get(rec.episode, "")
@@ -534,38 +546,40 @@ def _log_all(
             if rec.salvaged:  # read up to the damage of its file
                 who += " (salvaged)"
             label = f"{who} {rec.episode} [{group}]"
-            for quantity, column in _COLUMNS.items():
+            for quantity, column_name in _COLUMNS.items():
                 # The error at the /controller_state rate, as the metrics use it.
                 full_rate = quantity == "error"
-                values = cs_wide(rec, column) if full_rate else wide(rec, column)
+                values = cs_wide(rec, column_name) if full_rate else wide(rec, column_name)
+                values = values * ent.QUANTITY_SCALES.get(quantity, 1.0)
                 for j, joint in enumerate(_drawn(rec.joint_names)):
-                    _send_series(
-                        stream,
-                        ent.series_path(joint, quantity, rec.episode),
-                        cs_times_s(rec) if full_rate else t,
-                        values[:, j],
-                        name=label,
-                        color=color,
+                    series.append(
+                        _Series(
+                            ent.series_path(joint, quantity, rec.episode),
+                            ent.quantity_path(joint, quantity),
+                            cs_times_s(rec) if full_rate else t,
+                            values[:, j],
+                            label,
+                            color,
+                        )
                     )
-            _send_tcp(stream, data, rec, color, label=label)
-            drawn = _send_arm(stream, rec, color, offset=_offset(k), label=f"{rec.episode}: {who}")
-            k += 1
-            if not drawn:
+            series += _tcp_series(data, rec, color, label=label)
+            arm = scene.make_arm(
+                rec,
+                color,
+                offset=scene.offset(row, column),
+                label=_arm_label(rec, role),
+                # alternate label heights, so neighbours' labels do not overlap
+                label_z_m=-0.08 - scene.LABEL_STAGGER_M * (column % 2),
+            )
+            if arm is None:
                 no_arm.append(rec.episode)
-    stream.log(ent.LEGEND, rr.TextDocument(_legend(data), media_type="text/markdown"), static=True)
-    return no_arm
+            else:
+                arms.append(arm)
+    return series, arms, no_arm
 
 
-def _eye(points: list[NDArray[np.float64]]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """A camera that frames every arm (``points``: corners of the space they can reach):
-    looking at the centre, from the front-right and above, far enough for the whole box to
-    fit a ~60 deg view."""
-    if not points:
-        return np.array([2.0, -2.0, 1.5]), np.zeros(3)
-    allp = np.vstack(points)
-    low, high = allp.min(axis=0), allp.max(axis=0)
-    centre = (low + high) / 2
-    radius = max(float(np.linalg.norm(high - low)) / 2, 0.3)
-    direction = np.array([0.6, -1.0, 0.55])
-    position = centre + direction / np.linalg.norm(direction) * radius * 2.2
-    return position, centre
+def _arm_label(rec: Recording, role: str) -> str:
+    """``episode (role)``; the controller too when the episode's name does not hold it."""
+    name = rec.episode if rec.controller in rec.episode else f"{rec.episode}: {rec.controller}"
+    extra = [x for x in (role, "salvaged" if rec.salvaged else "") if x]
+    return f"{name} ({', '.join(extra)})" if extra else name

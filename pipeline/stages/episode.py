@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.constants import FINAL_WINDOW_S
+from pipeline.constants import FINAL_EDGE_S, FINAL_WINDOW_S
 from pipeline.errors import PipelineError
 from pipeline.fsutil import remove_stale
 from pipeline.params import Episode
@@ -111,7 +111,6 @@ def _run_and_write(
     scenario = episode.scenario
     spec = load_spec(scenario.robot)
     sim = episode.sim
-    control_dt_s = sim.physics_dt_s * sim.control_period_steps
     nominal = nominal_spec(spec, scenario.nominal, where=f"scenarios.{episode.scenario_name}")
     controller = make_controller(
         episode.controller.type,
@@ -180,19 +179,31 @@ def _run_and_write(
     )
     # true tracking error from the motion start (the report's definition)
     err = np.abs(result.q_ref[k0:] - result.q_true[k0:])
-    # same window as the report's "error at the target"
-    n_hold = max(1, round(min(FINAL_WINDOW_S, scenario.hold_s / 2) / control_dt_s))
+    t_s = (result.stamp_ns[k0:] - result.stamp_ns[k0]) * 1e-9
+    in_final = final_window(t_s, motion_end_s=float(trajectory.duration_s))
     return EpisodeOutcome(
         name=episode.name,
         status=result.status,
         reason=result.reason,
         bag=str(bag_dir),
         max_abs_error_rad=float(err.max()) if err.size else float("nan"),
-        final_abs_error_rad=float(err[-n_hold:].mean(axis=0).max()) if err.size else float("nan"),
+        final_abs_error_rad=float(err[in_final].mean(axis=0).max()) if err.size else float("nan"),
         duration_s=float(result.stamp_ns[-1] * 1e-9) if result.stamp_ns.size else 0.0,
         wall_s=0.0,
         contact=safety.summary() if safety.touched else "",
     )
+
+
+def final_window(t_s: np.ndarray, *, motion_end_s: float) -> np.ndarray:
+    """Which samples (times ``t_s`` [s] from the motion start) the error at the target is
+    the mean over: the report's window (``in_final`` of
+    :func:`pipeline.analysis.metrics.joint_metrics`), the last min(FINAL_WINDOW_S,
+    hold / 2) with hold = end - motion end, so the record console and the report print
+    the same number (tests/stages/test_record_report_agree.py)."""
+    end_s = float(t_s[-1]) if t_s.size else 0.0
+    window_s = min(FINAL_WINDOW_S, max(end_s - motion_end_s, 0.0) / 2)
+    mask: np.ndarray = t_s >= end_s - window_s - FINAL_EDGE_S
+    return mask
 
 
 # Work folders of the bag writer (pipeline/log/bag.py: ``.<name>.partial-<pid>`` while

@@ -7,13 +7,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pipeline.model.mjcf import build_mujoco_model
-from pipeline.report.rerun_rrd import _arm_capsules, _eye
+from pipeline.report.rrd_scene import VIEW_HALF_ANGLE_DEG, arm_capsules, eye
 from pipeline.robots import load_spec
 
 
 def _endpoints_rrd(q: np.ndarray) -> set[tuple[float, ...]]:
     spec = load_spec("ur5")
-    trans, quats, lengths, radii, _ = _arm_capsules(spec, q[None, :])
+    trans, quats, lengths, radii, _ = arm_capsules(spec, q[None, :])
     # Rerun's capsule runs from its origin along +Z for `length`, posed by (translation, quaternion)
     tips = trans + Rotation.from_quat(quats).apply(np.c_[np.zeros((len(lengths), 2)), lengths])
     return {
@@ -47,10 +47,18 @@ def test_rrd_capsules_are_the_mujoco_capsules_at_random_poses() -> None:
         assert _endpoints_rrd(q) == _endpoints_mujoco(q)
 
 
-def test_camera_frames_every_point() -> None:
-    corners = [np.array([-1.0, -1.0, -1.0]), np.array([4.0, 1.0, 1.0])]
-    position, target = _eye(corners)
-    np.testing.assert_allclose(target, [1.5, 0.0, 0.0])
-    # far enough that the box's bounding sphere fits a 60 degree view
-    radius = np.linalg.norm(corners[1] - corners[0]) / 2
-    assert np.linalg.norm(position - target) * np.tan(np.radians(30)) >= radius
+def test_camera_frames_every_corner_tightly() -> None:
+    corners = [np.array([-1.0, -1.0, 0.0]), np.array([4.0, 1.0, 1.0])]
+    position, target = eye(corners)
+    np.testing.assert_allclose(target, [1.5, 0.0, 0.5])
+    axis = (target - position) / np.linalg.norm(target - position)
+    half = np.radians(VIEW_HALF_ANGLE_DEG)
+    angles = []
+    for x in (-1.0, 4.0):
+        for y in (-1.0, 1.0):
+            for z in (0.0, 1.0):
+                ray = np.array([x, y, z]) - position
+                angles.append(np.arccos(ray @ axis / np.linalg.norm(ray)))
+    # every corner in view, and the farthest near the edge (the arms fill the view)
+    assert max(angles) <= half
+    assert max(angles) >= 0.6 * half
