@@ -142,7 +142,10 @@ def instrument(timers: Timers) -> None:
 
     timers.wrap(plans, "plan_scenario", "plan")
     timers.wrap(episode, "draw_scenario_plant", "plant build")
-    timers.wrap(runner, "build_mujoco_model", "plant build")
+    # the plant model: set on the compiled robot (pipeline.sim.plant), or compiled per draw
+    for name in ("plant_model", "build_mujoco_model"):
+        if hasattr(runner, name):
+            timers.wrap(runner, name, "plant build")
     timers.wrap(control, "make_controller", "controller")
     timers.wrap(model_file, "nominal_spec", "controller")
     timers.wrap(runner._Loop, "run", "control loop")
