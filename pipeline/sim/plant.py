@@ -174,11 +174,16 @@ def plant_model(
             return compiled(plant_spec)  # the compiler's own error
         draws.append((inertial, moments, quat))
     model = compiled(spec)
+    bodies = [
+        mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, link_name(j.name)) for j in spec.joints
+    ]
+    joints = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, j.name) for j in spec.joints]
+    if min(bodies + joints) < 0:  # a model named otherwise: compile the plant
+        return compiled(plant_spec)
     for i, (joint, (inertial, moments, quat)) in enumerate(
         zip(plant_spec.joints, draws, strict=True)
     ):
-        body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, link_name(joint.name))
-        dof = model.jnt_dofadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, joint.name)]
+        body, dof = bodies[i], model.jnt_dofadr[joints[i]]
         model.body_mass[body] = inertial.mass
         model.body_ipos[body] = inertial.com
         model.body_inertia[body] = moments
