@@ -34,11 +34,12 @@ import numpy as np
 from pipeline.constants import PLANT_FRICTION, PLANT_INTEGRATOR
 from pipeline.control.base import Controller
 from pipeline.errors import SimulationError
-from pipeline.model.mjcf import PlantOptions, build_mujoco_model
+from pipeline.model.mjcf import PlantOptions
 from pipeline.model.scene import Box
 from pipeline.robots.spec import RobotSpec
 from pipeline.settings import LoopSettings
 from pipeline.sim.loop import Actuator, Sensor, check_loop
+from pipeline.sim.plant import plant_model
 from pipeline.sim.result import F64, EpisodeResult, Reference
 
 DIVERGENCE_SPEED_FACTOR = 10.0
@@ -141,7 +142,10 @@ def run_episode(
             f"plant_spec: joints {plant_spec.joint_names} differ from the robot's "
             f"{spec.joint_names}"
         )
-    model = build_mujoco_model(
+    # a drawn plant is set on the robot's compiled model (pipeline.sim.plant): bit for bit
+    # the model a compile of plant_spec gives, without compiling per episode
+    model = plant_model(
+        spec,
         plant_spec,
         timestep_s=physics_dt_s,
         plant=plant,
