@@ -2,19 +2,25 @@
 
 The entry point imports the CLI inside a guard: Ctrl-C (or SIGTERM) while the heavy
 libraries load (~1 s) ends with "interrupted" and exit 130 ("terminated", 143), not a
-KeyboardInterrupt traceback.
+KeyboardInterrupt traceback. ``record --executor ray`` runs supervised
+(:mod:`pipeline.supervise`): Ray can end its driver process without a word.
 """
 
 from __future__ import annotations
 
+import os
 import sys
 
+from pipeline import supervise
 from pipeline.errors import handle_sigterm, interrupt_exit
 
 
 def entry() -> None:
     """Console-script entry point: import the CLI, then run it."""
     handle_sigterm()
+    if supervise.drives_ray(sys.argv[1:]) and supervise.MARK_ENV not in os.environ:
+        sys.exit(supervise.run_supervised(sys.argv[1:]))  # Ray may end its driver abruptly
+    supervise.mark_exit_when_python_exits()
     try:
         from pipeline.cli import main
     except KeyboardInterrupt as err:

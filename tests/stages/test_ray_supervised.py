@@ -1,0 +1,76 @@
+"""A Ray process dying mid-run ends `record --executor ray` in one line, with nothing left.
+
+Ray's core worker ends its driver from C++ (QuickExit) when the raylet goes, which it does
+when its dashboard agent dies: the driver cannot print anything. The command runs
+supervised (pipeline/supervise.py) and the supervisor says what happened.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from pipeline.supervise import drives_ray
+from tests.stages.test_campaign_run import PIPELINE, REPO, _params
+
+
+def test_only_ray_records_are_supervised() -> None:
+    assert drives_ray(["record", "--executor", "ray", "--params", "p"])
+    assert drives_ray(["record", "--campaign", "c", "--executor=ray"])
+    assert not drives_ray(["record", "--executor", "local"])
+    assert not drives_ray(["report", "--executor", "ray"])
+    assert not drives_ray(["record", "--executor"])
+
+
+def _descendants(pid: int) -> list[object]:
+    psutil = pytest.importorskip("psutil")
+    try:
+        return list(psutil.Process(pid).children(recursive=True))
+    except psutil.NoSuchProcess:
+        return []
+
+
+@pytest.mark.slow
+def test_killing_rays_dashboard_agent_ends_the_run_in_one_line(tmp_path: Path) -> None:
+    pytest.importorskip("ray")
+    psutil = pytest.importorskip("psutil")
+    params = _params(tmp_path, {"scenario": "paper", "controllers": ["pid", "ctc"], "seeds": 20})
+    out = tmp_path / "rec"
+    proc = subprocess.Popen(
+        [*PIPELINE, "record", "--params", str(params), "--out", str(out), "--campaign", "c",
+         "--executor", "ray"],
+        cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        start_new_session=True,
+    )  # fmt: skip
+    agent = None
+    deadline = time.monotonic() + 180
+    try:
+        while agent is None and time.monotonic() < deadline and proc.poll() is None:
+            for p in _descendants(proc.pid):
+                try:
+                    if any("dashboard/agent.py" in part for part in p.cmdline()):
+                        agent = p
+                except psutil.Error:
+                    continue
+            time.sleep(0.2)
+        assert agent is not None, "no Ray dashboard agent appeared"
+        time.sleep(2.0)  # let the run get going
+        agent.kill()
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode != 0
+    errors = [line for line in stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, stderr
+    assert "the Ray run ended abruptly" in errors[0]
+    assert "Traceback" not in stderr
+    time.sleep(1.0)
+    left = [p for p in psutil.process_iter(["cmdline"])
+            if str(tmp_path) in " ".join(p.info["cmdline"] or [])]  # fmt: skip
+    assert left == [], left
+    assert not [p for p in out.rglob("*") if ".partial-" in p.name]
