@@ -186,7 +186,7 @@ def _arm_capsules(
     segs = [
         (i, s)
         for i, link in enumerate(links)
-        for s in link.segments_dh
+        for s in link.segments
         if np.linalg.norm(np.subtract(s.end, s.start)) > 1e-9
     ]
     starts = np.array([[*s.start, 1.0] for _, s in segs]).reshape(-1, 4)

@@ -101,7 +101,7 @@ def link_node(i: int) -> str:
 def _capsule_mesh(spec_links: Sequence[Any], i: int, radius: float) -> trimesh.Trimesh:
     """Link i's capsules (or one sphere when it has no length), in DH frame i [m]."""
     parts = []
-    for seg in spec_links[i].segments_dh:
+    for seg in spec_links[i].segments:
         a, b = np.array(seg.start), np.array(seg.end)
         length = float(np.linalg.norm(b - a))
         cap = trimesh.creation.capsule(height=length, radius=seg.radius, count=[12, 12])
