@@ -15,6 +15,7 @@ from (:attr:`RobotSpec.settings_sources`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -552,7 +553,13 @@ def load_urdf(
                                 else base, where=f"{settings_source}: srdf",
                                 package_path=package_path)  # fmt: skip
         spec = apply_srdf(spec, srdf_path, {n: o for n, (o, _) in owner.items()})
-    return spec
+        pairs = f"SRDF {srdf_path}"
+    else:
+        # said once: the spec is loaded once per process, and the recording keeps it
+        pairs = "no SRDF: adjacent links and links touching at q = 0 are not checked"
+    return dataclasses.replace(
+        spec, settings_sources=(*spec.settings_sources, ("collision_pairs", pairs))
+    )
 
 
 def _read_yaml(path: Path) -> dict[str, Any]:

@@ -238,3 +238,17 @@ def test_sidecar_states_where_armature_comes_from(tmp_path):
     assert spec.armature.tolist() == [0.1, 0.2, 0.3]
     assert dict(spec.settings_sources)["armature"] == "datasheet X"
     assert spec.source_sha256 and spec.format == "urdf"
+
+
+def test_package_uris_resolve_through_ros_package_path(tmp_path, monkeypatch):
+    assert SHARE is not None
+    text = (
+        Path(_urdf(UR5_URDF)).read_text().replace("package://example-robot-data/", "package://erd/")
+    )
+    (tmp_path / "ur5.urdf").write_text(text)
+    (tmp_path / "share").mkdir()
+    (tmp_path / "share" / "erd").symlink_to(SHARE.parent)
+    with pytest.raises(SpecError, match="unresolved package 'erd'"):
+        load_spec(tmp_path / "ur5.urdf")
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "share"))
+    assert load_spec(tmp_path / "ur5.urdf").dof == 6
