@@ -98,7 +98,7 @@ def _spec(rec: Recording, data: Mapping[str, Any] | None) -> RobotSpec | None:
 def _file_spec(data: Mapping[str, Any]) -> RobotSpec | None:
     """The robot of a recording that names its robot file: that file, while it still has the
     recorded SHA-256 (else None: the recording's own limits stand)."""
-    source = data.get("source")
+    source = data.get("robot") or data.get("source")
     if not isinstance(source, str):
         return None
     try:

@@ -238,6 +238,8 @@ class RobotSpec:
     """Collision shapes of the base link (and links fixed to it), base frame."""
     settings_sources: tuple[tuple[str, str], ...] = ()
     """Where facts the description lacks came from (``armature`` -> sidecar file, ...)."""
+    loaded_from: str = ""
+    """What :func:`load_spec` was given (a built-in name or a path): loads it again."""
 
     @property
     def dof(self) -> int:
@@ -722,7 +724,7 @@ def _load_file(path: str, sha256: str, package_path: tuple[str, ...]) -> RobotSp
     module, func = LOADERS[loader_suffix(Path(path)) or ""].split(":")
     loader = getattr(importlib.import_module(module), func)
     spec: RobotSpec = loader(Path(path), package_path=package_path)
-    return dataclasses.replace(spec, source_sha256=sha256)
+    return dataclasses.replace(spec, source_sha256=sha256, loaded_from=path)
 
 
 def load_dh_yaml(path: Path, *, package_path: tuple[str, ...] = ()) -> RobotSpec:
@@ -744,7 +746,7 @@ def _load_builtin(name: str) -> RobotSpec:
 
         spec = load_sidecar(Path(str(sidecar)))
         digest = hashlib.sha256(Path(spec.source).read_bytes()).hexdigest()
-        return dataclasses.replace(spec, source_sha256=digest)
+        return dataclasses.replace(spec, source_sha256=digest, loaded_from=name)
     content = (resources.files("pipeline.robots") / f"{name}.yaml").read_text(encoding="utf-8")
     return _parse_text(content, f"robots/{name}.yaml")
 

@@ -63,6 +63,7 @@ def spec_as_dict(spec: RobotSpec) -> dict[str, Any]:
             "format": spec.format,
             "source": spec.source,
             "sha256": spec.source_sha256,
+            "robot": spec.loaded_from,
             "base_link": spec.base_link,
             "joints": [
                 {

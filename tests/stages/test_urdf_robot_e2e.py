@@ -52,6 +52,9 @@ def test_panda_records_and_reports_with_its_own_urdf(tmp_path: Path, capsys) -> 
     assert robot["source"] == panda.source and robot["format"] == "urdf"
     assert robot["sha256"] == hashlib.sha256(Path(panda.source).read_bytes()).hexdigest()
     assert "Menagerie" in robot["settings_sources"]["armature"]
+    from pipeline.analysis.episodes import robot_spec
+
+    assert robot_spec(rec) == panda  # the recording loads its robot again (same SHA-256)
     code, _, err = run_cli_out(
         ["report", "--recordings", str(tmp_path / "rec"), "--out", str(tmp_path / "rep")], capsys
     )
