@@ -252,3 +252,29 @@ def test_package_uris_resolve_through_ros_package_path(tmp_path, monkeypatch):
         load_spec(tmp_path / "ur5.urdf")
     monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "share"))
     assert load_spec(tmp_path / "ur5.urdf").dof == 6
+
+
+def test_dh_rows_and_the_joint_model_they_load_into_agree(any_robot):
+    from pipeline.model.dh import dh_link_frames, link_frames
+
+    if any_robot.dh_rows is None:
+        pytest.skip("not given as DH rows")
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        q = rng.uniform(any_robot.lower, any_robot.upper)
+        for a, b in zip(dh_link_frames(any_robot, q), link_frames(any_robot, q), strict=True):
+            assert np.abs(a - b).max() < 1e-14
+
+
+def test_urdf_robots_compile_and_step_a_second_without_warnings(any_robot):
+    model = build_mujoco_model(any_robot)
+    data = mujoco.MjData(model)
+    data.qpos[:] = 0.5 * (any_robot.lower + any_robot.upper)
+    pmodel = build_pinocchio_model(any_robot)
+    pdata = pmodel.createData()
+    for _ in range(int(1.0 / model.opt.timestep)):
+        # hold against gravity: the nominal model's gravity torque
+        data.ctrl[:] = pin.computeGeneralizedGravity(pmodel, pdata, data.qpos.copy())
+        mujoco.mj_step(model, data)
+    assert all(w.number == 0 for w in data.warning)
+    assert np.all(np.isfinite(data.qpos))
