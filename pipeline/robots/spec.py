@@ -197,9 +197,11 @@ class JointSpec:
     armature_source: str = ""
     """Where ``armature`` comes from (file, sidecar or scenario)."""
     damping_nm_s_rad: float = 0.0
-    """Viscous friction default [N m s/rad] (the plant's, unless the scenario says)."""
+    """Viscous friction the description states [N m s/rad]: a fact for a scenario to use
+    (the simulated plant's friction is the scenario's ``plant``, so ``plant: {}`` stays the
+    nominal model)."""
     frictionloss_nm: float = 0.0
-    """Coulomb friction default [N m]."""
+    """Coulomb friction the description states [N m] (as ``damping_nm_s_rad``)."""
     dh: DHRow | None = None
     """The DH row the joint came from (provenance; the analytic UR solver needs it)."""
 
@@ -240,6 +242,19 @@ class RobotSpec:
     """Where facts the description lacks came from (``armature`` -> sidecar file, ...)."""
     loaded_from: str = ""
     """What :func:`load_spec` was given (a built-in name or a path): loads it again."""
+
+    def __hash__(self) -> int:
+        # computed once: specs key the per-process caches of models and FK arrays, and a
+        # URDF robot's fields (meshes, description text) take tens of microseconds to hash
+        cached: int | None = self.__dict__.get("_hash")
+        if cached is None:
+            cached = hash(tuple(getattr(self, f.name) for f in dataclasses.fields(self)))
+            object.__setattr__(self, "_hash", cached)
+        return cached
+
+    def __getstate__(self) -> dict[str, Any]:
+        # string hashes differ between processes: a worker computes its own
+        return {k: v for k, v in self.__dict__.items() if k != "_hash"}
 
     @property
     def dof(self) -> int:

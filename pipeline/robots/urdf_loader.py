@@ -536,8 +536,6 @@ def load_urdf(
         settings_sources=(
             ("armature", opts.armature_source or sidecar_name),
             ("acceleration", sidecar_name),
-            ("damping", sidecar_name),
-            ("frictionloss", sidecar_name),
         ),
     )
     srdf = opts.srdf
