@@ -3,6 +3,7 @@ disabled pairs: the arm at rest is not in collision with itself."""
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
 import pytest
 
@@ -36,3 +37,25 @@ def test_panda_meets_a_box_placed_on_its_path():
     checker = CollisionChecker(panda, obstacles=[box])
     assert checker.is_valid(start) and checker.is_valid(goal)
     assert not checker.is_valid(0.5 * (start + goal))
+
+
+def test_the_motion_check_step_bounds_how_far_the_meshes_move():
+    from pipeline.planning.collision import reach_bound_m, shape_extent_m
+
+    panda = load_spec("panda")
+    assert shape_extent_m(panda) > max(j.collision_radius for j in panda.joints)
+    checker = CollisionChecker(panda)
+    model, data = checker.model, checker.data
+    rng = np.random.default_rng(4)
+    bound = reach_bound_m(panda)
+    for _ in range(20):
+        q = rng.uniform(panda.lower, panda.upper)
+        dq = rng.normal(0.0, 1e-3, panda.dof)
+        points = []
+        for qq in (q, q + dq):
+            data.qpos[:] = qq
+            mujoco.mj_forward(model, data)
+            points.append(data.geom_xpos.copy())
+        # geom centres: every point of the arm moves no more than the bound allows
+        moved = float(np.linalg.norm(points[1] - points[0], axis=1).max())
+        assert moved <= bound * float(np.linalg.norm(dq)) * (1 + 1e-9)
