@@ -176,7 +176,7 @@ def _arm_capsules(
     NDArray[np.float32],
     NDArray[np.float64],
 ]:
-    """Link capsules in world (DH base) coordinates for each row of ``q``.
+    """Link capsules in world (robot base) coordinates for each row of ``q``.
 
     Returns:
         translations (F*S, 3), quaternions (F*S, 4), lengths (F*S,), radii (F*S,) and the
@@ -351,7 +351,7 @@ def _offset(k: int) -> NDArray[np.float64]:
 
 
 def _reach_m(data: ReportData) -> float:
-    """How far any drawn arm reaches from its base [m] (sum of the DH lengths)."""
+    """How far any drawn arm reaches from its base [m] (its summed link lengths)."""
     reach = 0.0
     for rec in data.sample():
         spec = robot_spec(rec)
