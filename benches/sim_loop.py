@@ -57,8 +57,12 @@ def measure(
 ) -> dict[str, Any]:
     """Floor and per-controller episode cost [us per physics step] (best of ``repeats``)."""
     spec = load_spec(robot)
-    start = PAPER_START_RAD[: spec.dof]
-    goal = PAPER_GOAL_RAD[: spec.dof]
+    if spec.dof == len(PAPER_START_RAD):
+        start, goal = PAPER_START_RAD, PAPER_GOAL_RAD
+    else:  # another arm: its first named state (an SRDF's ready pose) or mid-range, 0.3 rad on
+        mid = 0.5 * (spec.lower + spec.upper)
+        start = np.array(spec.named_states[0][1]) if spec.named_states else mid
+        goal = np.clip(start + 0.3, spec.lower, spec.upper)
     reference = QuinticReference.between(start, goal, duration_s=motion_s)
     hold_s = seconds - motion_s
     cases: dict[str, dict[str, Any]] = {

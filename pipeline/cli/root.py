@@ -39,6 +39,14 @@ def _root(
     debug: Annotated[
         bool, typer.Option("--debug", help="Show Python tracebacks for errors.")
     ] = False,
+    package_path: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--package-path",
+            help="Folder that package:// URIs of a robot's URDF resolve in (repeatable; "
+            "before ARMLAB_PACKAGE_PATH and ROS_PACKAGE_PATH).",
+        ),
+    ] = None,
     version: Annotated[
         bool,
         typer.Option(
@@ -51,6 +59,12 @@ def _root(
 ) -> None:
     del version
     STATE["debug"] = debug
+    if package_path:
+        # an environment variable: episode worker processes inherit it
+        import os
+
+        rest = [p for p in os.environ.get("ARMLAB_PACKAGE_PATH", "").split(os.pathsep) if p]
+        os.environ["ARMLAB_PACKAGE_PATH"] = os.pathsep.join([*package_path, *rest])
 
 
 def print_json(obj: Any) -> None:

@@ -61,11 +61,17 @@ class IdentifiedModel:
 
 def spec_document(spec: RobotSpec) -> dict[str, Any]:
     """The robot as a robot-YAML mapping (radians), the format of ``pipeline/robots``."""
+    rows = spec.dh_rows
+    if rows is None:
+        raise IdentificationError(
+            f"{spec.source}: robot '{spec.name}' is given as {spec.format}; an identified "
+            "model file is written for robots given as DH rows only"
+        )
     joints = []
-    for j in spec.joints:
+    for j, dh in zip(spec.joints, rows, strict=True):
         entry: dict[str, Any] = {
             "name": j.name,
-            "dh": [j.dh.alpha, j.dh.a, j.dh.d, j.dh.theta_offset],
+            "dh": [dh.alpha, dh.a, dh.d, dh.theta_offset],
             "limits": asdict(j.limits),
         }
         if j.inertial is not None:

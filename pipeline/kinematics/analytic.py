@@ -84,12 +84,15 @@ class URGeometry:
 def ur_geometry(spec: RobotSpec) -> URGeometry:
     """Extract UR-type geometry or raise KinematicsError saying what does not fit."""
     problems: list[str] = []
-    if spec.convention != "standard":
+    given = spec.dh_rows
+    if given is None:
+        problems.append(f"it is given as {spec.format}, not DH rows (needs standard DH)")
+    elif spec.convention != "standard":
         problems.append(f"convention is '{spec.convention}' (needs standard DH)")
     if spec.dof != 6:
         problems.append(f"it has {spec.dof} joints (needs 6)")
-    else:
-        rows = [j.dh for j in spec.joints]
+    elif given is not None:
+        rows = list(given)
         for i, (row, want) in enumerate(zip(rows, UR_ALPHA, strict=True)):
             if abs(row.alpha - want) > _GEOMETRY_TOL:
                 problems.append(f"alpha{i + 1} = {row.alpha:.6g} rad (needs {want:.6g})")
@@ -106,7 +109,7 @@ def ur_geometry(spec: RobotSpec) -> URGeometry:
             + ". It needs UR-type geometry: standard DH, alpha = [pi/2, 0, 0, pi/2, -pi/2, 0], "
             "a = [0, a2, a3, 0, 0, 0]; use --solver numeric for other arms"
         )
-    rows = [j.dh for j in spec.joints]
+    rows = list(given or ())
     return URGeometry(
         d1=rows[0].d,
         a2=rows[1].a,

@@ -70,8 +70,8 @@ class NumericLMSolver:
         self._lower = spec.lower
         self._upper = spec.upper
         self._middle = 0.5 * (spec.lower + spec.upper)
-        # the longest the chain can be: every DH a and d end to end [m]
-        self._reach_m = float(sum(abs(j.dh.a) + abs(j.dh.d) for j in spec.joints))
+        # the longest the chain can be: every link length end to end [m]
+        self._reach_m = float(spec.reach_m())
         self._eye = np.eye(spec.dof)
 
     @property

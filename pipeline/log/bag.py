@@ -286,7 +286,7 @@ def encode_episode(
     header = {"stamp": cdr.time_value(t0 + int(motion_start_ns))}
 
     blocks = [
-        _once(TOPIC_ROBOT_DESCRIPTION, distro, t0, {"data": build_urdf(spec)}),
+        _once(TOPIC_ROBOT_DESCRIPTION, distro, t0, {"data": spec.description or build_urdf(spec)}),
         _once(TOPIC_PLANNED_TRAJECTORY, distro, t0, _planned_value(names, header, planned)),
     ]
 

@@ -85,12 +85,30 @@ def _spec(rec: Recording, data: Mapping[str, Any] | None) -> RobotSpec | None:
     name; None for a bag without our metadata."""
     if not rec.armlab_metadata:
         return None
+    if data is not None and data.get("format") not in (None, "dh-yaml"):
+        return _file_spec(data)
     if data is not None:
         # a campaign's episodes carry the same robot: parse it once
         return _parsed_spec(json.dumps(dict(data), sort_keys=True))
     if rec.robot in builtin_robot_names():
         return load_spec(rec.robot)
     return None
+
+
+def _file_spec(data: Mapping[str, Any]) -> RobotSpec | None:
+    """The robot of a recording that names its robot file: that file, while it still has the
+    recorded SHA-256 (else None: the recording's own limits stand)."""
+    source = data.get("robot") or data.get("source")
+    if not isinstance(source, str):
+        return None
+    try:
+        spec = load_spec(source)
+    except SpecError:
+        return None
+    return spec if spec.source_sha256 == data.get("sha256") else None
+
+
+_YAML_JOINT_KEYS = ("name", "dh", "limits", "inertial", "collision", "armature")
 
 
 def _robot_dict_to_yaml_form(data: dict[str, Any]) -> dict[str, Any]:
@@ -112,7 +130,8 @@ def _robot_dict_to_yaml_form(data: dict[str, Any]) -> dict[str, Any]:
                 jj["inertial"] = inertial
         if "collision_radius" in jj:
             jj["collision"] = {"radius": jj.pop("collision_radius")}
-        joints.append(jj)
+        # the joint model's own fields (origins, capsules) follow from the DH rows
+        joints.append({k: v for k, v in jj.items() if k in _YAML_JOINT_KEYS})
     out = {k: v for k, v in data.items() if k in ("name", "convention", "angle_unit")}
     out["joints"] = joints
     return out

@@ -7,9 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pipeline.model import transforms as tf
-from pipeline.model.chain import BASE_LINK, FLANGE, chain, link_name
-from pipeline.robots.spec import RobotSpec
+from pipeline.model.chain import FLANGE, chain, joint_motion
+from pipeline.robots.spec import IDENTITY, RobotSpec, pose_matrix
 
 
 @dataclass(frozen=True)
@@ -22,19 +21,21 @@ class TfEdge:
 
 
 def tf_edges(spec: RobotSpec, q: ArrayLike) -> list[TfEdge]:
-    """URDF tree transforms at joint positions ``q`` (base_link ... tool0).
+    """URDF tree transforms at joint positions ``q`` (base link ... tool0), as in
+    :func:`pipeline.model.urdf.build_urdf` (named frames left out).
 
-    Composing them gives the same flange pose as DH forward kinematics.
+    Composing them gives the same flange pose as forward kinematics.
     """
     qs = np.asarray(q, dtype=float).reshape(-1)
     links = chain(spec)
     edges = []
-    parent = BASE_LINK
+    parent = spec.base_link
     prev_post = np.eye(4)
     for joint, link, qi in zip(spec.joints, links, qs, strict=True):
-        child = link_name(joint.name)
-        edges.append(TfEdge(parent, child, prev_post @ link.pre @ tf.rot_z(float(qi))))
+        child = joint.link_name
+        edges.append(TfEdge(parent, child, prev_post @ link.pre @ joint_motion(joint, float(qi))))
         parent = child
         prev_post = link.post
-    edges.append(TfEdge(parent, FLANGE, prev_post))
+    flange = prev_post if spec.flange == IDENTITY else prev_post @ pose_matrix(spec.flange)
+    edges.append(TfEdge(parent, FLANGE, flange))
     return edges

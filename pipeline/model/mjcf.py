@@ -20,9 +20,9 @@ import numpy as np
 from pipeline.constants import FRICTION_IMPEDANCE, PLANT_INTEGRATOR
 from pipeline.errors import ModelError
 from pipeline.model import transforms as tf
-from pipeline.model.chain import BASE_LINK, FLANGE, chain, link_name
+from pipeline.model.chain import FLANGE, chain
 from pipeline.model.scene import Box
-from pipeline.robots.spec import RobotSpec
+from pipeline.robots.spec import IDENTITY, Pose, RobotSpec, Shape, pose_matrix
 
 ROBOT_BIT, GROUND_BIT, OBSTACLE_BIT = 1, 2, 4
 FLOOR_Z_M = -0.4  # the arm stands on a pedestal: UR arms hang below their base plane at q = 0
@@ -161,22 +161,27 @@ def build_mjcf(
                 f'fromto="{_v(a + b)}" size="{radius!r}" rgba="0 0 0 0" group="5" '
                 f'contype="{OBSTACLE_BIT}" conaffinity="0"/>'
             )
-    out.append(f'    <body name="{BASE_LINK}">')
+    out.append(f"    <body name={quoteattr(spec.base_link)}>")
+    meshes: dict[tuple[str, str], str] = {}
+    base_geoms = _shape_geoms(spec.base_shapes, spec.base_link, ROBOT_BIT, 0, meshes)
+    out.extend(f"      {g}" for g in base_geoms)
+    out.extend(_frame_sites(spec, spec.base_link, "      "))
     indent = "    "
     for i, (joint, link) in enumerate(zip(spec.joints, links, strict=True)):
         indent += "  "
         rel = link.pre @ link.post
         quat = tf.quat_wxyz(rel[:3, :3])
         inv_post = tf.inverse(link.post)
-        axis = inv_post[:3, :3] @ np.array([0.0, 0.0, 1.0])
+        axis = inv_post[:3, :3] @ link.axis
         anchor = inv_post[:3, 3]
         lim = joint.limits
+        kind = "slide" if joint.kind == "prismatic" else "hinge"
         out.append(
-            f"{indent}<body name={quoteattr(link_name(joint.name))} "
+            f"{indent}<body name={quoteattr(joint.link_name)} "
             f'pos="{_v(rel[:3, 3])}" quat="{_v(quat)}">'
         )
         out.append(
-            f'{indent}  <joint name={quoteattr(joint.name)} type="hinge" pos="{_v(anchor)}" '
+            f'{indent}  <joint name={quoteattr(joint.name)} type="{kind}" pos="{_v(anchor)}" '
             f'axis="{_v(axis)}" range="{lim.lower!r} {lim.upper!r}" '
             f'damping="{damping[i]!r}" frictionloss="{friction[i]!r}" armature="{armature[i]!r}"'
             + (_stiff_friction(timestep_s) if friction[i] > 0 else "")
@@ -192,27 +197,37 @@ def build_mjcf(
             )
         affinity = ROBOT_BIT | OBSTACLE_BIT | (GROUND_BIT if i > 0 else 0)
         rgba = _COLOURS[i % len(_COLOURS)]
-        for k, seg in enumerate(link.segments_dh):
+        if joint.shapes:
+            geoms = _shape_geoms(joint.shapes, joint.link_name, ROBOT_BIT, affinity, meshes)
+            out.extend(f"{indent}  {g}" for g in geoms)
+            out.extend(_frame_sites(spec, joint.link_name, f"{indent}  "))
+            continue
+        for k, seg in enumerate(link.segments):
             out.append(
-                f"{indent}  <geom name={quoteattr(f'{link_name(joint.name)}_c{k}')} "
+                f"{indent}  <geom name={quoteattr(f'{joint.link_name}_c{k}')} "
                 'type="capsule" '
                 f'fromto="{_v(seg.start + seg.end)}" size="{seg.radius!r}" rgba="{rgba}" '
                 f'contype="{ROBOT_BIT}" conaffinity="{affinity}"/>'
             )
-        if not link.segments_dh:
+        if not link.segments:
             out.append(
-                f"{indent}  <geom name={quoteattr(link_name(joint.name) + '_c0')} "
+                f"{indent}  <geom name={quoteattr(joint.link_name + '_c0')} "
                 'type="sphere" '
                 f'size="{joint.collision_radius!r}" rgba="{rgba}" contype="{ROBOT_BIT}" '
                 f'conaffinity="{affinity}"/>'
             )
-    out.append(f'{indent}  <site name="{FLANGE}" pos="0 0 0" size="0.01" rgba="1 0.5 0 1"/>')
+        out.extend(_frame_sites(spec, joint.link_name, f"{indent}  "))
+    out.append(
+        f'{indent}  <site name="{FLANGE}" {_site_pose(spec.flange)} size="0.01" rgba="1 0.5 0 1"/>'
+    )
     if plant.payload_kg > 0:
         # a small dense sphere: its own inertia is negligible against the arm's
         r = 0.02
+        at_flange = "" if spec.flange == IDENTITY else f" {_site_pose(spec.flange)}"
         i_sph = 0.4 * plant.payload_kg * r * r
         out.append(
-            f'{indent}  <body name="payload"><inertial pos="0 0 0" mass="{plant.payload_kg!r}" '
+            f'{indent}  <body name="payload"{at_flange}><inertial pos="0 0 0" '
+            f'mass="{plant.payload_kg!r}" '
             f'diaginertia="{i_sph!r} {i_sph!r} {i_sph!r}"/></body>'
         )
     for _ in spec.joints:
@@ -220,7 +235,18 @@ def build_mjcf(
         indent = indent[:-2]
     out.append("    </body>")
     out.append("  </worldbody>")
-    pairs = default_collision_pairs(spec) if excluded_pairs is None else excluded_pairs
+    if meshes:
+        out.insert(4, "  <asset>")
+        out[5:5] = [
+            f"    <mesh name={quoteattr(name)} file={quoteattr(file)}{scale}/>"
+            for (file, scale), name in meshes.items()
+        ] + ["  </asset>"]
+    if excluded_pairs is not None:
+        pairs = excluded_pairs
+    elif spec.disabled_pairs is not None:
+        pairs = spec.disabled_pairs
+    else:
+        pairs = default_collision_pairs(spec)
     if pairs:
         out.append("  <contact>")
         out.extend(f"    <exclude body1={quoteattr(a)} body2={quoteattr(b)}/>" for a, b in pairs)
@@ -237,6 +263,49 @@ def build_mjcf(
     return "\n".join(out) + "\n"
 
 
+def _site_pose(pose: Pose) -> str:
+    if pose == IDENTITY:
+        return 'pos="0 0 0"'
+    t = pose_matrix(pose)
+    return f'pos="{_v(t[:3, 3])}" quat="{_v(tf.quat_wxyz(t[:3, :3]))}"'
+
+
+def _frame_sites(spec: RobotSpec, link: str, indent: str) -> list[str]:
+    """Sites of the named frames fixed to ``link`` (merged fixed links, TCPs)."""
+    return [
+        f'{indent}<site name={quoteattr(f.name)} {_site_pose(f.pose)} size="0.005" '
+        'rgba="0 0 0 0" group="5"/>'
+        for f in spec.frames
+        if f.link == link and f.name != FLANGE
+    ]
+
+
+def _shape_geoms(
+    shapes: Sequence[Shape],
+    link: str,
+    contype: int,
+    affinity: int,
+    meshes: dict[tuple[str, str], str],
+) -> list[str]:
+    """Geoms of a link's own collision shapes: primitives as primitives, meshes as convex
+    meshes (MuJoCo collides a mesh as its convex hull); ``meshes`` gathers the assets."""
+    out = []
+    for k, shape in enumerate(shapes):
+        t = pose_matrix(shape.pose)
+        pose = f'pos="{_v(t[:3, 3])}" quat="{_v(tf.quat_wxyz(t[:3, :3]))}"'
+        name = quoteattr(f"{link}_c{k}")
+        common = f'rgba="0.7 0.7 0.75 1" contype="{contype}" conaffinity="{affinity}"'
+        if shape.kind == "mesh":
+            scale = "" if shape.size == (1.0, 1.0, 1.0) else f' scale="{_v(shape.size)}"'
+            mesh = meshes.setdefault((shape.mesh, scale), f"{link}_m{k}")
+            out.append(f'<geom name={name} type="mesh" mesh={quoteattr(mesh)} {pose} {common}/>')
+            continue
+        out.append(
+            f'<geom name={name} type="{shape.kind}" size="{_v(shape.size)}" {pose} {common}/>'
+        )
+    return out
+
+
 @functools.lru_cache(maxsize=32)
 def default_collision_pairs(spec: RobotSpec) -> tuple[tuple[str, str], ...]:
     """Robot link pairs in contact at q = 0 (always-touching geometry, not a real collision)."""
@@ -248,7 +317,7 @@ def default_collision_pairs(spec: RobotSpec) -> tuple[tuple[str, str], ...]:
         b1, b2 = model.geom_bodyid[c.geom1], model.geom_bodyid[c.geom2]
         if b1 > 0 and b2 > 0 and model.body_parentid[b1] != 0 and model.body_parentid[b2] != 0:
             names = sorted((model.body(b1).name, model.body(b2).name))
-            if BASE_LINK not in names:
+            if spec.base_link not in names:
                 pairs.add((names[0], names[1]))
     return tuple(sorted(pairs))
 

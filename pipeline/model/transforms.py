@@ -20,6 +20,16 @@ def rot_z(angle: float) -> Mat:
     return np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
 
 
+def rot_axis(axis: Mat, angle: float) -> Mat:
+    """Rotation by ``angle`` [rad] about the unit ``axis`` (Rodrigues), as a 4x4."""
+    x, y, z = (float(v) for v in axis)
+    c, s = math.cos(angle), math.sin(angle)
+    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    out = np.eye(4)
+    out[:3, :3] = np.eye(3) + s * k + (1.0 - c) * (k @ k)
+    return out
+
+
 def trans(x: float, y: float, z: float) -> Mat:
     out = np.eye(4)
     out[:3, 3] = (x, y, z)

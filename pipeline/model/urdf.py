@@ -1,9 +1,11 @@
 """Robot spec -> URDF text and a Pinocchio model built from it.
 
-URDF link i's frame is the frame right after joint i's rotation (DH frame
-i-1 composed with ``pre_i @ Rz(q_i)``); the DH frame i is ``post_i`` further.
-That keeps every revolute joint about its own z axis, as URDF wants, for both
-DH conventions. ``tool0`` is the DH flange frame.
+URDF link i's frame is the frame right after joint i's motion (link frame
+i-1 composed with ``pre_i @ motion_i(q_i)``); the model's link frame i (a DH
+robot's DH frame i) is ``post_i`` further. That keeps every joint about its own
+axis through its frame's origin, as URDF wants, for both DH conventions and for
+robots read from a URDF (``post`` = identity). ``tool0`` is the flange frame;
+the robot's further named frames are fixed links.
 """
 
 from __future__ import annotations
@@ -18,8 +20,8 @@ from numpy.typing import NDArray
 
 from pipeline.errors import ModelError
 from pipeline.model import transforms as tf
-from pipeline.model.chain import BASE_LINK, FLANGE, chain, link_name
-from pipeline.robots.spec import RobotSpec
+from pipeline.model.chain import FLANGE, chain
+from pipeline.robots.spec import IDENTITY, RobotSpec, pose_matrix
 
 
 def _v(xs: NDArray[np.float64] | tuple[float, ...]) -> str:
@@ -47,17 +49,30 @@ def _cylinder_between(
     return t, length
 
 
+def _axis(axis: NDArray[np.float64]) -> str:
+    """The ``<axis xyz>`` text: integers as integers (``0 0 1``), anything else exact."""
+    return " ".join(str(int(v)) if float(v).is_integer() else repr(float(v)) for v in axis)
+
+
+def _urdf_type(kind: str) -> str:
+    # a continuous joint is written revolute with its (stated) limits: Pinocchio models a
+    # continuous joint with two configuration variables (cos, sin), the controllers one
+    return "prismatic" if kind == "prismatic" else "revolute"
+
+
 @functools.lru_cache(maxsize=64)
 def build_urdf(spec: RobotSpec) -> str:
     """URDF text of the robot (inertials, visual + collision cylinders, ``tool0``);
     cached per process (an episode needs it twice: controller model, robot description)."""
     links = chain(spec)
     out = [f'<?xml version="1.0"?>\n<robot name={quoteattr(spec.name)}>']
-    out.append(f'  <link name="{BASE_LINK}"/>')
-    parent = BASE_LINK
+    out.append(f"  <link name={quoteattr(spec.base_link)}/>")
+    parent = spec.base_link
     prev_post = np.eye(4)
+    urdf_T_link = {spec.base_link: np.eye(4)}
     for joint, link in zip(spec.joints, links, strict=True):
-        name = link_name(joint.name)
+        name = joint.link_name
+        urdf_T_link[name] = link.post
         out.append(f"  <link name={quoteattr(name)}>")
         if joint.inertial is not None:
             inn = joint.inertial
@@ -69,7 +84,7 @@ def build_urdf(spec: RobotSpec) -> str:
                 f'<inertia ixx="{t[0][0]!r}" ixy="{t[0][1]!r}" ixz="{t[0][2]!r}" '
                 f'iyy="{t[1][1]!r}" iyz="{t[1][2]!r}" izz="{t[2][2]!r}"/></inertial>'
             )
-        for seg in link.segments_dh:
+        for seg in link.segments:
             a = (link.post @ np.append(seg.start, 1.0))[:3]
             b = (link.post @ np.append(seg.end, 1.0))[:3]
             origin, length = _cylinder_between(a, b)
@@ -79,19 +94,29 @@ def build_urdf(spec: RobotSpec) -> str:
         out.append("  </link>")
         lim = joint.limits
         out.append(
-            f'  <joint name={quoteattr(joint.name)} type="revolute">'
+            f"  <joint name={quoteattr(joint.name)} type={quoteattr(_urdf_type(joint.kind))}>"
             f"<parent link={quoteattr(parent)}/><child link={quoteattr(name)}/>"
             f"{_origin(prev_post @ link.pre)}"
-            f'<axis xyz="0 0 1"/><limit lower="{lim.lower!r}" upper="{lim.upper!r}" '
+            f'<axis xyz="{_axis(link.axis)}"/><limit lower="{lim.lower!r}" upper="{lim.upper!r}" '
             f'effort="{lim.effort!r}" velocity="{lim.velocity!r}"/></joint>'
         )
         parent = name
         prev_post = link.post
+    flange = prev_post if spec.flange == IDENTITY else prev_post @ pose_matrix(spec.flange)
     out.append(f'  <link name="{FLANGE}"/>')
     out.append(
         f'  <joint name="{FLANGE}_fixed_joint" type="fixed"><parent link={quoteattr(parent)}/>'
-        f'<child link="{FLANGE}"/>{_origin(prev_post)}</joint>'
+        f'<child link="{FLANGE}"/>{_origin(flange)}</joint>'
     )
+    for named in spec.frames:
+        if named.name == FLANGE:
+            continue
+        out.append(f"  <link name={quoteattr(named.name)}/>")
+        out.append(
+            f'  <joint name={quoteattr(named.name + "_fixed_joint")} type="fixed">'
+            f"<parent link={quoteattr(named.link)}/><child link={quoteattr(named.name)}/>"
+            f"{_origin(urdf_T_link[named.link] @ pose_matrix(named.pose))}</joint>"
+        )
     out.append("</robot>")
     return "\n".join(out) + "\n"
 

@@ -36,11 +36,28 @@ I64 = NDArray[np.int64]
 MIN_PADDING_M = 1e-3  # below this the check step (and planning) gets impractically fine
 
 
+@functools.lru_cache(maxsize=32)
+def shape_extent_m(spec: RobotSpec) -> float:
+    """How far a link's own collision shapes (a URDF's meshes and primitives) reach from
+    its link frame's origin [m]: 0 for a robot drawn by capsules alone."""
+    if not any(j.shapes for j in spec.joints):
+        return 0.0
+    model = build_mujoco_model(spec)
+    links = {j.link_name for j in spec.joints}
+    extent = 0.0
+    for g in range(model.ngeom):
+        if model.body(model.geom_bodyid[g]).name in links:
+            pos = float(np.linalg.norm(model.geom_pos[g]))
+            extent = max(extent, pos + float(model.geom_rbound[g]))
+    return extent
+
+
 def reach_terms_m(spec: RobotSpec) -> list[float]:
     """``R_i`` [m] per joint: a bound on the distance of the geometry beyond joint ``i``
-    from its axis (the summed DH lengths ``|a_j| + |d_j|`` for ``j >= i`` plus the
-    largest capsule radius); see ``reach_bound_m``."""
-    r_max = max(j.collision_radius for j in spec.joints)
+    from its axis (the summed link lengths for ``j >= i``, :meth:`RobotSpec.reach_m`, plus
+    the largest capsule radius or, for a robot with its own shapes, how far they reach
+    from their link frames); see ``reach_bound_m``."""
+    r_max = max(max(j.collision_radius for j in spec.joints), shape_extent_m(spec))
     return [spec.reach_m(i) + r_max for i in range(spec.dof)]
 
 

@@ -53,7 +53,7 @@ def arm_capsules(
     NDArray[np.float32],
     NDArray[np.float64],
 ]:
-    """Link capsules in world (DH base) coordinates for each row of ``q``.
+    """Link capsules in world (robot base) coordinates for each row of ``q``.
 
     Returns:
         translations (F*S, 3), quaternions (F*S, 4), lengths (F*S,), radii (F*S,) and the
@@ -63,7 +63,7 @@ def arm_capsules(
     segs = [
         (i, s)
         for i, link in enumerate(links)
-        for s in link.segments_dh
+        for s in link.segments
         if np.linalg.norm(np.subtract(s.end, s.start)) > 1e-9
     ]
     starts = np.array([[*s.start, 1.0] for _, s in segs]).reshape(-1, 4)

@@ -64,6 +64,17 @@ def _settings_line(node: Any, first: Sequence[str], *, skip: Sequence[str] = ())
 _PATH_KEYS = ("planner", "direct", "simplify", "n_waypoints", "n_states_before_simplify")
 
 
+def _robot_source(robot: Mapping[str, Any] | None) -> str:
+    """How the robot is given: its DH convention, or its description file and SHA-256."""
+    if robot is not None and robot.get("format") not in (None, "dh-yaml"):
+        sha = str(robot.get("sha256") or "")[:12]
+        return (
+            f"from {md.value(robot.get('format'))} `{md.value(robot.get('source'))}` "
+            f"(SHA-256 {sha}...)"
+        )
+    return f"DH convention {md.value(_given(robot, 'convention') if robot else None)}"
+
+
 def _planner_line(planner: Any) -> str:
     """What the planner did, in words, then its settings.
 
@@ -122,8 +133,7 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
         "### Setup",
         "",
         f"- Robot: **{first.robot}** ({len(first.joint_names)} joints: "
-        f"{', '.join(first.joint_names)}), DH convention "
-        f"{md.value(_given(s.robot, 'convention') if s is not None else None)}.",
+        f"{', '.join(first.joint_names)}), {_robot_source(s.robot if s is not None else None)}.",
         f"- Start [rad]: {pose('start')}; goal [rad]: {pose('goal')}; "
         f"obstacles: {len(obstacles) if isinstance(obstacles, list) else md.NA}; "
         f"hold after the motion: {md.value(_given(sc, 'hold_s'))} s.",

@@ -7,7 +7,10 @@ everything is radians, metres, kilograms and newton-metres.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+import hashlib
+import itertools
 import math
 import re
 from dataclasses import dataclass
@@ -57,6 +60,28 @@ def check_name(value: str) -> str:
 Name = Annotated[str, AfterValidator(check_name)]
 
 
+Pose = tuple[tuple[float, float, float, float], ...]
+"""A 4x4 homogeneous transform as nested tuples (hashable: specs key per-process caches)."""
+IDENTITY: Pose = (
+    (1.0, 0.0, 0.0, 0.0),
+    (0.0, 1.0, 0.0, 0.0),
+    (0.0, 0.0, 1.0, 0.0),
+    (0.0, 0.0, 0.0, 1.0),
+)
+JointKind = Literal["revolute", "continuous", "prismatic"]
+
+
+def as_pose(t: Any) -> Pose:
+    """A 4x4 array-like as a :data:`Pose` (values kept bit for bit)."""
+    a = np.asarray(t, dtype=np.float64).reshape(4, 4)
+    return tuple((float(r[0]), float(r[1]), float(r[2]), float(r[3])) for r in a)
+
+
+def pose_matrix(p: Pose) -> np.ndarray:
+    """A :data:`Pose` as a 4x4 float64 array."""
+    return np.array(p, dtype=np.float64)
+
+
 @dataclass(frozen=True)
 class DHRow:
     """One DH row. Standard: ``[alpha_i, a_i, d_i, theta_offset_i]``; modified
@@ -77,7 +102,8 @@ class DHRow:
 
 @dataclass(frozen=True)
 class JointLimits:
-    """Joint limits: position [rad], velocity [rad/s], acceleration [rad/s^2], effort [N m]."""
+    """Joint limits: position [rad], velocity [rad/s], acceleration [rad/s^2], effort [N m]
+    (metres, m/s, m/s^2 and N for a prismatic joint)."""
 
     lower: float
     upper: float
@@ -88,12 +114,12 @@ class JointLimits:
 
 @dataclass(frozen=True)
 class Inertial:
-    """Rigid-body inertia of the link moved by a joint, in that link's DH frame.
+    """Rigid-body inertia of the link a joint moves, in that link's frame.
 
     Attributes:
         mass: [kg].
-        com: centre of mass in DH frame i [m].
-        inertia: 3x3 inertia tensor about the centre of mass, DH-frame axes [kg m^2].
+        com: centre of mass in the link frame [m].
+        inertia: 3x3 inertia tensor about the centre of mass, link-frame axes [kg m^2].
     """
 
     mass: float
@@ -102,26 +128,133 @@ class Inertial:
 
 
 @dataclass(frozen=True)
-class JointSpec:
-    """One revolute joint and the link it moves."""
+class Segment:
+    """A capsule of link geometry, endpoints in the link frame [m]."""
+
+    start: tuple[float, float, float]
+    end: tuple[float, float, float]
+    radius: float
+
+
+@dataclass(frozen=True)
+class Shape:
+    """A collision shape of a link (URDF ``<collision>``), pose in the link frame.
+
+    Attributes:
+        kind: ``box`` (size = half extents), ``sphere`` (radius), ``cylinder`` (radius,
+            half length), ``mesh`` (scale xyz; ``mesh`` the file's absolute path).
+    """
+
+    kind: Literal["box", "sphere", "cylinder", "mesh"]
+    pose: Pose
+    size: tuple[float, ...]
+    mesh: str = ""
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A named frame fixed to a link (``tool0``, a TCP, a merged fixed link)."""
 
     name: str
-    dh: DHRow
+    link: str
+    """The link it is fixed to (the base link or a joint's link)."""
+    pose: Pose
+    """``link_T_frame``."""
+
+
+@dataclass(frozen=True)
+class JointSpec:
+    """One controlled joint and the link it moves, in any format's terms.
+
+    The link frame is ``parent link frame @ origin @ motion(axis, q) @ post``: a URDF joint
+    has ``post`` = identity (the link frame is the joint frame); a DH row's link frame is
+    its DH frame, a fixed transform past the rotation (MJCF-style: the joint need not pass
+    through the link frame's origin).
+    """
+
+    name: str
     limits: JointLimits
     inertial: Inertial | None
     collision_radius: float
     armature: float = 0.0
     """Rotor (reflected) inertia about the joint axis [kg m^2]: gear ratio^2 x rotor inertia."""
+    origin: Pose = IDENTITY
+    """``parent_link_T_joint`` at q = 0."""
+    axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    """Unit motion axis in the joint frame."""
+    post: Pose = IDENTITY
+    """``joint_T_link`` after the motion."""
+    kind: JointKind = "revolute"
+    link: str = ""
+    """Name of the link this joint moves (``elbow_joint`` -> ``elbow_link`` when not given)."""
+    capsules: tuple[Segment, ...] = ()
+    """Planning / drawing geometry (capsules along the chain), link frame."""
+    shapes: tuple[Shape, ...] = ()
+    """The description's own collision shapes (URDF), link frame; empty for DH robots."""
+    length_m: float = 0.0
+    """A bound on how far this link carries the next joint (or the flange) from this
+    joint's axis [m] (DH: ``|a| + |d|``); :meth:`RobotSpec.reach_m` sums them."""
+    armature_source: str = ""
+    """Where ``armature`` comes from (file, sidecar or scenario)."""
+    damping_nm_s_rad: float = 0.0
+    """Viscous friction the description states [N m s/rad]: a fact for a scenario to use
+    (the simulated plant's friction is the scenario's ``plant``, so ``plant: {}`` stays the
+    nominal model)."""
+    frictionloss_nm: float = 0.0
+    """Coulomb friction the description states [N m] (as ``damping_nm_s_rad``)."""
+    dh: DHRow | None = None
+    """The DH row the joint came from (provenance; the analytic UR solver needs it)."""
+
+    @property
+    def link_name(self) -> str:
+        return self.link or f"{self.name.removesuffix('_joint')}_link"
 
 
 @dataclass(frozen=True)
 class RobotSpec:
-    """A serial revolute arm: the single source for FK, MuJoCo, URDF and Pinocchio."""
+    """A serial arm: the single source for FK, MuJoCo, URDF and Pinocchio, whatever
+    format it was loaded from."""
 
     name: str
-    convention: Convention
+    convention: Convention | None
+    """The DH convention of a robot given as DH rows, None otherwise."""
     joints: tuple[JointSpec, ...]
     source: str
+    base_link: str = "base_link"
+    flange: Pose = IDENTITY
+    """``last_link_T_flange``: the ``tool0`` frame on the last joint's link."""
+    frames: tuple[Frame, ...] = ()
+    """Further named fixed frames (merged fixed links, TCPs), addressable in the models."""
+    format: str = "dh-yaml"
+    """The loader that read ``source`` (its registry key)."""
+    source_sha256: str = ""
+    """SHA-256 of the description file (URDF: the re-run key of what it drives)."""
+    description: str = ""
+    """The robot's own description text (a URDF's XML), published as ``/robot_description``;
+    empty: generated from the model."""
+    disabled_pairs: tuple[tuple[str, str], ...] | None = None
+    """Link pairs never checked for collision (an SRDF's); None: those touching at q = 0."""
+    named_states: tuple[tuple[str, tuple[float, ...]], ...] = ()
+    """Named joint configurations (an SRDF's ``group_state``s, e.g. ``ready``) [rad]."""
+    base_shapes: tuple[Shape, ...] = ()
+    """Collision shapes of the base link (and links fixed to it), base frame."""
+    settings_sources: tuple[tuple[str, str], ...] = ()
+    """Where facts the description lacks came from (``armature`` -> sidecar file, ...)."""
+    loaded_from: str = ""
+    """What :func:`load_spec` was given (a built-in name or a path): loads it again."""
+
+    def __hash__(self) -> int:
+        # computed once: specs key the per-process caches of models and FK arrays, and a
+        # URDF robot's fields (meshes, description text) take tens of microseconds to hash
+        cached: int | None = self.__dict__.get("_hash")
+        if cached is None:
+            cached = hash(tuple(getattr(self, f.name) for f in dataclasses.fields(self)))
+            object.__setattr__(self, "_hash", cached)
+        return cached
+
+    def __getstate__(self) -> dict[str, Any]:
+        # string hashes differ between processes: a worker computes its own
+        return {k: v for k, v in self.__dict__.items() if k != "_hash"}
 
     @property
     def dof(self) -> int:
@@ -160,11 +293,30 @@ class RobotSpec:
         """Rotor (reflected) inertia per joint [kg m^2]."""
         return np.array([j.armature for j in self.joints])
 
+    @property
+    def dh_rows(self) -> tuple[DHRow, ...] | None:
+        """The DH rows of a robot given as DH (provenance), None for any other robot."""
+        rows = tuple(j.dh for j in self.joints if j.dh is not None)
+        return rows if self.convention is not None and len(rows) == self.dof else None
+
     def reach_m(self, first: int = 0) -> float:
-        """The summed DH lengths ``|a_j| + |d_j|`` of joints ``first`` onwards [m]: a bound on
-        how far the flange gets from joint ``first``'s axis (from the base for 0), in any
-        configuration."""
-        return sum(abs(j.dh.a) + abs(j.dh.d) for j in self.joints[first:])
+        """The summed link lengths (:attr:`JointSpec.length_m`) of joints ``first`` onwards
+        [m]: a bound on how far the flange gets from joint ``first``'s axis (from the base
+        for 0), in any configuration."""
+        return sum(j.length_m for j in self.joints[first:])
+
+    def named_state(self, name: str) -> np.ndarray:
+        """A named configuration (SRDF ``group_state``) [rad].
+
+        Raises:
+            SpecError: no such state (lists the known ones).
+        """
+        states = dict(self.named_states)
+        if name not in states:
+            raise SpecError(
+                unknown_name_message("named state", name, list(states), where=self.source)
+            )
+        return np.array(states[name])
 
     def require_dynamics(self, what: str) -> None:
         """Raise a clear error if ``what`` needs link inertias this robot lacks."""
@@ -357,11 +509,99 @@ def format_validation_error(source: str, err: ValidationError) -> str:
     return f"{source}: {where}{msg}{shown}{more}"
 
 
+_Op = tuple[str, float]
+MIN_SEGMENT_M = 1e-6
+
+
+def _dh_ops(row: DHRow, convention: str) -> tuple[list[_Op], list[_Op]]:
+    """A DH row as elementary ops before and after the joint rotation. Both conventions
+    factor as ``frame_i = frame_{i-1} @ pre_i @ Rz(q_i) @ post_i``:
+
+    - standard:  pre = I,                           post = Rz(off) Tz(d) Tx(a) Rx(alpha)
+    - modified:  pre = Rx(alpha) Tx(a) Tz(d) Rz(off), post = I
+    """
+    r = row
+    if convention == "standard":
+        return [], [("rz", r.theta_offset), ("tz", r.d), ("tx", r.a), ("rx", r.alpha)]
+    return [("rx", r.alpha), ("tx", r.a), ("tz", r.d), ("rz", r.theta_offset)], []
+
+
+def _compose(ops: list[_Op]) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Matrix of a sequence of elementary ops, and the polyline its translations trace."""
+    from pipeline.model import transforms as tf
+
+    t = np.eye(4)
+    points = [t[:3, 3].copy()]
+    for kind, v in ops:
+        step = {
+            "rz": lambda x: tf.rot_z(x),
+            "rx": lambda x: tf.rot_x(x),
+            "tz": lambda x: tf.trans(0, 0, x),
+            "tx": lambda x: tf.trans(x, 0, 0),
+        }[kind](v)
+        t = t @ step
+        if kind.startswith("t") and v != 0.0:
+            points.append(t[:3, 3].copy())
+    return t, points
+
+
+def _segments(points: list[np.ndarray], to_frame: np.ndarray, radius: float) -> list[Segment]:
+    out = []
+    pts = [(to_frame @ np.append(p, 1.0))[:3] for p in points]
+    for a, b in itertools.pairwise(pts):
+        # MuJoCo refuses a capsule shorter than 1e-6 m ("fromto points too close"); a
+        # sub-micron DH offset draws no geometry
+        if np.linalg.norm(b - a) > MIN_SEGMENT_M:
+            out.append(Segment((a[0], a[1], a[2]), (b[0], b[1], b[2]), radius))
+    return out
+
+
+def dh_joint_geometry(
+    convention: str, rows: list[DHRow], radii: list[float]
+) -> list[tuple[Pose, Pose, tuple[Segment, ...]]]:
+    """Per DH row: the joint origin (``pre``, in DH frame i-1), ``post`` (rotated joint
+    frame -> DH frame i, the link frame) and the link's capsules in DH frame i, which follow
+    the translations of ``post_i`` (moving with link i) and of ``pre_{i+1}``."""
+    from pipeline.model import transforms as tf
+
+    decomposed = [_dh_ops(r, convention) for r in rows]
+    out = []
+    for i, radius in enumerate(radii):
+        pre, _ = _compose(decomposed[i][0])
+        post, post_pts = _compose(decomposed[i][1])
+        # post's polyline is traced from the rotated joint frame: map to DH frame i
+        segs = _segments(post_pts, tf.inverse(post), radius)
+        if i + 1 < len(rows):
+            _, next_pre_pts = _compose(decomposed[i + 1][0])
+            segs += _segments(next_pre_pts, np.eye(4), radius)
+        out.append((as_pose(pre), as_pose(post), tuple(segs)))
+    return out
+
+
+def with_dh_rows(spec: RobotSpec, rows: list[DHRow]) -> RobotSpec:
+    """``spec`` (given as DH rows) with new DH rows: origins, capsules and lengths rebuilt.
+
+    Raises:
+        SpecError: the robot is not given as DH rows, or a row count mismatch.
+    """
+    if spec.convention is None or len(rows) != spec.dof:
+        raise SpecError(f"{spec.source}: robot '{spec.name}' takes {spec.dof} DH rows")
+    geometry = dh_joint_geometry(spec.convention, rows, [j.collision_radius for j in spec.joints])
+    joints = tuple(
+        dataclasses.replace(j, origin=o, post=p, capsules=c, length_m=abs(r.a) + abs(r.d), dh=r)
+        for j, r, (o, p, c) in zip(spec.joints, rows, geometry, strict=True)
+    )
+    return dataclasses.replace(spec, joints=joints)
+
+
 def _to_spec(raw: _Robot, source: str) -> RobotSpec:
     k = math.pi / 180.0 if raw.angle_unit == "deg" else 1.0
+    rows = [
+        DHRow(alpha=j.dh[0] * k, a=j.dh[1], d=j.dh[2], theta_offset=j.dh[3] * k) for j in raw.joints
+    ]
+    geometry = dh_joint_geometry(raw.convention, rows, [j.collision.radius for j in raw.joints])
     joints = []
-    for j in raw.joints:
-        alpha, a, d, off = j.dh
+    for j, row, (origin, post, capsules) in zip(raw.joints, rows, geometry, strict=True):
         lim = j.limits
         inertial = None
         if j.inertial is not None:
@@ -374,7 +614,6 @@ def _to_spec(raw: _Robot, source: str) -> RobotSpec:
         joints.append(
             JointSpec(
                 name=j.name,
-                dh=DHRow(alpha=alpha * k, a=a, d=d, theta_offset=off * k),
                 limits=JointLimits(
                     lower=lim.lower * k,
                     upper=lim.upper * k,
@@ -385,6 +624,12 @@ def _to_spec(raw: _Robot, source: str) -> RobotSpec:
                 inertial=inertial,
                 collision_radius=j.collision.radius,
                 armature=j.armature,
+                origin=origin,
+                post=post,
+                capsules=capsules,
+                length_m=abs(row.a) + abs(row.d),
+                armature_source=source if j.armature else "",
+                dh=row,
             )
         )
     return RobotSpec(name=raw.name, convention=raw.convention, joints=tuple(joints), source=source)
@@ -401,48 +646,122 @@ def parse_spec(data: Any, *, source: str) -> RobotSpec:
     return _to_spec(raw, source)
 
 
+BUILTIN_SIDECAR = ".armlab.yaml"
+
+
 def builtin_robot_names() -> list[str]:
     """Names of the robots shipped inside the package."""
     folder = resources.files("pipeline.robots")
     return sorted(
-        p.name.removesuffix(".yaml") for p in folder.iterdir() if p.name.endswith(".yaml")
+        p.name.removesuffix(BUILTIN_SIDECAR).removesuffix(".yaml")
+        for p in folder.iterdir()
+        if p.name.endswith(".yaml")
     )
 
 
-def load_spec(name_or_path: str | Path) -> RobotSpec:
-    """Load a robot by built-in name (``"ur5"``) or by path to a YAML file.
+LOADERS: dict[str, str] = {
+    ".yaml": "pipeline.robots.spec:load_dh_yaml",
+    ".yml": "pipeline.robots.spec:load_dh_yaml",
+    ".urdf": "pipeline.robots.urdf_loader:load_urdf",
+    ".armlab.yaml": "pipeline.robots.urdf_loader:load_sidecar",
+}
+"""Robot file loaders by suffix, ``module:function`` taking ``(path, *, package_path)`` and
+returning a :class:`RobotSpec`: a new format is one loader file and one entry here."""
 
-    Built-in robots are parsed once per process (they are package data).
+
+def loader_suffix(path: Path) -> str | None:
+    """The :data:`LOADERS` key of a file name (the longest suffix that matches), or None."""
+    name = path.name.lower()
+    found = [s for s in LOADERS if name.endswith(s)]
+    return max(found, key=len) if found else None
+
+
+def package_search_path(extra: tuple[str, ...] = ()) -> tuple[Path, ...]:
+    """Folders that ``package://NAME/...`` resolves in: ``extra`` (the option), then
+    ``ARMLAB_PACKAGE_PATH`` and ``ROS_PACKAGE_PATH`` (``:``-separated), then the
+    example-robot-data share folder when it is installed. ``NAME`` is a sub-folder of one of
+    them (or the folder itself, when it is called ``NAME``)."""
+    import os
+    import sys
+
+    folders = list(extra)
+    for var in ("ARMLAB_PACKAGE_PATH", "ROS_PACKAGE_PATH"):
+        folders += [f for f in os.environ.get(var, "").split(os.pathsep) if f]
+    share = Path(sys.prefix) / "lib" / f"python{sys.version_info[0]}.{sys.version_info[1]}"
+    share = share / "site-packages" / "cmeel.prefix" / "share"
+    if (share / "example-robot-data").is_dir():
+        folders.append(str(share))
+    return tuple(Path(f).expanduser() for f in folders)
+
+
+def load_spec(name_or_path: str | Path, *, package_path: tuple[str, ...] = ()) -> RobotSpec:
+    """Load a robot by built-in name (``"ur5"``) or by path to a robot file (DH YAML, URDF:
+    see :data:`LOADERS`).
+
+    Built-in robots are parsed once per process (they are package data); a file once per
+    process and content.
 
     Raises:
         SpecError: unknown name (lists the available ones), unreadable file or
             invalid content (names the file and field path).
     """
     text = str(name_or_path)
-    path = Path(text)
-    # a path has a YAML suffix or a slash; anything else is a built-in name (a stray
+    path = Path(text).expanduser()
+    # a path has a known suffix or a slash; anything else is a built-in name (a stray
     # file or folder called "ur5" in the working directory must not hide the robot)
-    if path.suffix in (".yaml", ".yml") or "/" in text or "\\" in text:
+    suffix = loader_suffix(path)
+    if suffix is not None or "/" in text or "\\" in text:
         if path.is_dir():
-            raise SpecError(f"{text}: is a directory, expected a robot YAML file")
+            raise SpecError(f"{text}: is a directory, expected a robot YAML or URDF file")
         if not path.is_file():
             raise SpecError(f"{text}: no such robot file")
-        source = str(path)
+        if suffix is None:
+            raise SpecError(
+                f"{text}: unknown robot file type '{path.suffix}'; valid: {', '.join(LOADERS)}"
+            )
         try:
-            content = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as err:
-            raise SpecError(f"{source}: cannot read robot file ({err})") from err
-    else:
-        names = builtin_robot_names()
-        if text not in names:
-            hint = unknown_name_message("robot", text, names)
-            raise SpecError(f"{hint} (or pass a path to a YAML file)")
-        return _load_builtin(text)
+            content = path.read_bytes()
+        except OSError as err:
+            raise SpecError(f"{text}: cannot read robot file ({err})") from err
+        return _load_file(str(path), hashlib.sha256(content).hexdigest(), package_path)
+    names = builtin_robot_names()
+    if text not in names:
+        hint = unknown_name_message("robot", text, names)
+        raise SpecError(f"{hint} (or pass a path to a robot file: {', '.join(LOADERS)})")
+    return _load_builtin(text)
+
+
+@functools.lru_cache(maxsize=16)
+def _load_file(path: str, sha256: str, package_path: tuple[str, ...]) -> RobotSpec:
+    """A robot file, parsed once per process and content (``sha256`` keys the cache)."""
+    import importlib
+
+    module, func = LOADERS[loader_suffix(Path(path)) or ""].split(":")
+    loader = getattr(importlib.import_module(module), func)
+    spec: RobotSpec = loader(Path(path), package_path=package_path)
+    return dataclasses.replace(spec, source_sha256=sha256, loaded_from=path)
+
+
+def load_dh_yaml(path: Path, *, package_path: tuple[str, ...] = ()) -> RobotSpec:
+    """The DH YAML loader (``package_path`` unused: a DH robot names no files)."""
+    del package_path
+    source = str(path)
+    try:
+        content = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise SpecError(f"{source}: cannot read robot file ({err})") from err
     return _parse_text(content, source)
 
 
 @functools.lru_cache(maxsize=16)
 def _load_builtin(name: str) -> RobotSpec:
+    sidecar = resources.files("pipeline.robots") / f"{name}{BUILTIN_SIDECAR}"
+    if sidecar.is_file():  # a URDF robot: its settings sidecar names the URDF
+        from pipeline.robots.urdf_loader import load_sidecar
+
+        spec = load_sidecar(Path(str(sidecar)))
+        digest = hashlib.sha256(Path(spec.source).read_bytes()).hexdigest()
+        return dataclasses.replace(spec, source_sha256=digest, loaded_from=name)
     content = (resources.files("pipeline.robots") / f"{name}.yaml").read_text(encoding="utf-8")
     return _parse_text(content, f"robots/{name}.yaml")
 

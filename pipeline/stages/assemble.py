@@ -17,7 +17,7 @@ import numpy as np
 from pipeline import __version__
 from pipeline.params import Episode, ScenarioParams
 from pipeline.planning import PlannedPath, TimedTrajectory
-from pipeline.robots.spec import RobotSpec
+from pipeline.robots.spec import JointSpec, RobotSpec
 from pipeline.settings import (
     ControllerSettings,
     EpisodeSettings,
@@ -35,8 +35,49 @@ if TYPE_CHECKING:
     from pipeline.sim.result import EpisodeResult
 
 
+def _inertial_dict(j: JointSpec) -> dict[str, Any]:
+    if j.inertial is None:
+        return {}
+    t = j.inertial.inertia
+    return {
+        "inertial": {
+            "mass": j.inertial.mass,
+            "com": list(j.inertial.com),
+            "inertia": [t[0][0], t[1][1], t[2][2], t[0][1], t[0][2], t[1][2]],
+        }
+    }
+
+
 def spec_as_dict(spec: RobotSpec) -> dict[str, Any]:
-    """The robot spec as plain data (radians), as recorded in every bag."""
+    """The robot spec as plain data (radians), as recorded in every bag.
+
+    A robot given as DH rows is recorded whole (the robot YAML, radians); any other robot
+    by its source file and that file's SHA-256 (a changed file re-runs what it drives), its
+    joints (limits, link inertials as modelled, armature) and where the facts its file
+    lacks came from.
+    """
+    rows = spec.dh_rows
+    if rows is None:
+        return {
+            "name": spec.name,
+            "format": spec.format,
+            "source": spec.source,
+            "sha256": spec.source_sha256,
+            "robot": spec.loaded_from,
+            "base_link": spec.base_link,
+            "joints": [
+                {
+                    "name": j.name,
+                    "type": j.kind,
+                    "link": j.link_name,
+                    "limits": asdict(j.limits),
+                    **_inertial_dict(j),
+                    "armature": j.armature,
+                }
+                for j in spec.joints
+            ],
+            "settings_sources": dict(spec.settings_sources),
+        }
     return {
         "name": spec.name,
         "convention": spec.convention,
@@ -44,7 +85,7 @@ def spec_as_dict(spec: RobotSpec) -> dict[str, Any]:
         "joints": [
             {
                 "name": j.name,
-                "dh": [j.dh.alpha, j.dh.a, j.dh.d, j.dh.theta_offset],
+                "dh": [dh.alpha, dh.a, dh.d, dh.theta_offset],
                 "limits": asdict(j.limits),
                 **(
                     {
@@ -67,7 +108,7 @@ def spec_as_dict(spec: RobotSpec) -> dict[str, Any]:
                 "collision": {"radius": j.collision_radius},
                 "armature": j.armature,
             }
-            for j in spec.joints
+            for j, dh in zip(spec.joints, rows, strict=True)
         ],
     }
 

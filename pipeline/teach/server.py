@@ -1,7 +1,7 @@
 """The teach page: a viser server drawing a :class:`TeachSession` and wiring its events.
 
 The arm is drawn from the same capsules as the MJCF/URDF models
-(:func:`pipeline.model.chain.chain`), one node per DH frame posed by DH forward
+(:func:`pipeline.model.chain.chain`), one node per link frame posed by forward
 kinematics. A transform gizmo sets the flange target; joint sliders drive FK.
 Every event goes through one lock (the solvers' Pinocchio data is not
 thread-safe) and ends in :meth:`TeachServer.render`, which sends the new pose
@@ -94,14 +94,14 @@ def _told_to_client(handler: Callable[[Any, Any], None]) -> Callable[[Any, Any],
 
 
 def link_node(i: int) -> str:
-    """Scene name of the node at DH frame ``i`` (1..n): link i's geometry hangs on it."""
+    """Scene name of the node at link frame ``i`` (1..n): link i's geometry hangs on it."""
     return f"{ARM_ROOT}/link{i}"
 
 
 def _capsule_mesh(spec_links: Sequence[Any], i: int, radius: float) -> trimesh.Trimesh:
-    """Link i's capsules (or one sphere when it has no length), in DH frame i [m]."""
+    """Link i's capsules (or one sphere when it has no length), in link frame i [m]."""
     parts = []
-    for seg in spec_links[i].segments_dh:
+    for seg in spec_links[i].segments:
         a, b = np.array(seg.start), np.array(seg.end)
         length = float(np.linalg.norm(b - a))
         cap = trimesh.creation.capsule(height=length, radius=seg.radius, count=[12, 12])

@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from pipeline.robots import RobotSpec
+from pipeline.robots.spec import with_dh_rows
 
 
 def wrapped_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -18,10 +19,9 @@ def wrapped_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def with_dh(spec: RobotSpec, index: int, **changes: float) -> RobotSpec:
     """A copy of ``spec`` with joint ``index``'s DH row changed."""
-    joints = list(spec.joints)
-    j = joints[index]
-    joints[index] = dataclasses.replace(j, dh=dataclasses.replace(j.dh, **changes))
-    return dataclasses.replace(spec, joints=tuple(joints))
+    rows = list(spec.dh_rows or ())
+    rows[index] = dataclasses.replace(rows[index], **changes)
+    return with_dh_rows(spec, rows)
 
 
 def with_limits(spec: RobotSpec, lower: np.ndarray, upper: np.ndarray) -> RobotSpec:

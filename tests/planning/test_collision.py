@@ -129,7 +129,7 @@ def _shelf_under_the_elbow(spec, gap_m):
     capsule lies along the shelf's face, where MuJoCo's capsule–box collider misses
     pairs within the margin (google-deepmind/mujoco#1473)."""
     frame = link_frames(spec, np.zeros(6))[2]
-    (seg,) = chain(spec)[2].segments_dh
+    (seg,) = chain(spec)[2].segments
     a, b = ((frame @ np.append(p, 1.0))[:3] for p in (seg.start, seg.end))
     assert a[2] == pytest.approx(b[2])  # horizontal at q = 0
     top = a[2] - seg.radius - gap_m

@@ -28,7 +28,7 @@ def _capsules_world(spec, q, link):
     """(start, end, radius) of each capsule of joint ``link``'s body, from DH FK alone."""
     frame = link_frames(spec, q)[link]
     out = []
-    for seg in chain(spec)[link].segments_dh:
+    for seg in chain(spec)[link].segments:
         a = (frame @ np.append(seg.start, 1.0))[:3]
         b = (frame @ np.append(seg.end, 1.0))[:3]
         out.append((a, b, seg.radius))

@@ -242,7 +242,7 @@ def test_a_soft_pid_landing_on_a_shelf_is_flagged_in_summary_recording_and_repor
 
     spec = load_spec("ur5")
     frame = link_frames(spec, np.zeros(6))[2]
-    seg = chain(spec)[2].segments_dh[0]
+    seg = chain(spec)[2].segments[0]
     z = min((frame @ np.append(p, 1.0))[2] for p in (seg.start, seg.end)) - seg.radius
     shelf = {"name": "shelf", "center": [-0.6, 0.0, float(z) - 0.02 - 0.05],
              "half_size": [0.12, 0.1, 0.05]}  # fmt: skip

@@ -1,0 +1,590 @@
+"""The URDF loader (+ SRDF, + a small settings sidecar): a URDF robot as a :class:`RobotSpec`.
+
+The controlled joints are the chain from the root link to a tip link: the single leaf chain
+by default (with several, ``tip:`` is required and the error lists them). Every other
+movable joint (gripper fingers, mimic joints) is locked at a stated configuration (default:
+the URDF's zero) and merged, as fixed joints are, into the link it hangs from: its mass
+counts, its frame stays addressable (:attr:`RobotSpec.frames`). ``package://NAME/...``
+resolves through :func:`pipeline.robots.spec.package_search_path`.
+
+A URDF carries no armature, joint friction or acceleration limits: they come from the
+settings sidecar ``<stem>.armlab.yaml`` next to the URDF (or a sidecar loaded as the robot
+file, naming its ``urdf:``), else documented defaults, and the spec says where each came
+from (:attr:`RobotSpec.settings_sources`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+from xml.etree import ElementTree
+
+import numpy as np
+from pydantic import Field, ValidationError
+
+from pipeline.errors import SpecError
+from pipeline.model import transforms as tf
+from pipeline.robots.spec import (
+    Frame,
+    Inertial,
+    JointLimits,
+    JointSpec,
+    RobotSpec,
+    Segment,
+    Shape,
+    _Strict,
+    as_pose,
+    format_validation_error,
+    package_search_path,
+)
+from pipeline.yamlio import parse_yaml
+
+__all__ = ["SIDECAR_SUFFIX", "load_sidecar", "load_urdf"]
+
+SIDECAR_SUFFIX = ".armlab.yaml"
+MOVABLE = ("revolute", "continuous", "prismatic")
+MESH_SUFFIXES = (".stl", ".obj")  # what MuJoCo reads as a collision mesh
+DEFAULT_ACCELERATION = 5.0  # [rad/s^2]: a planning default, as the DH robots' files state
+DEFAULT_RADIUS_M = 0.04
+CONTINUOUS_RANGE_RAD = 2 * math.pi
+F64 = np.ndarray
+
+
+class _Sidecar(_Strict):
+    urdf: str | None = None
+    srdf: str | None = None
+    tip: str | None = None
+    flange: str | None = None
+    locked: dict[str, float] = Field(default_factory=dict)
+    acceleration: float | list[float] = Field(default=DEFAULT_ACCELERATION)
+    armature: float | list[float] = 0.0
+    armature_source: str | None = None
+    damping: float | list[float] = 0.0
+    frictionloss: float | list[float] = 0.0
+    collision_radius: float = Field(default=DEFAULT_RADIUS_M, gt=0, le=1.0)
+
+
+@dataclass
+class _Link:
+    name: str
+    mass: float = 0.0
+    com: F64 = field(default_factory=lambda: np.zeros(3))
+    inertia: F64 = field(default_factory=lambda: np.zeros((3, 3)))  # about com, link axes
+    shapes: list[tuple[str, F64, tuple[float, ...], str]] = field(default_factory=list)
+
+
+@dataclass
+class _Joint:
+    name: str
+    kind: str
+    parent: str
+    child: str
+    origin: F64
+    axis: tuple[float, float, float]
+    limit: dict[str, float] | None
+    mimic: tuple[str, float, float] | None
+
+
+def _floats(text: str | None, n: int, where: str, default: str) -> tuple[float, ...]:
+    raw = (text if text is not None else default).split()
+    try:
+        values = tuple(float(v) for v in raw)
+    except ValueError:
+        values = ()
+    if len(values) != n or not all(math.isfinite(v) for v in values):
+        raise SpecError(f"{where}: expected {n} finite numbers, got {text!r}")
+    return values
+
+
+def _origin(el: ElementTree.Element | None, where: str) -> F64:
+    if el is None:
+        return np.eye(4)
+    x, y, z = _floats(el.get("xyz"), 3, f"{where}.origin.xyz", "0 0 0")
+    r, p, yaw = _floats(el.get("rpy"), 3, f"{where}.origin.rpy", "0 0 0")
+    out = np.eye(4)
+    out[:3, :3] = tf.rpy_to_matrix(r, p, yaw)
+    out[:3, 3] = (x, y, z)
+    return out
+
+
+def resolve_uri(uri: str, *, base: Path, where: str, package_path: tuple[str, ...]) -> Path:
+    """A URDF file reference as a path: ``package://NAME/rest`` through the search path,
+    ``file://`` and relative paths from ``base`` (the URDF's folder).
+
+    Raises:
+        SpecError: an unresolved package (named, with the folders searched).
+    """
+    if uri.startswith("package://"):
+        package, _, rest = uri.removeprefix("package://").partition("/")
+        folders = package_search_path(package_path)
+        for folder in folders:
+            for root in (folder / package, folder if folder.name == package else None):
+                if root is not None and root.is_dir():
+                    return root / rest
+        searched = ", ".join(str(f) for f in folders) or "no folders"
+        raise SpecError(
+            f"{where}: unresolved package '{package}' in {uri!r} (searched {searched}; add its "
+            "parent folder with --package-path or ROS_PACKAGE_PATH)"
+        )
+    path = Path(uri.removeprefix("file://")).expanduser()
+    return path if path.is_absolute() else base / path
+
+
+def _inertia(el: ElementTree.Element, where: str) -> F64:
+    keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+    v = {k: _floats(el.get(k), 1, f"{where}.inertia.{k}", "0")[0] for k in keys}
+    return np.array(
+        [
+            [v["ixx"], v["ixy"], v["ixz"]],
+            [v["ixy"], v["iyy"], v["iyz"]],
+            [v["ixz"], v["iyz"], v["izz"]],
+        ]
+    )
+
+
+def _check_physical(mass: float, inertia: F64, where: str) -> None:
+    eig = np.linalg.eigvalsh(inertia)
+    tol = 1e-12 * max(1.0, float(np.abs(eig).max()))
+    if eig[0] < -tol:
+        raise SpecError(f"{where}: non-physical inertia (eigenvalues {eig.tolist()})")
+    a, b, c = eig
+    if a + b < c - tol:
+        raise SpecError(
+            f"{where}: non-physical inertia: principal moments violate the triangle "
+            f"inequality ({a:.6g} + {b:.6g} < {c:.6g})"
+        )
+    if mass == 0.0 and float(np.abs(inertia).max()) > 0.0:
+        raise SpecError(f"{where}: mass 0 with a non-zero inertia")
+
+
+def _parse_links(
+    root: ElementTree.Element, source: str, base: Path, package_path: tuple[str, ...]
+) -> dict[str, _Link]:
+    links: dict[str, _Link] = {}
+    for el in root.findall("link"):
+        name = el.get("name")
+        if not name:
+            raise SpecError(f"{source}: a <link> without a name")
+        where = f"{source}: link '{name}'"
+        link = _Link(name)
+        inertial = el.find("inertial")
+        if inertial is not None:
+            mass_el = inertial.find("mass")
+            mass = _floats(mass_el.get("value") if mass_el is not None else None, 1,
+                           f"{where}.mass", "0")[0]  # fmt: skip
+            if mass < 0:
+                raise SpecError(f"{where}: mass {mass} kg must be > 0")
+            frame = _origin(inertial.find("origin"), where)
+            inertia_el = inertial.find("inertia")
+            tensor = _inertia(inertia_el, where) if inertia_el is not None else np.zeros((3, 3))
+            _check_physical(mass, tensor, where)
+            rot = frame[:3, :3]
+            link.mass, link.com, link.inertia = mass, frame[:3, 3].copy(), rot @ tensor @ rot.T
+        for kind in ("visual", "collision"):
+            for k, geo in enumerate(el.findall(kind)):
+                shape = _shape(geo, f"{where}.{kind}[{k}]", base, package_path)
+                if kind == "collision" and shape is not None:
+                    link.shapes.append(shape)
+        links[name] = link
+    return links
+
+
+def _shape(
+    el: ElementTree.Element, where: str, base: Path, package_path: tuple[str, ...]
+) -> tuple[str, F64, tuple[float, ...], str] | None:
+    geometry = el.find("geometry")
+    pose = _origin(el.find("origin"), where)
+    if geometry is None or len(geometry) == 0:
+        raise SpecError(f"{where}: no <geometry>")
+    g = geometry[0]
+    if g.tag == "mesh":
+        uri = g.get("filename") or ""
+        path = resolve_uri(uri, base=base, where=where, package_path=package_path)
+        if not path.is_file():
+            raise SpecError(f"{where}: missing mesh {uri!r} ({path})")
+        scale = _floats(g.get("scale"), 3, f"{where}.mesh.scale", "1 1 1")
+        return ("mesh", pose, scale, str(path.resolve()))
+    if g.tag == "box":
+        size = _floats(g.get("size"), 3, f"{where}.box.size", "")
+        return ("box", pose, tuple(0.5 * s for s in size), "")
+    if g.tag == "sphere":
+        return ("sphere", pose, _floats(g.get("radius"), 1, f"{where}.sphere.radius", ""), "")
+    if g.tag == "cylinder":
+        r = _floats(g.get("radius"), 1, f"{where}.cylinder.radius", "")[0]
+        length = _floats(g.get("length"), 1, f"{where}.cylinder.length", "")[0]
+        return ("cylinder", pose, (r, 0.5 * length), "")
+    raise SpecError(f"{where}: unknown geometry <{g.tag}>")
+
+
+def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link]) -> list[_Joint]:
+    joints = []
+    for el in root.findall("joint"):
+        name = el.get("name") or "?"
+        where = f"{source}: joint '{name}'"
+        kind = el.get("type") or ""
+        if kind in ("floating", "planar"):
+            raise SpecError(f"{where}: type '{kind}' (a floating base): only fixed-base arms")
+        if kind not in (*MOVABLE, "fixed"):
+            raise SpecError(f"{where}: unknown type {kind!r}; valid: {', '.join(MOVABLE)}, fixed")
+        parent_el, child_el = el.find("parent"), el.find("child")
+        parent = parent_el.get("link") if parent_el is not None else None
+        child = child_el.get("link") if child_el is not None else None
+        for role, link in (("parent", parent), ("child", child)):
+            if link not in links:
+                raise SpecError(f"{where}: {role} link {link!r} is not a <link> of the file")
+        assert parent is not None and child is not None
+        axis_el = el.find("axis")
+        ax = _floats(axis_el.get("xyz") if axis_el is not None else None, 3, f"{where}.axis",
+                     "1 0 0")  # fmt: skip
+        norm = math.sqrt(sum(a * a for a in ax))
+        if kind in MOVABLE and norm == 0.0:
+            raise SpecError(f"{where}: axis (0 0 0)")
+        axis = (ax[0] / norm, ax[1] / norm, ax[2] / norm) if norm else (1.0, 0.0, 0.0)
+        limit_el = el.find("limit")
+        limit = None
+        if limit_el is not None:
+            limit = {
+                k: _floats(limit_el.get(k), 1, f"{where}.limit.{k}", "nan")[0]
+                if limit_el.get(k) is not None
+                else math.nan
+                for k in ("lower", "upper", "velocity", "effort")
+            }
+        mimic_el = el.find("mimic")
+        mimic = None
+        if mimic_el is not None:
+            mimic = (
+                mimic_el.get("joint") or "",
+                _floats(mimic_el.get("multiplier"), 1, f"{where}.mimic.multiplier", "1")[0],
+                _floats(mimic_el.get("offset"), 1, f"{where}.mimic.offset", "0")[0],
+            )
+        joints.append(
+            _Joint(name, kind, parent, child, _origin(el.find("origin"), where), axis, limit, mimic)
+        )
+    return joints
+
+
+def _tree(
+    source: str, links: dict[str, _Link], joints: list[_Joint]
+) -> tuple[str, dict[str, _Joint], dict[str, list[_Joint]]]:
+    """Root link, parent joint per link, child joints per link; refuses loops and forests."""
+    parent_of: dict[str, _Joint] = {}
+    children: dict[str, list[_Joint]] = {name: [] for name in links}
+    for j in joints:
+        if j.child in parent_of:
+            raise SpecError(
+                f"{source}: closed loop: link '{j.child}' is the child of joints "
+                f"'{parent_of[j.child].name}' and '{j.name}'"
+            )
+        parent_of[j.child] = j
+        children[j.parent].append(j)
+    roots = [name for name in links if name not in parent_of]
+    if len(roots) != 1:
+        what = ", ".join(roots) if roots else "none (every link has a parent: a closed loop)"
+        raise SpecError(f"{source}: expected one root link, found {what}")
+    seen, stack = set(), [roots[0]]
+    while stack:
+        name = stack.pop()
+        seen.add(name)
+        stack.extend(j.child for j in children[name])
+    if len(seen) != len(links):
+        stray = sorted(set(links) - seen)
+        raise SpecError(f"{source}: closed loop through links {', '.join(stray)}")
+    return roots[0], parent_of, children
+
+
+def _path(link: str, parent_of: dict[str, _Joint]) -> list[_Joint]:
+    out = []
+    while link in parent_of:
+        out.append(parent_of[link])
+        link = parent_of[link].parent
+    return out[::-1]
+
+
+def _choose_tip(
+    source: str,
+    tip: str | None,
+    links: dict[str, _Link],
+    parent_of: dict[str, _Joint],
+    children: dict[str, list[_Joint]],
+    locked: dict[str, float],
+) -> str:
+    if tip is not None:
+        if tip not in links:
+            raise SpecError(f"{source}: tip: no link '{tip}'; links: {', '.join(links)}")
+        return tip
+    ends = []
+    for leaf in (name for name, kids in children.items() if not kids):
+        movable = [
+            j for j in _path(leaf, parent_of)
+            if j.kind in MOVABLE and j.mimic is None and j.name not in locked
+        ]  # fmt: skip
+        if movable and movable[-1].child not in ends:
+            ends.append(movable[-1].child)
+    if len(ends) != 1:
+        raise SpecError(
+            f"{source}: several leaf chains end at links {', '.join(ends) or 'none'}: set "
+            "tip: (one of them) in the sidecar, or lock the others' joints (locked:)"
+        )
+    return ends[0]
+
+
+def _per_joint(value: float | list[float], names: list[str], what: str, source: str) -> list[float]:
+    if isinstance(value, list):
+        if len(value) != len(names):
+            raise SpecError(
+                f"{source}: {what}: expected 1 or {len(names)} values, got {len(value)}"
+            )
+        return [float(v) for v in value]
+    return [float(value)] * len(names)
+
+
+def _motion(joint: _Joint, q: float) -> F64:
+    if joint.kind == "prismatic":
+        return tf.trans(*(q * np.array(joint.axis)))
+    return tf.rot_axis(np.array(joint.axis), q)
+
+
+def load_urdf(
+    path: Path, *, package_path: tuple[str, ...] = (), settings: dict[str, Any] | None = None,
+    settings_source: str | None = None,
+) -> RobotSpec:  # fmt: skip
+    """Load a URDF (with its sidecar ``<stem>.armlab.yaml`` if there is one).
+
+    Raises:
+        SpecError: one line naming the file, the element and the value at fault.
+    """
+    source = str(path)
+    if settings is None:
+        sidecar = path.with_name(path.stem + SIDECAR_SUFFIX)
+        if sidecar.is_file():
+            settings_source = str(sidecar)
+            settings = _read_yaml(sidecar)
+    opts = _validate_sidecar(settings or {}, settings_source or source)
+    try:
+        text = path.read_text(encoding="utf-8")
+        root = ElementTree.fromstring(text)
+    except (OSError, UnicodeDecodeError) as err:
+        raise SpecError(f"{source}: cannot read URDF ({err})") from err
+    except ElementTree.ParseError as err:
+        raise SpecError(f"{source}: not well-formed XML ({err})") from err
+    if root.tag != "robot":
+        raise SpecError(f"{source}: root element <{root.tag}>, expected <robot>")
+    base = path.parent
+    links = _parse_links(root, source, base, package_path)
+    joints = _parse_joints(root, source, links)
+    root_link, parent_of, children = _tree(source, links, joints)
+    if (
+        root_link == "world"
+        and len(children["world"]) == 1
+        and children["world"][0].kind == "fixed"
+    ):
+        # ROS's fixed "world" link only places the robot (and MuJoCo reserves the name): the
+        # base is its child, in that child's own frame
+        mount = children["world"][0]
+        del parent_of[mount.child]
+        root_link = mount.child
+    by_name = {j.name: j for j in joints}
+    for name in opts.locked:
+        if name not in by_name:
+            raise SpecError(f"{settings_source}: locked: no joint '{name}' in {source}")
+    tip = _choose_tip(source, opts.tip, links, parent_of, children, opts.locked)
+    chain = [j for j in _path(tip, parent_of) if j.kind in MOVABLE]
+    for j in chain:
+        if j.mimic is not None:
+            raise SpecError(f"{source}: joint '{j.name}' on the arm chain mimics '{j.mimic[0]}'")
+    chain_names = {j.name for j in chain}
+
+    def locked_q(j: _Joint) -> float:
+        if j.mimic is not None:
+            master = by_name.get(j.mimic[0])
+            if master is None or master.name in chain_names:
+                raise SpecError(
+                    f"{source}: joint '{j.name}' mimics {j.mimic[0]!r}, not a locked joint"
+                )
+            return j.mimic[1] * locked_q(master) + j.mimic[2]
+        return float(opts.locked.get(j.name, 0.0))
+
+    # walk the tree: each link is rigid on an owner (the base or a chain joint's link)
+    owner: dict[str, tuple[str, F64]] = {root_link: (root_link, np.eye(4))}
+    chain_origin: dict[str, F64] = {}
+    stack = [root_link]
+    while stack:
+        name = stack.pop()
+        own, own_T = owner[name]
+        for j in children[name]:
+            if j.name in chain_names:
+                chain_origin[j.name] = own_T @ j.origin
+                owner[j.child] = (j.child, np.eye(4))
+            else:
+                motion = _motion(j, locked_q(j)) if j.kind in MOVABLE else np.eye(4)
+                owner[j.child] = (own, own_T @ j.origin @ motion)
+            stack.append(j.child)
+
+    # merged inertials, shapes and frames per owner
+    names = [j.name for j in chain]
+    radius = opts.collision_radius
+    mass: dict[str, list[tuple[float, F64, F64]]] = {}
+    shapes: dict[str, list[Shape]] = {}
+    frames = []
+    for link_name, (own, own_T) in owner.items():
+        link = links[link_name]
+        rot = own_T[:3, :3]
+        if link.mass > 0:
+            com = (own_T @ np.append(link.com, 1.0))[:3]
+            mass.setdefault(own, []).append((link.mass, com, rot @ link.inertia @ rot.T))
+        for kind, pose, size, mesh in link.shapes:
+            if kind == "mesh" and Path(mesh).suffix.lower() not in MESH_SUFFIXES:
+                continue  # MuJoCo cannot read it: the link keeps its capsules
+            shapes.setdefault(own, []).append(
+                Shape(kind=kind, pose=as_pose(own_T @ pose), size=size, mesh=mesh)  # type: ignore[arg-type]
+            )
+        if own != link_name:
+            frames.append(Frame(name=link_name, link=own, pose=as_pose(own_T)))
+    flange_name = opts.flange or ("tool0" if any(f.name == "tool0" for f in frames) else None)
+    flange = np.eye(4)
+    if flange_name is not None:
+        match = [f for f in frames if f.name == flange_name and f.link == tip]
+        if not match and flange_name != tip:
+            raise SpecError(f"{settings_source or source}: flange: '{flange_name}' is not a "
+                            f"frame fixed to the tip link '{tip}'")  # fmt: skip
+        if match:
+            flange = np.array(match[0].pose)
+    frames = [f for f in frames if f.name != "tool0"]
+
+    acceleration = _per_joint(opts.acceleration, names, "acceleration", source)
+    armature = _per_joint(opts.armature, names, "armature", source)
+    damping = _per_joint(opts.damping, names, "damping", source)
+    friction = _per_joint(opts.frictionloss, names, "frictionloss", source)
+    sidecar_name = settings_source or "defaults"
+    out = []
+    for i, j in enumerate(chain):
+        where = f"{source}: joint '{j.name}'"
+        lim = j.limit
+        if lim is None or (j.kind != "continuous" and not (
+            math.isfinite(lim["lower"]) and math.isfinite(lim["upper"]))):  # fmt: skip
+            raise SpecError(f"{where}: a {j.kind} joint needs <limit lower upper velocity effort>")
+        lower, upper = (
+            (-CONTINUOUS_RANGE_RAD, CONTINUOUS_RANGE_RAD)
+            if j.kind == "continuous"
+            else (lim["lower"], lim["upper"])
+        )
+        if not lower < upper:
+            raise SpecError(f"{where}: limit lower {lower} must be < upper {upper}")
+        for k in ("velocity", "effort"):
+            if not (math.isfinite(lim[k]) and lim[k] > 0):
+                raise SpecError(f"{where}: limit {k} {lim[k]} must be > 0")
+        parts = mass.get(j.child, [])
+        total = sum(m for m, _, _ in parts)
+        if total <= 0:
+            raise SpecError(f"{source}: link '{j.child}' (moved by '{j.name}') has zero mass")
+        centre: F64 = np.sum([m * c for m, c, _ in parts], axis=0) / total
+        tensor = np.zeros((3, 3))
+        for m, c, inertia in parts:
+            d = c - centre
+            tensor += inertia + m * (float(d @ d) * np.eye(3) - np.outer(d, d))
+        _check_physical(total, tensor, f"{source}: link '{j.child}' (merged)")
+        nxt = chain_origin[chain[i + 1].name] if i + 1 < len(chain) else flange
+        end = nxt[:3, 3]
+        capsules = (
+            (Segment((0.0, 0.0, 0.0), (float(end[0]), float(end[1]), float(end[2])), radius),)
+            if float(np.linalg.norm(end)) > 1e-6
+            else ()
+        )
+        out.append(
+            JointSpec(
+                name=j.name,
+                limits=JointLimits(lower, upper, lim["velocity"], acceleration[i], lim["effort"]),
+                inertial=Inertial(
+                    mass=float(total),
+                    com=(float(centre[0]), float(centre[1]), float(centre[2])),
+                    inertia=tuple(
+                        (float(r[0]), float(r[1]), float(r[2])) for r in 0.5 * (tensor + tensor.T)
+                    ),
+                ),
+                collision_radius=radius,
+                armature=armature[i],
+                origin=as_pose(chain_origin[j.name]),
+                axis=j.axis,
+                kind=j.kind,  # type: ignore[arg-type]
+                link=j.child,
+                capsules=capsules,
+                shapes=tuple(shapes.get(j.child, ())),
+                # reach: the joint's own offset from the previous one, the flange's on the last
+                length_m=float(np.linalg.norm(chain_origin[j.name][:3, 3]))
+                + (float(np.linalg.norm(flange[:3, 3])) if i + 1 == len(chain) else 0.0),
+                armature_source=opts.armature_source or sidecar_name,
+                damping_nm_s_rad=damping[i],
+                frictionloss_nm=friction[i],
+            )
+        )
+    if not out:
+        raise SpecError(f"{source}: no movable joint between the root '{root_link}' and '{tip}'")
+    spec = RobotSpec(
+        name=root.get("name") or path.stem,
+        convention=None,
+        joints=tuple(out),
+        source=source,
+        base_link=root_link,
+        flange=as_pose(flange),
+        frames=tuple(frames),
+        format="urdf",
+        description=text,
+        base_shapes=tuple(shapes.get(root_link, ())),
+        settings_sources=(
+            ("armature", opts.armature_source or sidecar_name),
+            ("acceleration", sidecar_name),
+        ),
+    )
+    srdf = opts.srdf
+    if srdf is None:
+        for guess in (path.with_suffix(".srdf"), base.parent / "srdf" / (path.stem + ".srdf")):
+            if guess.is_file():
+                srdf = str(guess)
+                break
+    if srdf is not None:
+        from pipeline.robots.srdf import apply_srdf
+
+        srdf_path = resolve_uri(srdf, base=Path(settings_source).parent if settings_source
+                                else base, where=f"{settings_source}: srdf",
+                                package_path=package_path)  # fmt: skip
+        spec = apply_srdf(spec, srdf_path, {n: o for n, (o, _) in owner.items()})
+        pairs = f"SRDF {srdf_path}"
+    else:
+        # said once: the spec is loaded once per process, and the recording keeps it
+        pairs = "no SRDF: adjacent links and links touching at q = 0 are not checked"
+    return dataclasses.replace(
+        spec, settings_sources=(*spec.settings_sources, ("collision_pairs", pairs))
+    )
+
+
+def _read_yaml(path: Path) -> dict[str, Any]:
+    try:
+        data = parse_yaml(path.read_text(encoding="utf-8"), source=str(path), error=SpecError)
+    except (OSError, UnicodeDecodeError) as err:
+        raise SpecError(f"{path}: cannot read ({err})") from err
+    if not isinstance(data, dict):
+        raise SpecError(f"{path}: expected a mapping (urdf, tip, locked, armature, ...)")
+    return data
+
+
+def _validate_sidecar(data: dict[str, Any], source: str) -> _Sidecar:
+    try:
+        return _Sidecar.model_validate(data)
+    except ValidationError as err:
+        raise SpecError(format_validation_error(source, err)) from err
+
+
+def load_sidecar(path: Path, *, package_path: tuple[str, ...] = ()) -> RobotSpec:
+    """A settings sidecar loaded as the robot file: its ``urdf:`` with its settings."""
+    data = _read_yaml(path)
+    opts = _validate_sidecar(data, str(path))
+    if opts.urdf is None:
+        raise SpecError(f"{path}: urdf: required (the URDF this sidecar describes)")
+    urdf = resolve_uri(opts.urdf, base=path.parent, where=f"{path}: urdf",
+                       package_path=package_path)  # fmt: skip
+    if not urdf.is_file():
+        raise SpecError(f"{path}: urdf: no such file {urdf}")
+    return load_urdf(urdf, package_path=package_path, settings=data, settings_source=str(path))
