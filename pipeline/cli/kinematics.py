@@ -347,13 +347,13 @@ def ik_check_cmd(
         )  # fmt: skip
         table.add_row("position error max / median \\[m]", f"{pe.max:.2e} / {pe.median:.2e}",
                       "< 1e-4", ok[c["position_error"]])  # fmt: skip
-        if report.position_only:
-            table.add_row("orientation error max / median \\[rad]",
-                          f"{oe.max:.2e} / {oe.median:.2e}", "n/a (position-only IK)", "")
-        else:
-            table.add_row("orientation error max / median \\[rad]",
-                          f"{oe.max:.2e} / {oe.median:.2e}", "< 1e-2", ok[c["orientation_error"]])
-        # fmt: skip
+        judged = (
+            ("n/a (position-only IK)", "")
+            if report.position_only
+            else ("< 1e-2", ok[c["orientation_error"]])
+        )
+        table.add_row("orientation error max / median \\[rad]",
+                      f"{oe.max:.2e} / {oe.median:.2e}", *judged)  # fmt: skip
         table.add_row("solve time mean / median / p99 \\[ms]",
                       f"{st.mean:.3f} / {st.median:.3f} / {st.p99:.3f}", "p99 < 5",
                       ok[c["solve_time"]])  # fmt: skip

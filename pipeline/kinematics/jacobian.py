@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+
 import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray

@@ -82,15 +82,16 @@ STALL_F = 1e-6
 LAMBDA_START = 0.1
 LAMBDA_MIN = 1e-9
 LAMBDA_MAX = 1e3
-PULL_STEP_MAX_RAD = 0.5
-"""Largest null-space pull per step [rad] (2-norm over the joints)."""
+PULL_STEP_MAX_RAD = 0.3
+"""Largest null-space pull per step [rad] (2-norm over the joints): the self-motion
+manifold curves, and a longer step lands too far off the target to correct cheaply."""
 PULL_DONE_RAD = 1e-3
 """The pull stops once its null-space step is this small [rad], or once a step brings
 the joints less than this much nearer the rest posture (held at a limit)."""
 PULL_DAMPING = 1e-9
 """Damping of J J^T in the pull's pseudo-inverse (keeps it defined at a singularity)."""
-LANDING_STEPS = 8
-"""Gauss-Newton steps after the pull to land back on the target."""
+LANDING_STEPS = 6
+"""Gauss-Newton steps after each pull step to land back on the target."""
 
 
 class NumericLMSolver:
@@ -259,20 +260,23 @@ class NumericLMSolver:
             if info != 0:  # not positive definite: only with a non-finite Jacobian
                 break
             dq = dq.reshape(-1)  # LAPACK returns a 0-d array for a one-joint arm
-            # joints held at a limit that the step pushes further out: solve without them
-            # (clamping their share alone would bend the step off the descent direction)
-            blocked = ((q <= lower) & (dq < 0.0)) | ((q >= upper) & (dq > 0.0))
-            if blocked.all():
-                break
-            if blocked.any():
-                free = ~blocked
-                sub = jtj[np.ix_(free, free)]
-                _, dq_free, info = lapack.dposv(sub + lam * eye[: sub.shape[0], : sub.shape[0]], g[free])
-                if info != 0:
+            raw = q + dq
+            q_new = np.minimum(np.maximum(raw, lower), upper)
+            if (q_new != raw).any():
+                # joints held at a limit that the step pushes further out: solve without
+                # them (clamping their share alone bends the step off the descent direction)
+                blocked = ((q <= lower) & (dq < 0.0)) | ((q >= upper) & (dq > 0.0))
+                if blocked.all():
                     break
-                dq = np.zeros_like(dq)
-                dq[free] = dq_free.reshape(-1)
-            q_new = np.minimum(np.maximum(q + dq, lower), upper)
+                if blocked.any():
+                    free = np.flatnonzero(~blocked)
+                    sub = jtj[free[:, None], free] + lam * eye[: free.size, : free.size]
+                    _, dq_free, info = lapack.dposv(sub, g[free])
+                    if info != 0:
+                        break
+                    dq = np.zeros(dq.shape[0])
+                    dq[free] = dq_free.reshape(-1)
+                    q_new = np.minimum(np.maximum(q + dq, lower), upper)
             e_new, pos_new, ang_new = self._residual(q_new, goal)
             f_new = 0.5 * float(e_new @ e_new)
             predicted = 0.5 * float(dq @ (lam * dq + g))
@@ -297,49 +301,61 @@ class NumericLMSolver:
         return None, it, (pos, ang)
 
     def _pull_toward_rest(self, q0: Array, goal: pin.SE3) -> tuple[Array, int]:
-        """Null-space steps from solution ``q0`` toward the rest posture, then Gauss-Newton
-        steps back onto the target: (the nearer-to-rest solution, steps spent)."""
+        """Predictor-corrector walk along the self-motion manifold from solution ``q0``
+        toward the rest posture: (the solution nearest rest seen, steps spent)."""
         lower, upper, rest = self._lower, self._upper, self._rest
-        tol_m, tol_rad = self._options.tol_m, self._options.tol_rad
         damp = PULL_DAMPING * self._task_eye
-        q = q0.copy()
+        best, z = q0, rest - q0
+        best_d = math.sqrt(float(z @ z))
+        q = q0
         steps = 0
-        last = math.inf
         for _ in range(self._options.null_space_iterations):
-            e, _, _ = self._residual(q, goal)
+            # predictor: the null-space part of (rest - q), capped, clamped to the limits
+            self._residual(q, goal)
             jac = self._task_jacobian()
             z = rest - q
-            distance = math.sqrt(float(z @ z))
-            if distance > last - PULL_DONE_RAD:
-                break
-            last = distance
-            # J^+ = J^T (J J^T)^-1: one Cholesky solve for the correction and the projection
-            rhs = np.empty((e.shape[0], 2))
-            rhs[:, 0] = e
-            rhs[:, 1] = jac @ z
-            _, y, info = lapack.dposv(jac @ jac.T + damp, rhs)
+            _, y, info = lapack.dposv(jac @ jac.T + damp, jac @ z)
             if info != 0:  # only with a non-finite Jacobian
-                return q0, steps
-            null = z - jac.T @ y[:, 1]
+                break
+            null = z - jac.T @ y.reshape(-1)
             size = math.sqrt(float(null @ null))
+            if size < PULL_DONE_RAD:
+                break  # a local minimum of |q - rest| on the manifold (or held at limits)
             if size > PULL_STEP_MAX_RAD:
                 null *= PULL_STEP_MAX_RAD / size
-            q = np.minimum(np.maximum(q + jac.T @ y[:, 0] + null, lower), upper)
             steps += 1
-            if size < PULL_DONE_RAD:
+            # corrector: minimum-norm Gauss-Newton steps back onto the target
+            landed = self._land(np.minimum(np.maximum(q + null, lower), upper), goal)
+            steps += landed[1]
+            if landed[0] is None:
                 break
-        for _ in range(LANDING_STEPS):
+            q = landed[0]
+            z = rest - q
+            d = math.sqrt(float(z @ z))
+            if d > best_d - PULL_DONE_RAD:
+                if d < best_d:
+                    best = q
+                break  # no longer paying off
+            best, best_d = q, d
+        return best, steps
+
+    def _land(self, q: Array, goal: pin.SE3) -> tuple[Array | None, int]:
+        """Up to :data:`LANDING_STEPS` minimum-norm Gauss-Newton steps from ``q`` onto the
+        target: (the configuration within tolerance or None, steps spent)."""
+        lower, upper = self._lower, self._upper
+        tol_m, tol_rad = self._options.tol_m, self._options.tol_rad
+        damp = PULL_DAMPING * self._task_eye
+        for step in range(LANDING_STEPS):
             e, pos, ang = self._residual(q, goal)
             if pos <= tol_m and ang <= tol_rad:
-                d_new, d_old = q - rest, q0 - rest
-                return (q if float(d_new @ d_new) < float(d_old @ d_old) else q0), steps
+                return q, step
             jac = self._task_jacobian()
-            _, y1, info = lapack.dposv(jac @ jac.T + damp, e)
+            _, y, info = lapack.dposv(jac @ jac.T + damp, e)
             if info != 0:
-                return q0, steps
-            q = np.minimum(np.maximum(q + jac.T @ y1.reshape(-1), lower), upper)
-            steps += 1
-        return q0, steps
+                break
+            q = np.minimum(np.maximum(q + jac.T @ y.reshape(-1), lower), upper)
+        _, pos, ang = self._residual(q, goal)
+        return (q if pos <= tol_m and ang <= tol_rad else None), LANDING_STEPS
 
 
 __all__ = ["NumericLMSolver"]
