@@ -209,20 +209,24 @@ class NumericLMSolver:
             restarts=opts.max_restarts,
         )
 
-    def _residual(self, q: Array, goal: pin.SE3) -> tuple[Array, float, float]:
-        """Kinematics of ``q`` into the data; (task error e, position error [m],
-        orientation error [rad], 0 when position-only)."""
+    def _residual(self, q: Array, goal: pin.SE3) -> tuple[Array, Array]:
+        """Kinematics of ``q`` into the data; (task error e, position error vector [m])."""
         model, data = self._model, self._data
         pin.computeJointJacobians(model, data, q)
         placement = pin.updateFramePlacement(model, data, self._fid)
         if self._position_only:
             e: Array = goal.translation - placement.translation
-            return e, math.sqrt(float(e @ e)), 0.0
+            return e, e
         dm = placement.actInv(goal)
-        e = pin.log6(dm).vector
-        t = dm.translation
+        return pin.log6(dm).vector, dm.translation
+
+    def _errors(self, e: Array, t: Array) -> tuple[float, float]:
+        """(position error [m], orientation error [rad]; 0 when position-only) of a
+        :meth:`_residual`."""
+        if self._position_only:
+            return math.sqrt(float(t @ t)), 0.0
         w = e[3:]
-        return e, math.sqrt(float(t @ t)), math.sqrt(float(w @ w))
+        return math.sqrt(float(t @ t)), math.sqrt(float(w @ w))
 
     def _task_jacobian(self) -> Array:
         """The task Jacobian at the configuration of the last :meth:`_residual`."""
@@ -239,8 +243,10 @@ class NumericLMSolver:
         lower, upper = self._lower, self._upper
         tol_m, tol_rad = self._options.tol_m, self._options.tol_rad
         eye = self._eye
+        # F = 1/2 |e|^2; a cheap gate before the exact position/angle test
+        gate = 0.5 * (tol_m * tol_m + tol_rad * tol_rad)
         q = q0.copy()
-        e, pos, ang = self._residual(q, goal)
+        e, t = self._residual(q, goal)
         f = 0.5 * float(e @ e)
         lam, nu = LAMBDA_START, 2.0
         jtj = np.empty(0)
@@ -249,8 +255,10 @@ class NumericLMSolver:
         history = [f]
         it = 0
         for it in range(1, self._options.max_iterations + 1):
-            if pos <= tol_m and ang <= tol_rad:
-                return q, it - 1, (0.0, 0.0)
+            if f <= gate:
+                pos, ang = self._errors(e, t)
+                if pos <= tol_m and ang <= tol_rad:
+                    return q, it - 1, (pos, ang)
             if fresh:
                 jac = self._task_jacobian()
                 jtj = jac.T @ jac
@@ -277,12 +285,12 @@ class NumericLMSolver:
                     dq = np.zeros(dq.shape[0])
                     dq[free] = dq_free.reshape(-1)
                     q_new = np.minimum(np.maximum(q + dq, lower), upper)
-            e_new, pos_new, ang_new = self._residual(q_new, goal)
+            e_new, t_new = self._residual(q_new, goal)
             f_new = 0.5 * float(e_new @ e_new)
             predicted = 0.5 * float(dq @ (lam * dq + g))
             rho = (f - f_new) / predicted if predicted > 0.0 else -1.0
             if rho > 0.0:
-                q, e, f, pos, ang = q_new, e_new, f_new, pos_new, ang_new
+                q, e, t, f = q_new, e_new, t_new, f_new
                 lam = max(LAMBDA_MIN, lam * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3))
                 nu = 2.0
                 fresh = True
@@ -296,6 +304,7 @@ class NumericLMSolver:
             # stalled far from the target (a local minimum): restart instead
             if it >= STALL_AFTER and f > STALL_F and f > STALL_RATIO * history[-1 - STALL_WINDOW]:
                 break
+        pos, ang = self._errors(e, t)
         if pos <= tol_m and ang <= tol_rad:
             return q, it, (pos, ang)
         return None, it, (pos, ang)
@@ -346,7 +355,8 @@ class NumericLMSolver:
         tol_m, tol_rad = self._options.tol_m, self._options.tol_rad
         damp = PULL_DAMPING * self._task_eye
         for step in range(LANDING_STEPS):
-            e, pos, ang = self._residual(q, goal)
+            e, t = self._residual(q, goal)
+            pos, ang = self._errors(e, t)
             if pos <= tol_m and ang <= tol_rad:
                 return q, step
             jac = self._task_jacobian()
@@ -354,7 +364,7 @@ class NumericLMSolver:
             if info != 0:
                 break
             q = np.minimum(np.maximum(q + jac.T @ y.reshape(-1), lower), upper)
-        _, pos, ang = self._residual(q, goal)
+        pos, ang = self._errors(*self._residual(q, goal))
         return (q if pos <= tol_m and ang <= tol_rad else None), LANDING_STEPS
 
 
