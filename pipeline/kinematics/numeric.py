@@ -35,14 +35,17 @@ mdh_example the full-range draws keep the tail as short as uniform draws.)
 
 Redundant arms (more joints than the task has dimensions: 7 for a pose, 4 for a
 position) have a self-motion manifold of solutions. Once an attempt reaches the
-target, up to ``null_space_iterations`` steps pull the joints toward the rest
-posture (``IKOptions.rest_q``, default the middle of each range) inside the
-task's null space: dq = J^+ e + N (q_rest - q), N = I - J^+ J, the pull capped
-at 0.5 rad per step and every step clamped to the limits, then Gauss-Newton
-steps land it back on the target. The pulled configuration replaces the first
-only if it is within tolerance and nearer the rest posture, so the pull never
-costs a solution. It minimises |q - q_rest| locally, on the self-motion branch
-the attempt landed on.
+target, up to ``null_space_iterations`` predictor-corrector steps walk the joints
+toward the rest posture (``IKOptions.rest_q``, default the middle of each range)
+along the self-motion manifold: predictor dq = J^+ e + N (q_rest - q),
+N = I - J^+ J, the pull capped at 0.3 rad per step and clamped to the limits;
+corrector: minimum-norm Gauss-Newton steps back to within 1e-4 of the target.
+The walk stops when a step gains less than 1 mrad; the configuration nearest the
+rest posture then lands on the solver's tolerance and replaces the first only if
+it does and is nearer, so the pull never costs a solution. It minimises
+|q - q_rest| locally, on the self-motion branch the attempt landed on (from the
+middle of the ranges, 10,000 random Panda targets: 0.09 rad nearer on average
+for about 10 more iterations; seeded at far configurations it gains far more).
 
 The returned joint vector is brought to the 2 pi representative nearest the seed
 within the limits (same pose, tidier angles).
@@ -92,6 +95,9 @@ PULL_DAMPING = 1e-9
 """Damping of J J^T in the pull's pseudo-inverse (keeps it defined at a singularity)."""
 LANDING_STEPS = 6
 """Gauss-Newton steps after each pull step to land back on the target."""
+PULL_WALK_TOL = 1e-4
+"""The walk's own landing tolerance [m and rad] (looser than the answer's, which only
+the configuration kept has to meet)."""
 
 
 class NumericLMSolver:
@@ -311,61 +317,79 @@ class NumericLMSolver:
 
     def _pull_toward_rest(self, q0: Array, goal: pin.SE3) -> tuple[Array, int]:
         """Predictor-corrector walk along the self-motion manifold from solution ``q0``
-        toward the rest posture: (the solution nearest rest seen, steps spent)."""
+        toward the rest posture: (the solution nearest rest found, steps spent)."""
         lower, upper, rest = self._lower, self._upper, self._rest
+        opts = self._options
         damp = PULL_DAMPING * self._task_eye
-        best, z = q0, rest - q0
-        best_d = math.sqrt(float(z @ z))
-        q = q0
+        z = rest - q0
+        d0 = best_d = math.sqrt(float(z @ z))
+        best = q = q0
+        e, _ = self._residual(q, goal)
         steps = 0
-        for _ in range(self._options.null_space_iterations):
-            # predictor: the null-space part of (rest - q), capped, clamped to the limits
-            self._residual(q, goal)
+        # the walk lands loosely; only the configuration it keeps lands on the tolerance
+        walk_m, walk_rad = max(opts.tol_m, PULL_WALK_TOL), max(opts.tol_rad, PULL_WALK_TOL)
+        for _ in range(opts.null_space_iterations):
+            # predictor: the null-space part of (rest - q), capped, plus the correction of
+            # the residual left by the loose landing; J^+ = J^T (J J^T)^-1, one solve
             jac = self._task_jacobian()
             z = rest - q
-            _, y, info = lapack.dposv(jac @ jac.T + damp, jac @ z)
+            rhs = np.empty((e.shape[0], 2))
+            rhs[:, 0] = e
+            rhs[:, 1] = jac @ z
+            _, y, info = lapack.dposv(jac @ jac.T + damp, rhs)
             if info != 0:  # only with a non-finite Jacobian
                 break
-            null = z - jac.T @ y.reshape(-1)
+            null = z - jac.T @ y[:, 1]
             size = math.sqrt(float(null @ null))
             if size < PULL_DONE_RAD:
                 break  # a local minimum of |q - rest| on the manifold (or held at limits)
             if size > PULL_STEP_MAX_RAD:
                 null *= PULL_STEP_MAX_RAD / size
-            steps += 1
-            # corrector: minimum-norm Gauss-Newton steps back onto the target
-            landed = self._land(np.minimum(np.maximum(q + null, lower), upper), goal)
-            steps += landed[1]
-            if landed[0] is None:
+            step = jac.T @ y[:, 0] + null
+            # corrector: minimum-norm Gauss-Newton steps back near the target
+            landed, e, used = self._land(
+                np.minimum(np.maximum(q + step, lower), upper), goal, walk_m, walk_rad
+            )
+            steps += 1 + used
+            if landed is None:
                 break
-            q = landed[0]
-            z = rest - q
+            z = rest - landed
             d = math.sqrt(float(z @ z))
-            if d > best_d - PULL_DONE_RAD:
-                if d < best_d:
-                    best = q
+            if d < best_d:
+                best, best_d = landed, d
+            if d > best_d - PULL_DONE_RAD and best is not landed:
                 break  # no longer paying off
-            best, best_d = q, d
-        return best, steps
+            q = landed
+        if best is q0:
+            return q0, steps
+        final, _, used = self._land(best, goal, opts.tol_m, opts.tol_rad)
+        steps += used
+        if final is None:
+            return q0, steps
+        z = rest - final
+        return (final if math.sqrt(float(z @ z)) < d0 else q0), steps
 
-    def _land(self, q: Array, goal: pin.SE3) -> tuple[Array | None, int]:
+    def _land(
+        self, q: Array, goal: pin.SE3, tol_m: float, tol_rad: float
+    ) -> tuple[Array | None, Array, int]:
         """Up to :data:`LANDING_STEPS` minimum-norm Gauss-Newton steps from ``q`` onto the
-        target: (the configuration within tolerance or None, steps spent)."""
+        target: (the configuration within the tolerances or None, its task error, steps
+        spent). The data is left at the returned configuration's kinematics."""
         lower, upper = self._lower, self._upper
-        tol_m, tol_rad = self._options.tol_m, self._options.tol_rad
         damp = PULL_DAMPING * self._task_eye
-        for step in range(LANDING_STEPS):
+        for step in range(LANDING_STEPS + 1):
             e, t = self._residual(q, goal)
             pos, ang = self._errors(e, t)
             if pos <= tol_m and ang <= tol_rad:
-                return q, step
+                return q, e, step
+            if step == LANDING_STEPS:
+                break
             jac = self._task_jacobian()
             _, y, info = lapack.dposv(jac @ jac.T + damp, e)
             if info != 0:
                 break
             q = np.minimum(np.maximum(q + jac.T @ y.reshape(-1), lower), upper)
-        pos, ang = self._errors(*self._residual(q, goal))
-        return (q if pos <= tol_m and ang <= tol_rad else None), LANDING_STEPS
+        return None, e, LANDING_STEPS
 
 
 __all__ = ["NumericLMSolver"]
