@@ -14,9 +14,10 @@ Protocol (targets from issue 17 and the kinematics notes):
   solve only: on a shared machine the CPU time is what the solver itself costs.
 - Peers in the same run: the same solver on ur5 (6 joints, the same protocol and
   count), the panda without the null-space pull (first 2,000 poses: what the pull
-  costs, and how much nearer the rest posture it ends over the first 500), and Pinocchio's documented
-  CLIK loop on the panda (damped pseudo-inverse, damping 1e-12, step 0.1, <= 1000
-  iterations, no restarts, same tolerance; first 500 poses).
+  costs, and how much nearer the rest posture it ends over the first 500), and
+  Pinocchio's documented CLIK loop on the panda (damped pseudo-inverse, damping
+  1e-12, step 0.1, <= 1000 iterations, no restarts, same tolerance; first 500
+  poses).
 FK is the robot's Pinocchio model (kinematics.flange_pose); tests/kinematics
 cross-check it against DH FK and against example-robot-data's panda URDF.
 """
@@ -128,9 +129,7 @@ def bench_numeric(spec: RobotSpec, targets: np.ndarray, options: IKOptions) -> d
         "restarted_fraction": float((restarts > 0).mean()),
         # |q - rest| of the answers (rest: the middle of the ranges) over the first
         # DISTANCE_POSES poses, the ones the run without the pull solves too
-        "distance_to_rest_rad_mean_first_poses": float(
-            np.nanmean(rest_distance[:DISTANCE_POSES])
-        ),
+        "distance_to_rest_rad_mean_first_poses": float(np.nanmean(rest_distance[:DISTANCE_POSES])),
         "failures": reasons,
     }
 
