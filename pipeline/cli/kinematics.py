@@ -199,7 +199,8 @@ def ik_cmd(
     if only_position:
         if quaternion is not None or rpy is not None:
             raise KinematicsError(
-                f"robot '{spec.name}' has {spec.dof} joints: its IK matches the flange "
+                f"robot '{spec.name}' has {spec.dof} joint{'s' * (spec.dof != 1)}: its IK "
+                "matches the flange "
                 "position only (an orientation needs 6 joints); drop --rpy / --quaternion"
             )
         rpy = (0.0, 0.0, 0.0)  # not matched: any rotation completes the 4x4 target

@@ -313,7 +313,7 @@ def format_reason(spec: RobotSpec, base_T_flange: Array, what: str) -> str:
         return (
             f"robot '{spec.name}' cannot reach position "
             f"[{p[0]:{fmt}}, {p[1]:{fmt}}, {p[2]:{fmt}}] m (position-only IK, "
-            f"{spec.dof} joints): {what}"
+            f"{spec.dof} joint{'s' * (spec.dof != 1)}): {what}"
         )
     return (
         f"robot '{spec.name}' cannot reach position "
