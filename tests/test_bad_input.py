@@ -299,9 +299,13 @@ def test_a_single_joint_robot_is_usable_or_refused_cleanly(tmp_path, capsys):
     robot = tmp_path / "one.yaml"
     robot.write_text(yaml.safe_dump(data))
     assert run_cli(["fk", str(robot), "0.3", "--json"], capsys)[0] == 0
+    # fewer than 6 joints: position-only IK, so an orientation is refused and a
+    # position off the joint's circle is unreachable
     code, err = run_cli(["ik", str(robot), "--position", "0.1", "0", "0.1", "--rpy", "0", "0",
                          "0"], capsys)  # fmt: skip
-    assert_one_line(code, err, "cannot reach")
+    assert_one_line(code, err, "has 1 joint: its IK matches the flange position only")
+    code, err = run_cli(["ik", str(robot), "--position", "0.1", "0", "0.1"], capsys)
+    assert_one_line(code, err, "cannot reach position [0.1000, 0.0000, 0.1000] m (position-only")
 
 
 # --- kinematics commands -----------------------------------------------------------------

@@ -62,12 +62,13 @@ def _check_joints(spec: Any, joints: list[float]) -> None:
     from pipeline.errors import KinematicsError
 
     if len(joints) != spec.dof:
-        return  # forward_kinematics names the count
-    for i, (q, j) in enumerate(zip(joints, spec.joints, strict=True)):
-        if not (j.limits.lower <= q <= j.limits.upper):  # NaN fails this too
+        return  # flange_pose names the count
+    limits = zip(spec.joint_names, spec.lower.tolist(), spec.upper.tolist(), strict=True)
+    for i, (q, (name, lower, upper)) in enumerate(zip(joints, limits, strict=True)):
+        if not (lower <= q <= upper):  # NaN fails this too
             raise KinematicsError(
-                f"joint {i + 1} ({j.name}): {q!r} rad is outside its limits "
-                f"[{j.limits.lower:.6g}, {j.limits.upper:.6g}] rad"
+                f"joint {i + 1} ({name}): {q!r} rad is outside its limits "
+                f"[{lower:.6g}, {upper:.6g}] rad"
             )
 
 
@@ -84,18 +85,17 @@ def fk_cmd(
     ],
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
-    """Forward kinematics: the flange pose (DH frame n) in the DH base frame.
+    """Forward kinematics: the flange pose (frame tool0) in the robot's base frame.
 
-    Prints position \\[m], quaternion (w, x, y, z) and roll/pitch/yaw \\[rad] with
-    R = Rz(yaw) Ry(pitch) Rx(roll).
+    Any number of joints. Prints position \\[m], quaternion (w, x, y, z) and
+    roll/pitch/yaw \\[rad] with R = Rz(yaw) Ry(pitch) Rx(roll).
     """
-    from pipeline.kinematics.base import pose_summary
-    from pipeline.model.dh import forward_kinematics
+    from pipeline.kinematics import flange_pose, pose_summary
     from pipeline.robots import load_spec
 
     spec = load_spec(robot)
     _check_joints(spec, joints)
-    pose = pose_summary(forward_kinematics(spec, joints))
+    pose = pose_summary(flange_pose(spec, joints))
     if as_json:
         print_json({"robot": spec.name, "joints": [float(q) for q in joints], **pose})
         return
@@ -115,7 +115,7 @@ def ik_cmd(
         tuple[float, float, float],
         typer.Option(
             "--position",
-            help="Flange position X Y Z \\[m] in the DH base frame.",
+            help="Flange position X Y Z \\[m] in the robot's base frame.",
             show_default=False,
         ),
     ],
@@ -124,7 +124,8 @@ def ik_cmd(
         typer.Option(
             "--quaternion",
             help="Flange orientation as a quaternion W X Y Z (normalised here). "
-            "Give this or --rpy.",
+            "Give this or --rpy (robots with 6 or more joints; fewer joints get "
+            "position-only IK and take neither).",
             show_default=False,
         ),
     ] = None,
@@ -133,7 +134,7 @@ def ik_cmd(
         typer.Option(
             "--rpy",
             help="Flange orientation as roll pitch yaw \\[rad], R = Rz(yaw) Ry(pitch) Rx(roll). "
-            "Give this or --quaternion.",
+            "Give this or --quaternion (robots with 6 or more joints).",
             show_default=False,
         ),
     ] = None,
@@ -141,8 +142,8 @@ def ik_cmd(
         str,
         typer.Option(
             "--solver",
-            help="IK solver: 'numeric' (Levenberg-Marquardt, any arm, one solution) or "
-            "'analytic' (closed form, UR-type arms, every solution within limits).",
+            help="IK solver: 'numeric' (Levenberg-Marquardt, any arm and joint count, one "
+            "solution) or 'analytic' (closed form, UR-type arms, every solution within limits).",
         ),
     ] = "numeric",
     seed_joints: Annotated[
@@ -155,10 +156,24 @@ def ik_cmd(
             show_default=False,
         ),
     ] = None,
+    rest_joints: Annotated[
+        str | None,
+        typer.Option(
+            "--rest-joints",
+            help="Rest posture \\[rad], one per joint within the limits: a redundant arm "
+            "(7+ joints) pulls its spare joints toward it in the null space of the pose "
+            "(numeric). Default: middle of each joint's range.",
+            show_default=False,
+        ),
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """Inverse kinematics: joint vectors \\[rad] that put the flange at the given pose.
 
+    Any joint count. 6 joints or more: the full pose (position and orientation);
+    a redundant arm (7+) also pulls its spare joints toward a rest posture
+    (--rest-joints). Fewer than 6 joints cannot reach arbitrary 6-D poses: IK is
+    position-only (give --position alone; the orientation follows from it).
     Every printed solution is checked by forward kinematics (errors shown).
     Exits 1 with one line if the pose is unreachable.
     """
@@ -169,49 +184,75 @@ def ik_cmd(
     from pipeline.kinematics import (
         DEFAULT_TOL_M,
         DEFAULT_TOL_RAD,
+        IKOptions,
         make_solver,
+        meets_tolerance,
         pose_summary,
+        position_only,
         target_pose,
         verify_solution,
     )
     from pipeline.robots import load_spec
 
     spec = load_spec(robot)
+    only_position = position_only(spec)
+    if only_position:
+        if quaternion is not None or rpy is not None:
+            raise KinematicsError(
+                f"robot '{spec.name}' has {spec.dof} joint{'s' * (spec.dof != 1)}: its IK "
+                "matches the flange "
+                "position only (an orientation needs 6 joints); drop --rpy / --quaternion"
+            )
+        rpy = (0.0, 0.0, 0.0)  # not matched: any rotation completes the 4x4 target
     target = target_pose(position, quaternion_wxyz=quaternion, rpy_rad=rpy)
     seed = None if seed_joints is None else _joint_list(seed_joints, "--seed-joints")
-    result = make_solver(solver, spec).solve(target, seed_q=seed)
+    rest = None if rest_joints is None else tuple(_joint_list(rest_joints, "--rest-joints"))
+    result = make_solver(solver, spec, options=IKOptions(rest_q=rest)).solve(target, seed_q=seed)
     if not result.ok:
         raise KinematicsError(result.reason)
     rows = []
     for q in result.solutions:
         pos_err, ang_err = verify_solution(spec, q, target)
-        if pos_err <= DEFAULT_TOL_M and ang_err <= DEFAULT_TOL_RAD:
+        if meets_tolerance(spec, pos_err, ang_err, tol_m=DEFAULT_TOL_M, tol_rad=DEFAULT_TOL_RAD):
             rows.append(([float(v) for v in q], pos_err, ang_err))
     if not rows:
+        within = f"{DEFAULT_TOL_M:g} m" + ("" if only_position else f" / {DEFAULT_TOL_RAD:g} rad")
         raise KinematicsError(
             f"robot '{spec.name}': {solver} IK returned {len(result.solutions)} solution(s) but "
-            f"none reproduces the target within {DEFAULT_TOL_M:g} m / {DEFAULT_TOL_RAD:g} rad"
+            f"none reproduces the target within {within}"
         )
     if as_json:
+        target_json: dict[str, Any] = (
+            {"position": pose_summary(target)["position"]} if only_position
+            else pose_summary(target)
+        )  # fmt: skip
         print_json(
             {
                 "robot": spec.name,
                 "solver": solver,
-                "target": pose_summary(target),
+                "position_only": only_position,
+                "target": target_json,
                 "solutions": [r[0] for r in rows],
                 "position_error_m": [r[1] for r in rows],
-                "orientation_error_rad": [r[2] for r in rows],
+                # a position-only robot's orientation is whatever its position implies
+                "orientation_error_rad": None if only_position else [r[2] for r in rows],
             }
         )
         return
+    errors = [Column("pos \\[m]", min_width=5)]
+    if not only_position:
+        errors.append(Column("ori \\[rad]", min_width=5))
+    what = "position-only " if only_position else ""
+    digits = 4 if spec.dof <= 6 else 3  # seven joints and both errors fit 80 columns
     table = Table(
-        "#", *(Column(f"q{i}", justify="right", min_width=7) for i in range(1, spec.dof + 1)),
-        Column("pos \\[m]", min_width=5), Column("ori \\[rad]", min_width=5),
-        title=f"{spec.name}: {len(rows)} IK solution(s) \\[rad] ({solver})", box=box.SIMPLE,
-        pad_edge=False,
+        "#", *(Column(f"q{i}", justify="right", min_width=digits + 3)
+               for i in range(1, spec.dof + 1)),
+        *errors, title=f"{spec.name}: {len(rows)} {what}IK solution(s) \\[rad] ({solver})",
+        box=box.SIMPLE, pad_edge=False, collapse_padding=True,
     )  # fmt: skip
     for i, (q, pos_err, ang_err) in enumerate(rows, start=1):
-        table.add_row(str(i), *(f"{v:.4f}" for v in q), f"{pos_err:.0e}", f"{ang_err:.0e}")
+        shown = [f"{pos_err:.0e}"] + ([] if only_position else [f"{ang_err:.0e}"])
+        table.add_row(str(i), *(f"{v:.{digits}f}" for v in q), *shown)
     console.print(table)
 
 
@@ -254,7 +295,9 @@ def ik_check_cmd(
     Reports success rate, position error \\[m] and orientation error \\[rad] (max,
     median over every returned solution), solve time \\[ms] (mean, median, p99),
     and PASS/FAIL against the kinematics notes' targets: < 0.1 mm, < 0.01 rad,
-    < 5 ms (p99). Writes an error map over the workspace (PNG). Exits 1 on FAIL.
+    < 5 ms (p99). Any joint count; below 6 joints IK is position-only and the
+    orientation is not judged. Writes an error map over the workspace (PNG).
+    Exits 1 on FAIL.
     """
     from pathlib import Path
 
@@ -305,8 +348,13 @@ def ik_check_cmd(
         )  # fmt: skip
         table.add_row("position error max / median \\[m]", f"{pe.max:.2e} / {pe.median:.2e}",
                       "< 1e-4", ok[c["position_error"]])  # fmt: skip
-        table.add_row("orientation error max / median \\[rad]", f"{oe.max:.2e} / {oe.median:.2e}",
-                      "< 1e-2", ok[c["orientation_error"]])  # fmt: skip
+        judged = (
+            ("n/a (position-only IK)", "")
+            if report.position_only
+            else ("< 1e-2", ok[c["orientation_error"]])
+        )
+        table.add_row("orientation error max / median \\[rad]",
+                      f"{oe.max:.2e} / {oe.median:.2e}", *judged)  # fmt: skip
         table.add_row("solve time mean / median / p99 \\[ms]",
                       f"{st.mean:.3f} / {st.median:.3f} / {st.p99:.3f}", "p99 < 5",
                       ok[c["solve_time"]])  # fmt: skip

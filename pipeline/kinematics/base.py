@@ -1,10 +1,18 @@
 """The IK interface: pose targets, options, results and the solver protocol.
 
-A pose target is a 4x4 homogeneous matrix ``base_T_flange``: the flange (DH
-frame n) in the DH base frame 0, exactly what
-:func:`pipeline.model.dh.forward_kinematics` returns. :func:`target_pose`
+A pose target is a 4x4 homogeneous matrix ``base_T_flange``: the flange frame
+(``tool0``) in the robot's base frame, exactly what
+:func:`pipeline.kinematics.fk.flange_pose` returns. :func:`target_pose`
 builds one from a position and a rotation given as a matrix, a quaternion
 (w, x, y, z) or roll/pitch/yaw (R = Rz(yaw) Ry(pitch) Rx(roll)).
+
+What IK means depends on the joint count. An arm with at least
+:data:`FULL_POSE_DOF` (6) joints is asked for the whole pose, position and
+orientation. An arm with fewer joints cannot reach arbitrary 6-D poses, so its
+IK is position-only: the target's rotation is ignored and only the flange
+position must match (:func:`position_only`). Joints beyond what the task needs
+(7 for a full pose, 4 or more for a position) are redundant; the numeric solver
+spends them on a pull toward a rest posture (:class:`IKOptions`).
 """
 
 from __future__ import annotations
@@ -17,8 +25,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import KinematicsError
+from pipeline.kinematics.fk import flange_pose
 from pipeline.model import transforms as tf
-from pipeline.model.dh import forward_kinematics
 from pipeline.robots.spec import RobotSpec
 
 Array = NDArray[np.float64]
@@ -29,6 +37,26 @@ DEFAULT_TOL_RAD = 1e-6
 """Default IK orientation tolerance [rad]."""
 ROTATION_TOL = 1e-6
 """Largest |R^T R - I| entry accepted as a rotation matrix in a pose target."""
+FULL_POSE_DOF = 6
+"""Joints an arm needs for IK on the full pose; fewer get position-only IK."""
+
+
+def position_only(spec: RobotSpec) -> bool:
+    """True if ``spec``'s IK matches the flange position only (fewer than 6 joints)."""
+    return spec.dof < FULL_POSE_DOF
+
+
+def task_dim(spec: RobotSpec) -> int:
+    """Task-space dimension of ``spec``'s IK: 3 (position only) or 6 (full pose)."""
+    return 3 if position_only(spec) else 6
+
+
+def meets_tolerance(
+    spec: RobotSpec, pos_err_m: float, ang_err_rad: float, *, tol_m: float, tol_rad: float
+) -> bool:
+    """True if errors from :func:`verify_solution` are within tolerance; the orientation
+    error is not judged for a position-only robot (:func:`position_only`)."""
+    return pos_err_m <= tol_m and (position_only(spec) or ang_err_rad <= tol_rad)
 
 
 def target_pose(
@@ -157,8 +185,12 @@ def pose_error(base_T_a: Array, base_T_b: Array) -> tuple[float, float]:
 
 
 def verify_solution(spec: RobotSpec, q: ArrayLike, base_T_flange: Array) -> tuple[float, float]:
-    """FK of ``q`` against the target: (position error [m], orientation error [rad])."""
-    return pose_error(forward_kinematics(spec, q), base_T_flange)
+    """FK of ``q`` against the target: (position error [m], orientation error [rad]).
+
+    The orientation error is reported for every robot; judge it with
+    :func:`meets_tolerance` (a position-only robot is not held to it).
+    """
+    return pose_error(flange_pose(spec, q), base_T_flange)
 
 
 def seed_or_middle(spec: RobotSpec, seed_q: ArrayLike | None) -> Array:
@@ -189,6 +221,11 @@ class IKOptions:
         max_iterations: iterations per attempt (numeric).
         max_restarts: attempts after the seeded one (numeric).
         seed: seed of the restart draws; same seed, same answer (numeric).
+        rest_q: rest posture [rad], one value per joint within the limits, that a
+            redundant arm's spare joints are pulled toward once the target is
+            reached (numeric); None: the middle of each joint's range.
+        null_space_iterations: steps of that pull (numeric; 0 turns it off). Ignored
+            for arms without spare joints (6 joints for a pose, 3 for a position).
     """
 
     tol_m: float = DEFAULT_TOL_M
@@ -196,6 +233,8 @@ class IKOptions:
     max_iterations: int = 60
     max_restarts: int = 40
     seed: int = 0
+    rest_q: tuple[float, ...] | None = None
+    null_space_iterations: int = 30
 
     def __post_init__(self) -> None:
         if not (self.tol_m > 0 and self.tol_rad > 0):
@@ -206,6 +245,14 @@ class IKOptions:
             raise KinematicsError(
                 f"IK needs max_iterations >= 1 and max_restarts >= 0, got "
                 f"{self.max_iterations} and {self.max_restarts}"
+            )
+        if self.null_space_iterations < 0:
+            raise KinematicsError(
+                f"IK needs null_space_iterations >= 0, got {self.null_space_iterations}"
+            )
+        if self.rest_q is not None and not all(math.isfinite(v) for v in self.rest_q):
+            raise KinematicsError(
+                f"the IK rest posture must be finite joint values [rad], got {list(self.rest_q)}"
             )
 
 
@@ -248,7 +295,7 @@ class IKSolver(Protocol):
     def spec(self) -> RobotSpec: ...
 
     def solve(self, base_T_flange: ArrayLike, *, seed_q: ArrayLike | None = None) -> IKResult:
-        """Joint vectors reaching ``base_T_flange`` (4x4, flange in DH base frame [m]).
+        """Joint vectors reaching ``base_T_flange`` (4x4, flange in the base frame [m]).
 
         ``seed_q`` [rad] picks the solution (numeric: the start; analytic: the 2 pi
         representative and the ordering); default: middle of the joint range.
@@ -262,6 +309,12 @@ def format_reason(spec: RobotSpec, base_T_flange: Array, what: str) -> str:
     p = base_T_flange[:3, 3]
     roll, pitch, yaw = tf.rpy(base_T_flange[:3, :3])
     fmt = ".4f" if float(np.abs(p).max()) < 1e6 else ".4g"  # 1e308 m is not 309 digits
+    if position_only(spec):
+        return (
+            f"robot '{spec.name}' cannot reach position "
+            f"[{p[0]:{fmt}}, {p[1]:{fmt}}, {p[2]:{fmt}}] m (position-only IK, "
+            f"{spec.dof} joint{'s' * (spec.dof != 1)}): {what}"
+        )
     return (
         f"robot '{spec.name}' cannot reach position "
         f"[{p[0]:{fmt}}, {p[1]:{fmt}}, {p[2]:{fmt}}] m, "
@@ -272,15 +325,19 @@ def format_reason(spec: RobotSpec, base_T_flange: Array, what: str) -> str:
 __all__ = [
     "DEFAULT_TOL_M",
     "DEFAULT_TOL_RAD",
+    "FULL_POSE_DOF",
     "IKOptions",
     "IKResult",
     "IKSolver",
     "as_pose",
     "format_reason",
+    "meets_tolerance",
     "pose_error",
     "pose_rows",
     "pose_summary",
+    "position_only",
     "seed_or_middle",
     "target_pose",
+    "task_dim",
     "verify_solution",
 ]

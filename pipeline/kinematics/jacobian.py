@@ -3,15 +3,13 @@
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 
 import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
+from pipeline.kinematics.fk import flange_model
 from pipeline.kinematics.limits import joint_vector
-from pipeline.model.chain import FLANGE
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
 
 Array = NDArray[np.float64]
@@ -20,20 +18,13 @@ SINGULAR_SIGMA = 1e-3
 """Default singularity threshold: smallest singular value of the 6 x n Jacobian."""
 
 
-@lru_cache(maxsize=16)
-def _pinocchio(spec: RobotSpec) -> tuple[pin.Model, pin.Data, int]:
-    # one model per spec and process; the Data is scratch space (not thread-safe)
-    model = build_pinocchio_model(spec)
-    return model, model.createData(), int(model.getFrameId(FLANGE))
-
-
 def jacobian(spec: RobotSpec, q: ArrayLike) -> Array:
     """Geometric Jacobian of the flange, 6 x dof, rows [v; omega] in base-frame axes.
 
     v is the flange origin's linear velocity [m/s per rad/s], omega the angular
     velocity [rad/s per rad/s] (Pinocchio ``LOCAL_WORLD_ALIGNED``).
     """
-    model, data, fid = _pinocchio(spec)
+    model, data, fid = flange_model(spec)
     qs = joint_vector(spec, q)
     out: Array = np.array(
         pin.computeFrameJacobian(model, data, qs, fid, pin.LOCAL_WORLD_ALIGNED), dtype=float

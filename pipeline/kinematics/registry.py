@@ -15,7 +15,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import KinematicsError
 from pipeline.kinematics.analytic import AnalyticURSolver
-from pipeline.kinematics.base import IKOptions, IKSolver, target_pose, verify_solution
+from pipeline.kinematics.base import (
+    IKOptions,
+    IKSolver,
+    meets_tolerance,
+    position_only,
+    target_pose,
+    verify_solution,
+)
 from pipeline.kinematics.numeric import NumericLMSolver
 from pipeline.plugins import installed_names, resolve
 from pipeline.robots.spec import RobotSpec
@@ -26,7 +33,8 @@ SOLVERS: dict[str, SolverFactory] = {
     "analytic": AnalyticURSolver,
     "numeric": NumericLMSolver,
 }
-"""Registered IK solvers: ``analytic`` (closed form, UR-type arms), ``numeric`` (LM, any arm)."""
+"""Registered IK solvers: ``analytic`` (closed form, UR-type arms), ``numeric`` (LM, any
+arm and joint count; position-only below 6 joints, a rest-posture pull above)."""
 
 
 GROUP = "armlab.ik_solvers"
@@ -83,8 +91,10 @@ def solve_pose_nearest(
 
     Args:
         spec: the robot.
-        position: flange position in the DH base frame [m].
-        quaternion_wxyz: orientation as (w, x, y, z); give this or ``rpy``.
+        position: flange position in the base frame [m].
+        quaternion_wxyz: orientation as (w, x, y, z); give this or ``rpy``. A robot
+            with fewer than 6 joints gets position-only IK: the orientation may be
+            left out, and is ignored if given.
         rpy: orientation as roll, pitch, yaw [rad], R = Rz(yaw) Ry(pitch) Rx(roll).
         solver: registry name (``analytic`` returns the nearest of all solutions,
             ``numeric`` starts from ``near``).
@@ -96,10 +106,12 @@ def solve_pose_nearest(
             the solver does not fit. The answer is verified by FK before it is returned.
     """
     opts = options or IKOptions()
+    if position_only(spec) and quaternion_wxyz is None and rpy is None:
+        rpy = (0.0, 0.0, 0.0)  # not matched: any rotation makes the 4x4 target
     target = target_pose(position, quaternion_wxyz=quaternion_wxyz, rpy_rad=rpy)
     q = make_solver(solver, spec, options=opts).solve(target, seed_q=near).best()
     pos_err, ang_err = verify_solution(spec, q, target)
-    if pos_err > opts.tol_m or ang_err > opts.tol_rad:
+    if not meets_tolerance(spec, pos_err, ang_err, tol_m=opts.tol_m, tol_rad=opts.tol_rad):
         raise KinematicsError(
             f"robot '{spec.name}': {solver} IK answer misses the target by {pos_err:.3g} m, "
             f"{ang_err:.3g} rad (tolerance {opts.tol_m:g} m, {opts.tol_rad:g} rad)"

@@ -21,9 +21,11 @@ def _fd_jacobian(spec, q, h=1e-6):
     return np.array(cols).T
 
 
-def test_pinocchio_jacobian_matches_finite_differences_of_dh_fk(any_robot):
-    for q in np.random.default_rng(21).uniform(any_robot.lower, any_robot.upper, (10, 6)):
-        assert np.abs(jacobian(any_robot, q) - _fd_jacobian(any_robot, q)).max() < 1e-7
+def test_pinocchio_jacobian_matches_finite_differences_of_dh_fk(every_dof_robot):
+    spec = every_dof_robot
+    for q in np.random.default_rng(21).uniform(spec.lower, spec.upper, (10, spec.dof)):
+        assert jacobian(spec, q).shape == (6, spec.dof)
+        assert np.abs(jacobian(spec, q) - _fd_jacobian(spec, q)).max() < 1e-7
 
 
 def test_manipulability_matches_the_ur_closed_form_determinant(ur_robot):

@@ -24,10 +24,11 @@ def _write(tmp_path: Path, data: object) -> Path:
 
 def test_builtin_robots_are_listed_and_load():
     names = builtin_robot_names()
-    assert {"ur5", "ur10", "mdh_example"} <= set(names)
-    for name in names:
-        spec = load_spec(name)
-        assert spec.dof == len(spec.joint_names) >= 3
+    assert {"ur5", "ur10", "mdh_example", "panda_dh", "arm3_example"} <= set(names)
+    dofs = {name: load_spec(name).dof for name in names}
+    assert dofs["ur5"] == dofs["mdh_example"] == 6
+    assert dofs["panda_dh"] == 7 and dofs["arm3_example"] == 3
+    assert dofs["panda"] == 7  # the URDF Panda, gripper locked
 
 
 def test_ur5_uses_manufacturer_values_not_the_papers_rounding(ur5):
