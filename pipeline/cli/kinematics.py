@@ -19,7 +19,7 @@ MAX_IK_CHECK_SAMPLES = 1_000_000
 def robots_cmd(
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
-    """List the built-in robots: name, DOF, DH convention, whether dynamics are given."""
+    """List the built-in robots: name, DOF, format (DH convention or URDF), dynamics given."""
     from pipeline.robots import builtin_robot_names, load_spec
 
     specs = [load_spec(n) for n in builtin_robot_names()]
@@ -31,6 +31,7 @@ def robots_cmd(
                         "name": s.name,
                         "dof": s.dof,
                         "convention": s.convention,
+                        "format": s.format,
                         "has_dynamics": s.has_dynamics,
                     }
                     for s in specs
@@ -38,9 +39,10 @@ def robots_cmd(
             }
         )
         return
-    table = Table("robot", "dof", "convention", "dynamics")
+    table = Table("robot", "dof", "format", "dynamics")
     for s in specs:
-        table.add_row(s.name, str(s.dof), s.convention, "yes" if s.has_dynamics else "no")
+        form = f"DH ({s.convention})" if s.convention is not None else s.format
+        table.add_row(s.name, str(s.dof), form, "yes" if s.has_dynamics else "no")
     console.print(table)
 
 

@@ -72,4 +72,7 @@ def print_json(obj: Any) -> None:
     sys.stdout.write(json.dumps(obj, indent=2) + "\n")
 
 
-ROBOT_HELP = "Built-in robot name (see `pipeline robots`) or path to a robot YAML file."
+ROBOT_HELP = (
+    "Built-in robot name (see `pipeline robots`) or path to a robot file: DH YAML, URDF, "
+    "or a .armlab.yaml naming a URDF."
+)
