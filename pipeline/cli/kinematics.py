@@ -20,9 +20,16 @@ def robots_cmd(
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """List the built-in robots: name, DOF, format (DH convention or URDF), dynamics given."""
-    from pipeline.robots import builtin_robot_names, load_spec
+    from pipeline.errors import SpecError
+    from pipeline.robots import RobotSpec, builtin_robot_names, load_spec
 
-    specs = [load_spec(n) for n in builtin_robot_names()]
+    specs: list[RobotSpec] = []
+    missing: dict[str, str] = {}
+    for n in builtin_robot_names():
+        try:
+            specs.append(load_spec(n))
+        except SpecError as err:  # a built-in URDF robot whose package is not installed
+            missing[n] = str(err)
     if as_json:
         print_json(
             {
@@ -35,7 +42,8 @@ def robots_cmd(
                         "has_dynamics": s.has_dynamics,
                     }
                     for s in specs
-                ]
+                ],
+                "unavailable": missing,
             }
         )
         return
@@ -44,6 +52,8 @@ def robots_cmd(
         form = f"DH ({s.convention})" if s.convention is not None else s.format
         table.add_row(s.name, str(s.dof), form, "yes" if s.has_dynamics else "no")
     console.print(table)
+    for n, why in missing.items():
+        console.print(f"{n}: unavailable: {why}", markup=False)
 
 
 def _joint_list(text: str, option: str) -> list[float]:

@@ -125,6 +125,12 @@ def resolve_uri(uri: str, *, base: Path, where: str, package_path: tuple[str, ..
                 if root is not None and root.is_dir():
                     return root / rest
         searched = ", ".join(str(f) for f in folders) or "no folders"
+        if package == "example-robot-data":
+            raise SpecError(
+                f"{where}: unresolved package 'example-robot-data' in {uri!r}: install it "
+                "(pip install example-robot-data, or the test extra) or add its share folder "
+                "with --package-path"
+            )
         raise SpecError(
             f"{where}: unresolved package '{package}' in {uri!r} (searched {searched}; add its "
             "parent folder with --package-path or ROS_PACKAGE_PATH)"
