@@ -103,7 +103,9 @@ def identified_spec(spec: RobotSpec, theta: np.ndarray) -> RobotSpec:
         )
         for j, joint in enumerate(spec.joints)
     )
-    return replace(spec, joints=joints)
+    return replace(
+        spec, joints=joints, armature_source="identified from recordings (pipeline identify fit)"
+    )
 
 
 def _floats(values: np.ndarray | Sequence[float]) -> list[float]:

@@ -122,6 +122,8 @@ class RobotSpec:
     convention: Convention
     joints: tuple[JointSpec, ...]
     source: str
+    armature_source: str = ""
+    """Where the joints' ``armature`` values come from (data sheet, estimate, identified)."""
 
     @property
     def dof(self) -> int:
@@ -270,6 +272,7 @@ class _Robot(_Strict):
     convention: Convention
     angle_unit: Literal["rad", "deg"] = "rad"
     joints: list[_Joint] = Field(min_length=1)
+    armature_source: str = Field(default="", max_length=1000)
 
     @model_validator(mode="after")
     def _in_range(self) -> _Robot:
@@ -387,7 +390,13 @@ def _to_spec(raw: _Robot, source: str) -> RobotSpec:
                 armature=j.armature,
             )
         )
-    return RobotSpec(name=raw.name, convention=raw.convention, joints=tuple(joints), source=source)
+    return RobotSpec(
+        name=raw.name,
+        convention=raw.convention,
+        joints=tuple(joints),
+        source=source,
+        armature_source=raw.armature_source,
+    )
 
 
 def parse_spec(data: Any, *, source: str) -> RobotSpec:
