@@ -30,7 +30,9 @@ from pipeline.analysis.campaign import (
     TABLE_DIR,
     TOO_FEW,
     by_parameter,
+    condition_values,
     swept_axes,
+    verdict_flips,
     win_loss,
 )
 from pipeline.analysis.summary import HEADLINE_TASK_METRICS
@@ -276,6 +278,63 @@ def _verdict_cell(row: dict[str, object], m: catalog.Metric) -> str:
     return f"{mark} {size} (Holm p = {p:.2g}, n = {row['n']})"
 
 
+# Flipping verdicts listed per assumption (all are in the CSV file).
+MAX_FLIPS_SHOWN = 30
+
+
+def _flip_lines(
+    wl: pl.DataFrame, conditions: list[str], *, out_dir: Path, stem: str, files: list[str]
+) -> list[str]:
+    """``### Verdicts that flip with <axis>``: per swept axis (an assumption such as
+    ``armature_scale``), the verdicts whose answer changes within its swept range."""
+    swept: dict[str, set[str]] = {}
+    for cond in conditions:
+        for label, value in condition_values(cond).items():
+            swept.setdefault(label, set()).add(value)
+    labels = [k for k, v in swept.items() if len(v) > 1]
+    if not labels:
+        return []
+    flips = verdict_flips(wl)
+    rel = f"{TABLE_DIR}/{stem}_flips.csv"
+    flips.write_csv(out_dir / rel)
+    files.append(rel)
+    lines: list[str] = []
+    for label in sorted(labels):
+        values = sorted(swept[label], key=lambda t: (_number(t), t))
+        sub = flips.filter(pl.col("assumption") == label)
+        lines += [f"### Verdicts that flip with `{label}`", ""]
+        if not sub.height:
+            lines += [
+                f"None: every verdict (wins / loses / n.s.; the sign where untested) is the "
+                f"same for {label} = {', '.join(values)}, the other swept values held.",
+                "",
+            ]
+            continue
+        lines += [
+            f"{sub.height} verdict(s) change within {label} = {', '.join(values)} (the other "
+            f"swept values held): they hang on this assumption. All: [`{rel}`]({rel}).",
+            "",
+        ]
+        for r in sub.head(MAX_FLIPS_SHOWN).iter_rows(named=True):
+            title = catalog.BY_NAME[r["metric"]].title if r["metric"] in catalog.BY_NAME else ""
+            where = f" ({r['others']})" if r["others"] else ""
+            lines.append(
+                f"- `{r['candidate']}` vs `{r['baseline']}`, {title or r['metric']}, "
+                f"{r['joint']}{where}: {r['answers']}."
+            )
+        if sub.height > MAX_FLIPS_SHOWN:
+            lines.append(f"- ({sub.height - MAX_FLIPS_SHOWN} more in the CSV file.)")
+        lines.append("")
+    return lines
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        return float("inf")
+
+
 def campaign_section(
     table_path: Path,
     *,
@@ -397,6 +456,7 @@ def campaign_section(
                     md.table(["joint", *[c or "(all)" for c in shown]], rows),
                     "",
                 ]
+        lines += _flip_lines(wl, conditions, out_dir=out_dir, stem=stem, files=files)
     else:
         lines += [
             f"No win/loss matrix: the campaign has no completed `{baseline}` episodes and "
