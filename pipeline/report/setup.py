@@ -102,7 +102,7 @@ def _loop_lines(loop: LoopSettings | None) -> list[str]:
     return [f"- Loop (the same for every law): {_settings_line(_as_recorded(loop), ())}."]
 
 
-def _armature_lines(robot: Any, plant: Mapping[str, Any]) -> list[str]:
+def _armature_lines(robot: Any, plant: Mapping[str, Any], scenario: Mapping[str, Any]) -> list[str]:
     """The rotor armature the nominal model assumes, and where its values come from."""
     if not isinstance(robot, Mapping):
         return []
@@ -114,10 +114,12 @@ def _armature_lines(robot: Any, plant: Mapping[str, Any]) -> list[str]:
     source = _given(robot, "armature_source")
     if nominal is None and source is None:
         return []
-    return [
-        f"- Rotor armature of the nominal model [kg m²]: {md.value(nominal)}; source: "
-        f"{source if source is not None else 'not stated in the robot file'}."
-    ]
+    stated = source if source is not None else "not stated in the robot file"
+    model = _given(scenario, "nominal")
+    if model is not None:  # the controllers' model is an identified one, not the file
+        stated = f"identified (`nominal: {model}`); the robot file's: {stated}"
+    values = md.value(nominal)
+    return [f"- Rotor armature of the nominal model [kg m²]: {values}; source: {stated}."]
 
 
 def setup_section(data: ReportData, scenario: str) -> list[str]:
@@ -146,7 +148,7 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
         f"obstacles: {len(obstacles) if isinstance(obstacles, list) else md.NA}; "
         f"hold after the motion: {md.value(_given(sc, 'hold_s'))} s.",
         f"- Planner: {_planner_line(planner)}.",
-        *_armature_lines(s.robot if s is not None else None, plant),
+        *_armature_lines(s.robot if s is not None else None, plant, sc),
         f"- Plant: {_settings_line(plant, _PLANT_KEYS, skip=('links',))}"
         + (
             "; link masses, centres of mass and inertias (and the armature above) drawn per "
