@@ -177,7 +177,7 @@ def physics_floor_s(
 
     from pipeline.model.mjcf import build_mujoco_model
     from pipeline.model.urdf import build_pinocchio_model
-    from pipeline.robots.spec import load_spec
+    from pipeline.robots.loaders import load_spec
     from pipeline.stages.assemble import draw_scenario_plant
     from pipeline.stages.plans import obstacle_boxes
 

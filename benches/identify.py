@@ -32,7 +32,7 @@ from pipeline.identify.fourier import FourierReference  # noqa: E402
 from pipeline.identify.stage import fit_command  # noqa: E402
 from pipeline.log.bag import write_episode_bag  # noqa: E402
 from pipeline.params import load_params  # noqa: E402
-from pipeline.robots.spec import load_spec  # noqa: E402
+from pipeline.robots.loaders import load_spec  # noqa: E402
 from pipeline.sim.runner import run_episode  # noqa: E402
 from pipeline.trajectory import TrajectorySamples  # noqa: E402
 

@@ -27,7 +27,8 @@ from pydantic import (
 
 from pipeline.constants import MAX_SEED
 from pipeline.errors import ParamsError, unknown_name_message
-from pipeline.robots.spec import Name, format_validation_error
+from pipeline.robots.dh_yaml import format_validation_error
+from pipeline.robots.spec import Name
 from pipeline.settings import CampaignInfo
 from pipeline.yamlio import parse_yaml, refuse_bool_numbers
 
@@ -161,8 +162,12 @@ class ScenarioParams(_Strict):
     # compare with the paper's numbers in the report (only the paper's experiment)
     reproduces_paper: bool = False
     # the controllers' nominal model: an identified MODEL.yaml (`pipeline identify fit`);
-    # None: the robot's own description (its CAD values)
+    # None: the robot's own description (its CAD values); `{seed}` in the path is the
+    # episode's seed (each drawn plant identified on its own: models/ur5-s{seed}.yaml)
     nominal: str | None = Field(default=None, min_length=1)
+    # the robot's rotor armature x this, on the plant and the (CAD) nominal model together:
+    # an assumption a campaign sweeps (an identified `nominal:` keeps its own armature)
+    armature_scale: float = Field(default=1.0, gt=0, le=100, allow_inf_nan=False)
 
     @model_validator(mode="after")
     def _unique_obstacles(self) -> ScenarioParams:

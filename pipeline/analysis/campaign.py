@@ -311,6 +311,84 @@ def win_loss(table: pl.DataFrame, *, baseline: str, metrics: tuple[str, ...]) ->
 _DERIVED = ("p_holm", "tests", "verdict")
 
 
+def condition_values(condition: str) -> dict[str, str]:
+    """A condition key's swept values: ``payload_kg=0.5,goal=r1`` -> {label: text}."""
+    out: dict[str, str] = {}
+    for part in condition.split(",") if condition else []:
+        key, _, value = part.partition("=")
+        out[key] = value
+    return out
+
+
+def _stance(row: Mapping[str, Any]) -> str | None:
+    """A win/loss row's answer: its tested verdict, else the sign of its size (untested)."""
+    verdict, effect = row["verdict"], row["effect_pct"]
+    if verdict in ("wins", "loses", "n.s."):
+        return str(verdict)
+    if verdict == "too few pairs" and isinstance(effect, float) and effect != 0:
+        return "better (untested)" if effect > 0 else "worse (untested)"
+    return None
+
+
+FLIP_SCHEMA = {
+    "assumption": pl.String,
+    "metric": pl.String,
+    "candidate": pl.String,
+    "baseline": pl.String,
+    "joint": pl.String,
+    "others": pl.String,
+    "answers": pl.String,
+}
+
+
+def verdict_flips(wl: pl.DataFrame) -> pl.DataFrame:
+    """The verdicts of a win/loss table (:func:`win_loss`) that change within the swept
+    range of one axis, the other axes held: one row per (axis, metric, candidate, joint,
+    other axes' values), ``answers`` = ``value: answer`` per swept value.
+
+    An answer is the tested verdict (wins / loses / n.s.); where there are too few pairs
+    for a test, the sign of the size, marked untested. A row is a flip when two values of
+    the axis give different answers. Columns :data:`FLIP_SCHEMA`.
+    """
+    rows: list[dict[str, Any]] = []
+    parsed = [(condition_values(str(r["condition"] or "")), r) for r in wl.iter_rows(named=True)]
+    labels = sorted({k for values, _ in parsed for k in values})
+    for label in labels:
+        groups: dict[tuple[Any, ...], dict[str, str]] = {}
+        for values, r in parsed:
+            if label not in values:
+                continue
+            stance = _stance(r)
+            if stance is None:
+                continue
+            others = ",".join(f"{k}={v}" for k, v in values.items() if k != label)
+            key = (r["metric"], r["candidate"], r["baseline"], r["joint"], others)
+            groups.setdefault(key, {})[values[label]] = stance
+        for (metric, cand, base, joint, others), answers in groups.items():
+            if len(set(answers.values())) < 2:
+                continue
+            ordered = sorted(answers.items(), key=lambda kv: _as_number(kv[0]))
+            rows.append(
+                {
+                    "assumption": label,
+                    "metric": metric,
+                    "candidate": cand,
+                    "baseline": base,
+                    "joint": joint,
+                    "others": others,
+                    "answers": "; ".join(f"{label}={v}: {a}" for v, a in ordered),
+                }
+            )
+    return pl.DataFrame(rows, schema=FLIP_SCHEMA, orient="row")
+
+
+def _as_number(text: str) -> tuple[float, str]:
+    try:
+        return (float(text), text)
+    except ValueError:
+        return (math.inf, text)
+
+
 def by_parameter(table: pl.DataFrame, axis: str, metric: str) -> pl.DataFrame:
     """Mean and 95 % Student-t CI of ``metric`` per value of one swept ``axis``, controller
     and joint (completed episodes, every other axis pooled): ``value, controller, joint,

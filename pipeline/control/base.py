@@ -153,6 +153,44 @@ def _validated_gain_array(
     return arr
 
 
+FRICTION_SMOOTH_RAD_S = 0.01
+"""Default velocity scale of the friction feed-forward's smooth sign, tanh(qd / v) [rad/s]."""
+FRICTION_GAINS = (
+    GainSpec("friction_ff", flag=True),
+    GainSpec("friction_coulomb_nm", unit="N m", default="0; a nominal MODEL.yaml's"),
+    GainSpec("friction_viscous_nm_s_rad", unit="N m s/rad", default="0; a nominal MODEL.yaml's"),
+    GainSpec("friction_smooth_rad_s", unit="rad/s", default=f"{FRICTION_SMOOTH_RAD_S:g}"),
+)
+"""Friction feed-forward (``friction_ff: true``): Coulomb + viscous torque of the
+reference velocity, added to a model-based law's command."""
+
+
+def friction_defaults(spec: RobotSpec) -> dict[str, Any]:
+    """Friction feed-forward off, no friction (a nominal model file fills the values in)."""
+    return {
+        "friction_ff": False,
+        "friction_coulomb_nm": [0.0] * spec.dof,
+        "friction_viscous_nm_s_rad": [0.0] * spec.dof,
+        "friction_smooth_rad_s": [FRICTION_SMOOTH_RAD_S] * spec.dof,
+    }
+
+
+def friction_feedforward(gains: Mapping[str, Any], qd_ref: F64) -> F64 | None:
+    """``fc tanh(qd_ref / v) + fv qd_ref`` [N m] when ``friction_ff`` is on, else None.
+
+    The reference velocity, not the measured one: a feed-forward, free of the encoder's
+    noise; the smooth sign (scale ``v``, ``friction_smooth_rad_s``) keeps the torque
+    continuous through a velocity reversal and zero at rest, where sticking friction
+    needs no compensation.
+    """
+    if not gains["friction_ff"]:
+        return None
+    v = gains["friction_smooth_rad_s"]
+    sign = np.where(v > 0, np.tanh(qd_ref / np.where(v > 0, v, 1.0)), np.sign(qd_ref))
+    out: F64 = gains["friction_coulomb_nm"] * sign + gains["friction_viscous_nm_s_rad"] * qd_ref
+    return out
+
+
 TUNING_KEYS = ("omega_n_rad_s", "zeta")
 
 
@@ -206,14 +244,25 @@ def resolve_tuned_gains(
     """The tuning knobs in ``gains`` choose the defaults; explicit gains override them."""
     tuning, explicit = split_tuning(gains, where=where)
     defaults = default_gains(spec, omega_n_rad_s=tuning.omega_n_rad_s, zeta=tuning.zeta)
-    resolved = resolve_gains(controller, spec, schema, defaults, explicit, where=where)
+    keys = {g.key for g in schema}
+    # friction feed-forward: off and zero unless given (no tuning knob chooses it)
+    untuned = {k: v for k, v in friction_defaults(spec).items() if k in keys - set(defaults)}
+    resolved = resolve_gains(
+        controller, spec, schema, {**defaults, **untuned}, explicit, where=where
+    )
     overridden = isinstance(explicit, Mapping) and set(defaults) <= set(explicit)
     return replace(tuning, used=not overridden), resolved
 
 
 def gains_as_json(gains: Mapping[str, Any]) -> dict[str, Any]:
-    """JSON-serializable copy of resolved gains (lists of floats, bools)."""
-    return {k: (v if isinstance(v, bool) else [float(x) for x in v]) for k, v in gains.items()}
+    """JSON-serializable copy of resolved gains (lists of floats, bools); the friction
+    feed-forward's values only when it is on (off, they play no part)."""
+    hidden = {g.key for g in FRICTION_GAINS} if gains.get("friction_ff") is False else set()
+    return {
+        k: (v if isinstance(v, bool) else [float(x) for x in v])
+        for k, v in gains.items()
+        if k not in hidden
+    }
 
 
 def nominal_mass_diagonal(spec: RobotSpec, q_config: Sequence[float] | None = None) -> F64:

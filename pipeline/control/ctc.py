@@ -19,9 +19,11 @@ from pipeline.control.base import (
     DEFAULT_OMEGA_N_RAD_S,
     DEFAULT_ZETA,
     F64,
+    FRICTION_GAINS,
     GainSpec,
     NominalPDController,
     check_tuning,
+    friction_feedforward,
 )
 from pipeline.robots.spec import RobotSpec
 
@@ -29,6 +31,7 @@ NAME = "ctc"
 GAINS = (
     GainSpec("kp", unit="1/s^2", default="w^2"),
     GainSpec("kd", unit="1/s", default="2 zeta w"),
+    *FRICTION_GAINS,
 )
 
 
@@ -58,4 +61,5 @@ class ComputedTorqueController(NominalPDController):
     def compute(self, q: F64, qd: F64, q_ref: F64, qd_ref: F64, qdd_ref: F64, dt_s: float) -> F64:
         a = qdd_ref + self._kd * (qd_ref - qd) + self._kp * (q_ref - q)
         tau: F64 = pin.rnea(self._model, self._data, q, qd, a)
-        return tau
+        friction = friction_feedforward(self._gains, qd_ref)
+        return tau if friction is None else tau + friction

@@ -27,9 +27,11 @@ from pipeline.control.base import (
     DEFAULT_OMEGA_N_RAD_S,
     DEFAULT_ZETA,
     F64,
+    FRICTION_GAINS,
     GainSpec,
     NominalPDController,
     check_tuning,
+    friction_feedforward,
     nominal_mass_diagonal,
 )
 from pipeline.control.pid import INTEGRAL_POLE_FRACTION
@@ -41,6 +43,7 @@ GAINS = (
     GainSpec("kd", unit="1/s", default="2 zeta w + p"),
     GainSpec("ki", unit="1/s^3", default="p w^2, p = 0.1 w"),
     GainSpec("i_clamp", unit="rad s", default="0.5 effort_j / (m_jj ki)"),
+    *FRICTION_GAINS,
 )
 INTEGRAL_EFFORT_FRACTION = 0.5
 """Default clamp: the integral may ask for at most this share of a joint's effort limit."""
@@ -114,4 +117,5 @@ class ComputedTorquePidController(NominalPDController):
         np.clip(z, -self._i_clamp, self._i_clamp, out=z)
         a = qdd_ref + self._kd * (qd_ref - qd) + self._kp * e + self._ki * z
         tau: F64 = pin.rnea(self._model, self._data, q, qd, a)
-        return tau
+        friction = friction_feedforward(self._gains, qd_ref)
+        return tau if friction is None else tau + friction

@@ -31,12 +31,19 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.control import pid
-from pipeline.control.base import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, F64, GainSpec
+from pipeline.control.base import (
+    DEFAULT_OMEGA_N_RAD_S,
+    DEFAULT_ZETA,
+    F64,
+    FRICTION_GAINS,
+    GainSpec,
+    friction_feedforward,
+)
 from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
 
 NAME = "pid_ff"
-GAINS = (*pid.GAINS, GainSpec("ff_at_next_sample", flag=True))
+GAINS = (*pid.GAINS, GainSpec("ff_at_next_sample", flag=True), *FRICTION_GAINS)
 
 
 def default_gains(
@@ -92,4 +99,7 @@ class PidFeedForwardController(pid.PidController):
         tau += pin.rnea(self._model, self._data, q_n, qd_n, qdd_n)
         if self._use_ff:
             tau += self._ff * qd_n
+        friction = friction_feedforward(self._gains, qd_n)
+        if friction is not None:
+            tau += friction
         return tau

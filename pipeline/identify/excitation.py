@@ -302,8 +302,8 @@ def record_excitation(
     from pipeline.log.bag import write_episode_bag
     from pipeline.model.scene import Box
     from pipeline.params import load_params
-    from pipeline.robots.spec import load_spec
     from pipeline.sim.runner import run_episode
+    from pipeline.stages.assemble import scenario_spec
     from pipeline.trajectory import TrajectorySamples
 
     wall0 = time.perf_counter()
@@ -323,7 +323,7 @@ def record_excitation(
         )
     if out.exists() and not force:
         raise IdentificationError(f"{out}: recording already exists; use --force to overwrite it")
-    spec = load_spec(scenario.robot)
+    spec = scenario_spec(scenario)
     obstacles = tuple(Box(b.name, b.center, b.half_size) for b in scenario.obstacles)
     design = design_excitation(
         spec,
@@ -339,9 +339,13 @@ def record_excitation(
     ref = design.reference
     check_excitation(spec, ref, obstacles=obstacles)
     cparams = params.controllers[controller_name]
-    from pipeline.identify.model_file import nominal_spec
+    from pipeline.identify.model_file import nominal_path, nominal_spec
 
-    nominal = nominal_spec(spec, scenario.nominal, where=f"scenarios.{scenario_name}")
+    nominal = nominal_spec(
+        spec,
+        nominal_path(scenario.nominal, seed=seed),
+        where=f"scenarios.{scenario_name}",
+    )
     controller = make_controller(
         cparams.type, nominal, cparams.gains, source=f"controllers.{controller_name}"
     )

@@ -25,7 +25,8 @@ import numpy as np
 import yaml
 
 from pipeline.errors import IdentificationError, PipelineError
-from pipeline.robots.spec import RobotSpec, parse_spec
+from pipeline.robots.dh_yaml import parse_spec
+from pipeline.robots.spec import RobotSpec
 from pipeline.yamlio import parse_yaml
 
 FORMAT = "armlab.identified-model/1"
@@ -84,7 +85,15 @@ def spec_document(spec: RobotSpec) -> dict[str, Any]:
         entry["collision"] = {"radius": j.collision_radius}
         entry["armature"] = j.armature
         joints.append(entry)
-    return {"name": spec.name, "convention": spec.convention, "angle_unit": "rad", "joints": joints}
+    document: dict[str, Any] = {
+        "name": spec.name,
+        "convention": spec.convention,
+        "angle_unit": "rad",
+        "joints": joints,
+    }
+    if spec.armature_source:
+        document["armature_source"] = spec.armature_source
+    return document
 
 
 def write_model(path: Path, document: Mapping[str, Any]) -> None:
@@ -145,6 +154,15 @@ def load_model(path: str | Path) -> IdentifiedModel:
     )
 
 
+SEED_FIELD = "{seed}"
+"""In a scenario's ``nominal:`` path, the episode's seed: each drawn plant's own model."""
+
+
+def nominal_path(path: str | None, *, seed: int) -> str | None:
+    """A scenario's ``nominal:`` path for the episode of ``seed`` (``{seed}`` filled in)."""
+    return None if path is None else path.replace(SEED_FIELD, str(seed))
+
+
 def nominal_spec(spec: RobotSpec, path: str | None, *, where: str = "nominal") -> RobotSpec:
     """The controllers' nominal robot: ``spec`` itself, or the identified model at ``path``.
 
@@ -160,3 +178,27 @@ def nominal_spec(spec: RobotSpec, path: str | None, *, where: str = "nominal") -
             f"the scenario's robot '{spec.name}' has {', '.join(spec.joint_names)}"
         )
     return model.spec
+
+
+FRICTION_KEYS = {
+    "friction_coulomb_nm": "coulomb_nm",
+    "friction_viscous_nm_s_rad": "viscous_nm_s_rad",
+}
+"""Friction feed-forward gains a nominal model file fills in -> its ``friction`` fields."""
+
+
+def with_nominal_friction(gains: Mapping[str, Any], path: str | None) -> dict[str, Any]:
+    """``gains`` with the friction feed-forward's Coulomb and viscous values taken from
+    the nominal model file at ``path``, when ``friction_ff`` is on and the gains do not
+    give them (explicit values win; without a model file nothing changes).
+
+    Raises:
+        IdentificationError: a bad model file.
+    """
+    out = dict(gains)
+    if path is None or out.get("friction_ff") is not True:
+        return out
+    friction = load_model(path).friction
+    for key, field in FRICTION_KEYS.items():
+        out.setdefault(key, [float(x) for x in getattr(friction, field)])
+    return out

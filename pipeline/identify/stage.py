@@ -44,7 +44,8 @@ from pipeline.identify.regressor import (
 from pipeline.identify.samples import FILTER_ORDER, JointSamples, joint_samples
 from pipeline.log.reader import ReadOptions, Recording, read_recording
 from pipeline.log.robot_facts import robot_facts
-from pipeline.robots.spec import RobotSpec, load_spec
+from pipeline.robots.loaders import load_spec
+from pipeline.robots.spec import RobotSpec
 
 F64 = np.ndarray
 
@@ -103,7 +104,9 @@ def identified_spec(spec: RobotSpec, theta: np.ndarray) -> RobotSpec:
         )
         for j, joint in enumerate(spec.joints)
     )
-    return replace(spec, joints=joints)
+    return replace(
+        spec, joints=joints, armature_source="identified from recordings (pipeline identify fit)"
+    )
 
 
 def _floats(values: np.ndarray | Sequence[float]) -> list[float]:

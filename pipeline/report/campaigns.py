@@ -43,6 +43,7 @@ from pipeline.report.figures import (
     subplot_grid,
     unit_label,
 )
+from pipeline.report.flips import flip_lines
 
 # Conditions drawn in a figure / listed in a Markdown table (all are in the CSV files).
 MAX_CONDITIONS_SHOWN = 12
@@ -429,6 +430,7 @@ def campaign_section(
                     md.table(["joint", *[c or "(all)" for c in shown]], rows),
                     "",
                 ]
+        lines += flip_lines(wl, conditions, out_dir=out_dir, stem=stem, files=files)
     else:
         lines += [
             f"No win/loss matrix: the campaign has no completed `{baseline}` episodes and "

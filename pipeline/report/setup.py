@@ -113,6 +113,26 @@ def _loop_lines(loop: LoopSettings | None) -> list[str]:
     return [f"- Loop (the same for every law): {_settings_line(_as_recorded(loop), ())}."]
 
 
+def _armature_lines(robot: Any, plant: Mapping[str, Any], scenario: Mapping[str, Any]) -> list[str]:
+    """The rotor armature the nominal model assumes, and where its values come from."""
+    if not isinstance(robot, Mapping):
+        return []
+    nominal = plant.get("nominal_armature")
+    if nominal is None:
+        joints = robot.get("joints")
+        if isinstance(joints, list):
+            nominal = [j.get("armature") for j in joints if isinstance(j, Mapping)]
+    source = _given(robot, "armature_source")
+    if nominal is None and source is None:
+        return []
+    stated = source if source is not None else "not stated in the robot file"
+    model = _given(scenario, "nominal")
+    if model is not None:  # the controllers' model is an identified one, not the file
+        stated = f"identified (`nominal: {model}`); the robot file's: {stated}"
+    values = md.value(nominal)
+    return [f"- Rotor armature of the nominal model [kg m²]: {values}; source: {stated}."]
+
+
 def setup_section(data: ReportData, scenario: str) -> list[str]:
     """The ``### Setup`` section of a scenario (or campaign condition): its first
     episode's settings, and one row per episode (per controller and gains when many)."""
@@ -138,6 +158,7 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
         f"obstacles: {len(obstacles) if isinstance(obstacles, list) else md.NA}; "
         f"hold after the motion: {md.value(_given(sc, 'hold_s'))} s.",
         f"- Planner: {_planner_line(planner)}.",
+        *_armature_lines(s.robot if s is not None else None, plant, sc),
         f"- Plant: {_settings_line(plant, _PLANT_KEYS, skip=('links',))}"
         + (
             "; link masses, centres of mass and inertias (and the armature above) drawn per "

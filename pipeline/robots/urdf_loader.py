@@ -27,6 +27,8 @@ from pydantic import Field, ValidationError
 
 from pipeline.errors import SpecError
 from pipeline.model import transforms as tf
+from pipeline.robots.dh_yaml import StrictModel, format_validation_error
+from pipeline.robots.packages import package_search_path
 from pipeline.robots.spec import (
     Frame,
     Inertial,
@@ -35,10 +37,7 @@ from pipeline.robots.spec import (
     RobotSpec,
     Segment,
     Shape,
-    _Strict,
     as_pose,
-    format_validation_error,
-    package_search_path,
 )
 from pipeline.yamlio import parse_yaml
 
@@ -53,7 +52,7 @@ CONTINUOUS_RANGE_RAD = 2 * math.pi
 F64 = np.ndarray
 
 
-class _Sidecar(_Strict):
+class _Sidecar(StrictModel):
     urdf: str | None = None
     srdf: str | None = None
     tip: str | None = None
@@ -539,6 +538,7 @@ def load_urdf(
         format="urdf",
         description=text,
         base_shapes=tuple(shapes.get(root_link, ())),
+        armature_source=opts.armature_source or sidecar_name,
         settings_sources=(
             ("armature", opts.armature_source or sidecar_name),
             ("acceleration", sidecar_name),

@@ -20,7 +20,8 @@ import numpy as np
 from pipeline.control import Controller, controller_entry, make_controller
 from pipeline.control.base import F64, TUNING_KEYS
 from pipeline.errors import ParamsError, PipelineError
-from pipeline.robots.spec import RobotSpec, load_spec
+from pipeline.robots.loaders import load_spec
+from pipeline.robots.spec import RobotSpec
 from pipeline.sim.references import PAPER_START_RAD, QuinticReference
 from pipeline.sim.runner import run_episode
 

@@ -110,7 +110,28 @@ def spec_as_dict(spec: RobotSpec) -> dict[str, Any]:
             }
             for j, dh in zip(spec.joints, rows, strict=True)
         ],
+        **({"armature_source": spec.armature_source} if spec.armature_source else {}),
     }
+
+
+def scenario_spec(scenario: ScenarioParams) -> RobotSpec:
+    """The scenario's robot: its description, armature x ``armature_scale`` (the arm's own,
+    so the plant and the CAD nominal model both get it).
+
+    Raises:
+        SpecError: an unknown robot or a bad robot file.
+    """
+    from dataclasses import replace
+
+    from pipeline.robots.loaders import load_spec
+
+    spec = load_spec(scenario.robot)
+    scale = scenario.armature_scale
+    if scale == 1.0:
+        return spec
+    joints = tuple(replace(j, armature=j.armature * scale) for j in spec.joints)
+    source = f"{spec.armature_source or 'the robot file'}; x {scale:g} (scenario armature_scale)"
+    return replace(spec, joints=joints, armature_source=source)
 
 
 def param_values(value: float | list[float]) -> tuple[float, ...]:

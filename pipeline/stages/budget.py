@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 from pipeline.errors import ParamsError
 from pipeline.params import Episode, Params
-from pipeline.robots.spec import load_spec
+from pipeline.robots.loaders import load_spec
 
 # What one control step costs, per joint, measured on the paper scenario (UR5, 1 kHz, full
 # logging incl. the true state): peak RSS of `pipeline record` grows by ~3.6 kB per control

@@ -33,7 +33,7 @@ from pipeline.params import (
     RandomGoals,
     ScenarioParams,
 )
-from pipeline.robots.spec import format_validation_error
+from pipeline.robots.dh_yaml import format_validation_error
 from pipeline.settings import CampaignInfo
 from pipeline.stages.goals import resolve_goal
 
@@ -169,7 +169,7 @@ def draw_goals(
     """
     from pipeline.model.scene import Box
     from pipeline.planning.collision import CollisionChecker
-    from pipeline.robots.spec import load_spec
+    from pipeline.robots.loaders import load_spec
 
     scenario = params.scenarios[scenario_name]
     spec = load_spec(scenario.robot)
@@ -247,7 +247,7 @@ def _controller_for(
 def _tuned_keys(controller_type: str, robot: str) -> tuple[str, ...]:
     """Gain keys a controller type derives from its tuning knobs (``kp``, ``kd``, ...)."""
     from pipeline.control.registry import controller_entry
-    from pipeline.robots.spec import load_spec
+    from pipeline.robots.loaders import load_spec
 
     try:
         entry = controller_entry(controller_type)

@@ -202,7 +202,7 @@ def check_campaign_count(params: Params, name: str, *, out: Path, jobs: int) -> 
     Raises:
         ParamsError: unknown campaign, or a lower bound already too big.
     """
-    from pipeline.robots.spec import load_spec
+    from pipeline.robots.loaders import load_spec
 
     if name not in params.campaigns:
         return 0  # expand() names the known ones
@@ -237,7 +237,7 @@ def check_campaign_size(
     Args:
         motion_s: the reference's duration [s] (0 before planning: a lower bound).
     """
-    from pipeline.robots.spec import load_spec
+    from pipeline.robots.loaders import load_spec
 
     n_bytes = 0
     wall_s = 0.0

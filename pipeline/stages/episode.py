@@ -20,12 +20,12 @@ from pipeline.errors import PipelineError
 from pipeline.fsutil import remove_stale
 from pipeline.params import Episode
 from pipeline.planning import PlannedPath, TimedTrajectory
-from pipeline.robots.spec import load_spec
 from pipeline.stages.assemble import (
     bag_metadata,
     draw_scenario_plant,
     episode_settings,
     loop_settings,
+    scenario_spec,
 )
 from pipeline.stages.plans import ScenarioPlan, obstacle_boxes
 
@@ -103,19 +103,20 @@ def _run_and_write(
     before_write: Callable[[], None] | None = None,
 ) -> EpisodeOutcome:
     from pipeline.control import controller_origin, make_controller
-    from pipeline.identify.model_file import nominal_spec
+    from pipeline.identify.model_file import nominal_path, nominal_spec, with_nominal_friction
     from pipeline.log.bag import write_episode_bag
     from pipeline.sim.runner import run_episode
     from pipeline.sim.safety import SKIP_WITHIN_M, assess_execution
 
     scenario = episode.scenario
-    spec = load_spec(scenario.robot)
+    spec = scenario_spec(scenario)
     sim = episode.sim
-    nominal = nominal_spec(spec, scenario.nominal, where=f"scenarios.{episode.scenario_name}")
+    model_path = nominal_path(scenario.nominal, seed=episode.seed)
+    nominal = nominal_spec(spec, model_path, where=f"scenarios.{episode.scenario_name}")
     controller = make_controller(
         episode.controller.type,
         nominal,
-        episode.controller.gains,
+        with_nominal_friction(episode.controller.gains, model_path),
         source=f"controllers.{episode.controller_name}",
     )
     p = scenario.plant

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 from pipeline.errors import PipelineError
 from pipeline.params import Episode, Params, ScenarioParams
 from pipeline.planning import PlannedPath, TimedTrajectory
-from pipeline.robots.spec import load_spec
+from pipeline.robots.loaders import load_spec
 from pipeline.stages.goals import resolve_goal
 
 if TYPE_CHECKING:

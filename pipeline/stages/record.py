@@ -17,7 +17,7 @@ from pathlib import Path
 from pipeline.errors import ParamsError, PipelineError, SimulationError
 from pipeline.fsutil import ensure_dir
 from pipeline.params import Episode, Params
-from pipeline.robots.spec import load_spec
+from pipeline.robots.loaders import load_spec
 from pipeline.stages.budget import check_budget
 from pipeline.stages.episode import EpisodeOutcome, remove_work_folders
 from pipeline.stages.executors import make_executor

@@ -19,7 +19,8 @@ from pipeline.errors import ParamsError, PipelineError
 from pipeline.fileio import atomic_write_bytes
 from pipeline.kinematics.base import pose_summary
 from pipeline.params import Params, parse_params
-from pipeline.robots.spec import RobotSpec, load_spec
+from pipeline.robots.loaders import load_spec
+from pipeline.robots.spec import RobotSpec
 from pipeline.teach.session import TeachState
 from pipeline.yamlio import parse_yaml
 

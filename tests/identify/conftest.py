@@ -11,7 +11,7 @@ import pytest
 from pipeline.control import make_controller
 from pipeline.identify.fourier import FourierReference
 from pipeline.log.bag import write_episode_bag
-from pipeline.robots.spec import load_spec
+from pipeline.robots.loaders import load_spec
 from pipeline.sim.runner import run_episode
 from pipeline.trajectory import TrajectorySamples
 

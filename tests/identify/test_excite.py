@@ -21,7 +21,7 @@ from pipeline.identify.fourier import FourierReference
 from pipeline.identify.stage import fit_command, validate_command
 from pipeline.log.reader import read_recording
 from pipeline.params import load_params
-from pipeline.robots.spec import load_spec
+from pipeline.robots.loaders import load_spec
 
 PARAMS = Path(__file__).parents[2] / "params.yaml"
 

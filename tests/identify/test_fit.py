@@ -15,7 +15,7 @@ from pipeline.identify.regressor import PER_JOINT, standard_parameters
 from pipeline.identify.samples import joint_samples
 from pipeline.identify.stage import fit_command, validate_command
 from pipeline.log.reader import read_recording
-from pipeline.robots.spec import load_spec
+from pipeline.robots.loaders import load_spec
 
 
 def test_exact_round_trip_recovers_the_base_parameters(ideal_bags: tuple[Path, Path]) -> None:

@@ -17,7 +17,7 @@ from pipeline.identify.fit import identify
 from pipeline.identify.samples import joint_samples
 from pipeline.identify.stage import fit_command, validate_command
 from pipeline.log.reader import read_recording
-from pipeline.robots.spec import load_spec
+from pipeline.robots.loaders import load_spec
 
 from .conftest import fourier, record
 

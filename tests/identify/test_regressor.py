@@ -16,7 +16,7 @@ from pipeline.identify.regressor import (
     standard_parameters,
 )
 from pipeline.model.urdf import build_pinocchio_model
-from pipeline.robots.spec import load_spec
+from pipeline.robots.loaders import load_spec
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from pipeline.robots import RobotSpec
-from pipeline.robots.spec import with_dh_rows
+from pipeline.robots.dh_yaml import with_dh_rows
 
 
 def wrapped_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:

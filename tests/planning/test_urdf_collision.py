@@ -10,7 +10,7 @@ import pytest
 from pipeline.model.scene import Box
 from pipeline.planning.collision import CollisionChecker
 from pipeline.robots import load_spec
-from pipeline.robots.spec import package_search_path
+from pipeline.robots.packages import package_search_path
 
 pytestmark = pytest.mark.skipif(
     not any((p / "example-robot-data").is_dir() for p in package_search_path()),

@@ -16,7 +16,8 @@ from pipeline.model.dh import forward_kinematics
 from pipeline.model.mjcf import build_mujoco_model
 from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots import RobotSpec, load_spec
-from pipeline.robots.spec import package_search_path, pose_matrix
+from pipeline.robots.packages import package_search_path
+from pipeline.robots.spec import pose_matrix
 
 SHARE = next(
     (p / "example-robot-data" / "robots" for p in package_search_path() if

@@ -88,7 +88,7 @@ def test_random_draws_are_seeded_per_index_so_more_draws_keep_the_first():
 
 def test_random_goals_are_within_limits_the_region_and_clear_of_an_obstacle():
     from pipeline.model.scene import Box
-    from pipeline.robots.spec import load_spec
+    from pipeline.robots.loaders import load_spec
     from pipeline.sim.safety import assess_execution
 
     data = _base()
@@ -120,7 +120,7 @@ def test_random_goals_are_within_limits_the_region_and_clear_of_an_obstacle():
 
 def test_a_swept_tuning_knob_replaces_the_explicit_gains_it_derives():
     from pipeline.control import make_controller
-    from pipeline.robots.spec import load_spec
+    from pipeline.robots.loaders import load_spec
 
     episodes = expand(_params(SWEEP), "c")
     ctc = next(e for e in episodes if e.controller_name == "ctc" and e.campaign

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from pipeline.robots import load_spec
-from pipeline.robots.spec import package_search_path
+from pipeline.robots.packages import package_search_path
 from tests.test_bad_input import run_cli, run_cli_out
 
 pytestmark = pytest.mark.skipif(

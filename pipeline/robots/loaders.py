@@ -1,0 +1,109 @@
+"""Loading a robot: by built-in name or by path, through one loader per file format.
+
+:data:`LOADERS` maps a file suffix to its loader; adding a format is one loader file and
+one entry there. Loaded robots are cached per process (per file content for paths).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+from importlib import resources
+from pathlib import Path
+
+from pipeline.errors import SpecError, unknown_name_message
+from pipeline.robots.dh_yaml import parse_dh_text
+from pipeline.robots.spec import (
+    RobotSpec,
+)
+
+BUILTIN_SIDECAR = ".armlab.yaml"
+
+
+def builtin_robot_names() -> list[str]:
+    """Names of the robots shipped inside the package."""
+    folder = resources.files("pipeline.robots")
+    return sorted(
+        p.name.removesuffix(BUILTIN_SIDECAR).removesuffix(".yaml")
+        for p in folder.iterdir()
+        if p.name.endswith(".yaml")
+    )
+
+
+LOADERS: dict[str, str] = {
+    ".yaml": "pipeline.robots.dh_yaml:load_dh_yaml",
+    ".yml": "pipeline.robots.dh_yaml:load_dh_yaml",
+    ".urdf": "pipeline.robots.urdf_loader:load_urdf",
+    ".armlab.yaml": "pipeline.robots.urdf_loader:load_sidecar",
+}
+"""Robot file loaders by suffix, ``module:function`` taking ``(path, *, package_path)`` and
+returning a :class:`RobotSpec`: a new format is one loader file and one entry here."""
+
+
+def loader_suffix(path: Path) -> str | None:
+    """The :data:`LOADERS` key of a file name (the longest suffix that matches), or None."""
+    name = path.name.lower()
+    found = [s for s in LOADERS if name.endswith(s)]
+    return max(found, key=len) if found else None
+
+
+def load_spec(name_or_path: str | Path, *, package_path: tuple[str, ...] = ()) -> RobotSpec:
+    """Load a robot by built-in name (``"ur5"``) or by path to a robot file (DH YAML, URDF:
+    see :data:`LOADERS`).
+
+    Built-in robots are parsed once per process (they are package data); a file once per
+    process and content.
+
+    Raises:
+        SpecError: unknown name (lists the available ones), unreadable file or
+            invalid content (names the file and field path).
+    """
+    text = str(name_or_path)
+    path = Path(text).expanduser()
+    # a path has a known suffix or a slash; anything else is a built-in name (a stray
+    # file or folder called "ur5" in the working directory must not hide the robot)
+    suffix = loader_suffix(path)
+    if suffix is not None or "/" in text or "\\" in text:
+        if path.is_dir():
+            raise SpecError(f"{text}: is a directory, expected a robot YAML or URDF file")
+        if not path.is_file():
+            raise SpecError(f"{text}: no such robot file")
+        if suffix is None:
+            raise SpecError(
+                f"{text}: unknown robot file type '{path.suffix}'; valid: {', '.join(LOADERS)}"
+            )
+        try:
+            content = path.read_bytes()
+        except OSError as err:
+            raise SpecError(f"{text}: cannot read robot file ({err})") from err
+        return _load_file(str(path), hashlib.sha256(content).hexdigest(), package_path)
+    names = builtin_robot_names()
+    if text not in names:
+        hint = unknown_name_message("robot", text, names)
+        raise SpecError(f"{hint} (or pass a path to a robot file: {', '.join(LOADERS)})")
+    return _load_builtin(text)
+
+
+@functools.lru_cache(maxsize=16)
+def _load_file(path: str, sha256: str, package_path: tuple[str, ...]) -> RobotSpec:
+    """A robot file, parsed once per process and content (``sha256`` keys the cache)."""
+    import importlib
+
+    module, func = LOADERS[loader_suffix(Path(path)) or ""].split(":")
+    loader = getattr(importlib.import_module(module), func)
+    spec: RobotSpec = loader(Path(path), package_path=package_path)
+    return dataclasses.replace(spec, source_sha256=sha256, loaded_from=path)
+
+
+@functools.lru_cache(maxsize=16)
+def _load_builtin(name: str) -> RobotSpec:
+    sidecar = resources.files("pipeline.robots") / f"{name}{BUILTIN_SIDECAR}"
+    if sidecar.is_file():  # a URDF robot: its settings sidecar names the URDF
+        from pipeline.robots.urdf_loader import load_sidecar
+
+        spec = load_sidecar(Path(str(sidecar)))
+        digest = hashlib.sha256(Path(spec.source).read_bytes()).hexdigest()
+        return dataclasses.replace(spec, source_sha256=digest, loaded_from=name)
+    content = (resources.files("pipeline.robots") / f"{name}.yaml").read_text(encoding="utf-8")
+    return parse_dh_text(content, f"robots/{name}.yaml")
