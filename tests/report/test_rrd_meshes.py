@@ -81,3 +81,56 @@ def test_panda_rrd_holds_a_mesh_per_link_posed_by_fk(
     proc = subprocess.run([str(RERUN), "rrd", "verify", str(out / "recording.rrd")],
                           capture_output=True, text=True, timeout=120)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
+
+
+URDF = """<robot name="two">
+  <link name="base">
+    <visual><origin xyz="0 0 0.05"/><geometry><box size="0.2 0.2 0.1"/></geometry>
+      <material name="grey"><color rgba="0.5 0.5 0.5 1"/></material></visual>
+  </link>
+  <link name="upper">
+    <inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/>
+    </inertial>
+    <visual><geometry><mesh filename="cube.stl" scale="2 2 2"/></geometry></visual>
+  </link>
+  <link name="lower">
+    <inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/>
+    </inertial>
+    <visual><geometry><mesh filename="cube.dae"/></geometry></visual>
+    <collision><origin xyz="0 0 0.1"/><geometry><cylinder radius="0.03" length="0.2"/></geometry>
+    </collision>
+  </link>
+  <link name="tip"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="upper"/>
+    <origin xyz="0 0 0.1"/><axis xyz="0 0 1"/>
+    <limit lower="-2" upper="2" velocity="1" effort="10"/></joint>
+  <joint name="j2" type="revolute"><parent link="upper"/><child link="lower"/>
+    <origin xyz="0 0 0.3"/><axis xyz="0 1 0"/>
+    <limit lower="-2" upper="2" velocity="1" effort="10"/></joint>
+  <joint name="fix" type="fixed"><parent link="lower"/><child link="tip"/>
+    <origin xyz="0 0 0.2"/></joint>
+</robot>
+"""
+
+
+def test_each_link_draws_its_visuals_where_rerun_reads_them_else_its_collision(
+    tmp_path: Path,
+) -> None:
+    import trimesh
+
+    trimesh.creation.box(extents=(0.1, 0.1, 0.1)).export(tmp_path / "cube.stl")
+    (tmp_path / "cube.dae").write_text("<COLLADA/>")  # never read: Rerun cannot load it
+    (tmp_path / "two.urdf").write_text(URDF)
+    spec = load_spec(tmp_path / "two.urdf")
+    by_link = {g.link: g for g in rerun_geometry(spec)}
+    assert set(by_link) == {"base", "upper", "lower"}
+    base, upper, lower = by_link["base"], by_link["upper"], by_link["lower"]
+    assert (base.owner, base.shape, base.size, base.rgba) == (-1, "box", (0.2, 0.2, 0.1),
+                                                              (0.5, 0.5, 0.5, 1.0))  # fmt: skip
+    assert (upper.owner, upper.shape, upper.size) == (0, "mesh", (2.0, 2.0, 2.0))
+    assert upper.mesh == str((tmp_path / "cube.stl").resolve())
+    assert (lower.owner, lower.shape, lower.size) == (1, "cylinder", (0.03, 0.2))  # collision
+    np.testing.assert_allclose(lower.owner_T_geometry[:3, 3], [0.0, 0.0, 0.1])
+    arm = link_meshes(spec, np.array([[0.0, 0.0], [0.5, -0.3]]))
+    assert arm is not None and arm.links == ("base", "upper", "lower")
+    assert arm.base_T_link.shape == (2, 2, 4, 4)

@@ -49,3 +49,30 @@ def test_dh_robot_page_keeps_its_capsules(ur5_server) -> None:
 
 def _node_names(server) -> list[str]:
     return list(server._server.scene._handle_from_node_name)
+
+
+def test_unreadable_visual_mesh_falls_back_to_capsules(tmp_path) -> None:
+    import trimesh
+
+    from pipeline.teach.meshes import add_link_meshes
+    from tests.report.test_rrd_meshes import URDF
+
+    trimesh.creation.box(extents=(0.1, 0.1, 0.1)).export(tmp_path / "cube.stl")
+    (tmp_path / "cube.dae").write_text("<COLLADA/>")  # not a mesh trimesh can read
+    (tmp_path / "two.urdf").write_text(URDF)
+    spec = load_spec(tmp_path / "two.urdf")
+    added: list[str] = []
+
+    class Scene:
+        def add_glb(self, name: str, *_: object, **__: object) -> str:
+            added.append(name)
+            return name
+
+        add_mesh_trimesh = add_glb
+
+    assert add_link_meshes(Scene(), spec, link_node) == [] and added == []
+    (tmp_path / "cube.dae").unlink()
+    trimesh.creation.box(extents=(0.1, 0.1, 0.1)).export(tmp_path / "cube.dae")
+    spec = load_spec(tmp_path / "two.urdf")
+    names = add_link_meshes(Scene(), spec, link_node)
+    assert [n.rsplit("/", 1)[0] for n in names] == [link_node(0), link_node(1), link_node(2)]
