@@ -53,20 +53,26 @@ def _primitive(g: LinkGeometry) -> Any:
     return mesh
 
 
-def add_link_meshes(scene: Any, spec: RobotSpec, node: Callable[[int], str]) -> list[Any]:
+def add_link_meshes(
+    scene: Any, spec: RobotSpec, node: Callable[[int], str]
+) -> tuple[list[Any], str]:
     """Add a URDF robot's visual geometry to ``scene`` (a viser ``SceneApi``) under the
     link-frame nodes ``node(i)`` (``i`` = 0 for the base, i + 1 for joint i's link).
 
     Returns:
-        the handles added; empty (nothing added) for a robot that is not a URDF, has no
-        visual geometry, or whose visual meshes cannot be read: the caller draws its
-        capsules then.
+        the handles added and why none were ("" when some were, or for a robot that is not
+        a URDF): nothing is added for a robot that is not a URDF, has no visual geometry,
+        or whose visual meshes cannot be read; the caller draws its capsules then.
     """
+    if spec.format != "urdf":
+        return [], ""
     try:
         items = link_geometry(spec, "visual")
         blobs = [_mesh_glb(g.mesh, g.size) if g.shape == "mesh" else None for g in items]
-    except SpecError:
-        return []
+    except SpecError as err:
+        return [], f"drawn as capsules: {err}"
+    if not items:
+        return [], "drawn as capsules: its URDF has no visual geometry"
     handles = []
     for k, (g, blob) in enumerate(zip(items, blobs, strict=True)):
         name = geometry_node(node(g.owner + 1), g, k)
@@ -76,4 +82,4 @@ def add_link_meshes(scene: Any, spec: RobotSpec, node: Callable[[int], str]) -> 
             handles.append(scene.add_glb(name, blob, **where))
         else:
             handles.append(scene.add_mesh_trimesh(name, _primitive(g), **where))
-    return handles
+    return handles, ""

@@ -296,7 +296,7 @@ class TeachServer:
         self._link_frames = []
         scene.add_frame(link_node(0), show_axes=False)
         # a URDF robot's own visual meshes; capsules for a DH robot (or unreadable meshes)
-        self.meshes = add_link_meshes(scene, self._spec, link_node)
+        self.meshes, self._mesh_note = add_link_meshes(scene, self._spec, link_node)
         for i, joint in enumerate(self._spec.joints, start=1):
             frame = scene.add_frame(link_node(i), show_axes=False)
             self._link_frames.append(frame)
@@ -324,6 +324,8 @@ class TeachServer:
             if self._solver_note
             else ""
         )
+        if self._mesh_note:  # a URDF robot whose meshes could not be read
+            note += f"<br><b style='color:#d29922'>Meshes</b>: {html.escape(self._mesh_note)}"
         gui.add_html(
             f"<div style='font-size:0.85em'><b>{html.escape(spec.name)}</b>, {spec.dof} joints, "
             f"IK <b>{solver}</b>. Drag the gizmo to set the flange target.{note}</div>"

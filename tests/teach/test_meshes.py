@@ -70,9 +70,12 @@ def test_unreadable_visual_mesh_falls_back_to_capsules(tmp_path) -> None:
 
         add_mesh_trimesh = add_glb
 
-    assert add_link_meshes(Scene(), spec, link_node) == [] and added == []
+    handles, note = add_link_meshes(Scene(), spec, link_node)
+    assert handles == [] and added == []
+    assert note.startswith("drawn as capsules:") and "cube.dae" in note
     (tmp_path / "cube.dae").unlink()
     trimesh.creation.box(extents=(0.1, 0.1, 0.1)).export(tmp_path / "cube.dae")
     spec = load_spec(tmp_path / "two.urdf")
-    names = add_link_meshes(Scene(), spec, link_node)
+    names, note = add_link_meshes(Scene(), spec, link_node)
+    assert note == ""
     assert [n.rsplit("/", 1)[0] for n in names] == [link_node(0), link_node(1), link_node(2)]
