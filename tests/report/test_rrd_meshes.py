@@ -17,15 +17,11 @@ from pipeline.report import entities as ent
 from pipeline.report.rrd_meshes import link_meshes
 from pipeline.robots import load_spec
 from pipeline.robots.link_geometry import RERUN_MESH_SUFFIXES, link_geometry, rerun_geometry
-from pipeline.robots.spec import package_search_path
 from tests.stages.test_urdf_robot_e2e import PARAMS
+from tests.stages.test_urdf_robot_e2e import pytestmark as needs_panda
 from tests.test_bad_input import run_cli, run_cli_out
 
 RERUN = Path(sys.executable).with_name("rerun")
-needs_panda = pytest.mark.skipif(
-    not any((p / "example-robot-data").is_dir() for p in package_search_path()),
-    reason="example-robot-data is not installed",
-)
 
 
 @needs_panda

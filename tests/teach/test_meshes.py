@@ -4,18 +4,12 @@ the server poses by FK; a DH robot keeps its capsules."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from pipeline.robots import load_spec
 from pipeline.robots.link_geometry import link_geometry
-from pipeline.robots.spec import package_search_path
 from pipeline.teach.server import link_node
+from tests.stages.test_urdf_robot_e2e import pytestmark as needs_panda
 from tests.teach.conftest import start_server
-
-needs_panda = pytest.mark.skipif(
-    not any((p / "example-robot-data").is_dir() for p in package_search_path()),
-    reason="example-robot-data is not installed",
-)
 
 
 @needs_panda
