@@ -66,6 +66,11 @@ def arm_path(episode: str) -> str:
     return f"{WORLD_ROOT}/{part(episode)}/arm"
 
 
+def arm_link_path(episode: str, link: str) -> str:
+    """A URDF robot's link frame (posed over time) for one episode: its meshes hang on it."""
+    return f"{arm_path(episode)}/{part(link)}"
+
+
 TCP_ROOT = "tcp"
 TCP_QUANTITIES = {
     "position_error_mm": "TCP position error [mm] (FK of reference vs {state})",

@@ -1,5 +1,6 @@
 """The 3D scene of recording.rrd: each episode's arm (the robot's capsules posed by FK of
-the recorded joints), on its own base, and the camera that frames them all."""
+the recorded joints; a URDF robot's meshes, :mod:`pipeline.report.rrd_meshes`), on its own
+base, and the camera that frames them all."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from pipeline.model.chain import chain
 from pipeline.model.dh import link_frames
 from pipeline.report import entities as ent
 from pipeline.report.inputs import times_s, wide
+from pipeline.report.rrd_meshes import LinkMeshes, link_meshes, send_link_meshes
 from pipeline.robots import RobotSpec
 
 ARM_RATE_HZ = 30.0
@@ -100,6 +102,7 @@ class Arm:
     lengths: NDArray[np.float64]
     radii: NDArray[np.float32]
     flange: NDArray[np.float64]
+    meshes: LinkMeshes | None = None  # a URDF robot's, drawn instead of the capsules
 
     def corners(self) -> list[NDArray[np.float64]]:
         """Two corners of a box around everything drawn for it, in world coordinates."""
@@ -132,7 +135,7 @@ def make_arm(
     if lengths.size // max(idx.size, 1) == 0:
         return None
     return Arm(rec.episode, offset, label, label_z_m, color, t[idx], trans, quats, lengths,
-                radii, flange)  # fmt: skip
+                radii, flange, link_meshes(spec, q))  # fmt: skip
 
 
 def send_arm(stream: rr.RecordingStream, arm: Arm) -> None:
@@ -140,17 +143,10 @@ def send_arm(stream: rr.RecordingStream, arm: Arm) -> None:
     root = ent.episode_root(arm.episode)
     stream.log(root, rr.Transform3D(translation=arm.offset.tolist()), static=True)
     per_frame = arm.lengths.size // arm.t.size
-    stream.send_columns(
-        ent.arm_path(arm.episode),
-        indexes=[rr.TimeColumn(ent.TIMELINE, duration=arm.t)],
-        columns=rr.Capsules3D.columns(
-            translations=arm.translations,
-            quaternions=arm.quaternions,
-            lengths=arm.lengths,
-            radii=arm.radii,
-            colors=np.tile(np.array(arm.color, dtype=np.uint8), (arm.lengths.size, 1)),
-        ).partition(lengths=[per_frame] * arm.t.size),
-    )
+    if arm.meshes is not None:
+        send_link_meshes(stream, arm.episode, arm.t, arm.meshes, arm.color)
+    else:
+        _send_capsules(stream, arm, per_frame)
     stream.log(
         ent.ee_path_path(arm.episode),
         rr.LineStrips3D([arm.flange], radii=[0.004], colors=[arm.color]),
@@ -162,6 +158,20 @@ def send_arm(stream: rr.RecordingStream, arm: Arm) -> None:
             [[0.0, 0.0, arm.label_z_m]], radii=[0.02], colors=[arm.color], labels=[arm.label]
         ),
         static=True,
+    )
+
+
+def _send_capsules(stream: rr.RecordingStream, arm: Arm, per_frame: int) -> None:
+    stream.send_columns(
+        ent.arm_path(arm.episode),
+        indexes=[rr.TimeColumn(ent.TIMELINE, duration=arm.t)],
+        columns=rr.Capsules3D.columns(
+            translations=arm.translations,
+            quaternions=arm.quaternions,
+            lengths=arm.lengths,
+            radii=arm.radii,
+            colors=np.tile(np.array(arm.color, dtype=np.uint8), (arm.lengths.size, 1)),
+        ).partition(lengths=[per_frame] * arm.t.size),
     )
 
 

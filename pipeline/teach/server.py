@@ -1,7 +1,8 @@
 """The teach page: a viser server drawing a :class:`TeachSession` and wiring its events.
 
 The arm is drawn from the same capsules as the MJCF/URDF models
-(:func:`pipeline.model.chain.chain`), one node per link frame posed by forward
+(:func:`pipeline.model.chain.chain`), or, for a robot loaded from a URDF, from its own
+visual meshes (:mod:`pipeline.teach.meshes`), one node per link frame posed by forward
 kinematics. A transform gizmo sets the flange target; joint sliders drive FK.
 Every event goes through one lock (the solvers' Pinocchio data is not
 thread-safe) and ends in :meth:`TeachServer.render`, which sends the new pose
@@ -50,6 +51,7 @@ from pipeline.model.chain import chain
 from pipeline.model.dh import link_frames
 from pipeline.model.mjcf import FLOOR_Z_M
 from pipeline.teach.goal import GoalKind, goal_from_state, write_goal
+from pipeline.teach.meshes import add_link_meshes
 from pipeline.teach.origin import origin_checked_serve
 from pipeline.teach.session import TeachSession, TeachState
 
@@ -94,7 +96,8 @@ def _told_to_client(handler: Callable[[Any, Any], None]) -> Callable[[Any, Any],
 
 
 def link_node(i: int) -> str:
-    """Scene name of the node at link frame ``i`` (1..n): link i's geometry hangs on it."""
+    """Scene name of the node at link frame ``i`` (1..n; 0: the base): link i's geometry
+    hangs on it."""
     return f"{ARM_ROOT}/link{i}"
 
 
@@ -291,14 +294,19 @@ class TeachServer:
         )  # fmt: skip
         links = chain(self._spec)
         self._link_frames = []
+        scene.add_frame(link_node(0), show_axes=False)
+        # a URDF robot's own visual meshes; capsules for a DH robot (or unreadable meshes)
+        self.meshes, self._mesh_note = add_link_meshes(scene, self._spec, link_node)
         for i, joint in enumerate(self._spec.joints, start=1):
             frame = scene.add_frame(link_node(i), show_axes=False)
+            self._link_frames.append(frame)
+            if self.meshes:
+                continue
             mesh = _capsule_mesh(links, i - 1, joint.collision_radius)
             scene.add_mesh_simple(
                 f"{link_node(i)}/geom", vertices=np.asarray(mesh.vertices, dtype=np.float32),
                 faces=np.asarray(mesh.faces, dtype=np.uint32), color=_LINK_RGB[(i - 1) % 2],
             )  # fmt: skip
-            self._link_frames.append(frame)
         scene.add_frame(f"{link_node(self._spec.dof)}/flange", axes_length=0.08, axes_radius=0.004)
         self._gizmo = scene.add_transform_controls(TARGET_NODE, scale=0.2, depth_test=False)
         self._marker = scene.add_icosphere(MARKER_NODE, radius=0.015, color=OK_RGB)
@@ -316,6 +324,8 @@ class TeachServer:
             if self._solver_note
             else ""
         )
+        if self._mesh_note:  # a URDF robot whose meshes could not be read
+            note += f"<br><b style='color:#d29922'>Meshes</b>: {html.escape(self._mesh_note)}"
         gui.add_html(
             f"<div style='font-size:0.85em'><b>{html.escape(spec.name)}</b>, {spec.dof} joints, "
             f"IK <b>{solver}</b>. Drag the gizmo to set the flange target.{note}</div>"
@@ -326,10 +336,11 @@ class TeachServer:
         with gui.add_folder("Joints [rad] (FK)"):
             self._sliders = []
             self._bars = []
-            for joint in spec.joints:
+            for joint, q in zip(spec.joints, self.state.q, strict=True):
                 lim = joint.limits
+                # the session's start (0 may be outside a joint's limits, e.g. the Panda's 4th)
                 slider = gui.add_slider(
-                    joint.name, min=lim.lower, max=lim.upper, step=1e-3, initial_value=0.0
+                    joint.name, min=lim.lower, max=lim.upper, step=1e-3, initial_value=float(q)
                 )
                 slider.on_update(self._on_slider)
                 self._sliders.append(slider)

@@ -1,0 +1,98 @@
+"""A URDF robot's arm in recording.rrd, drawn from its meshes: each link frame an entity
+posed over time by FK of the recorded joints, each link's geometry logged once under it
+(:func:`pipeline.robots.link_geometry.rerun_geometry`: the visual meshes where Rerun loads
+them, STL/OBJ/glTF, else the link's collision geometry). DH robots keep their capsules
+(:mod:`pipeline.report.rrd_scene`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import rerun as rr
+from numpy.typing import NDArray
+
+from pipeline.errors import SpecError
+from pipeline.model.dh import link_frames
+from pipeline.report import entities as ent
+from pipeline.robots import RobotSpec
+from pipeline.robots.link_geometry import LinkGeometry, rerun_geometry
+
+__all__ = ["LinkMeshes", "link_meshes", "send_link_meshes"]
+
+
+@dataclass(frozen=True)
+class LinkMeshes:
+    """What an episode's mesh arm draws.
+
+    Attributes:
+        geometry: each link's drawn geometry, on its owner's link frame.
+        links: the owners' link names: the base first, then each joint's link.
+        base_T_link: the joints' link frames per drawn frame, (F, n, 4, 4) [m].
+    """
+
+    geometry: tuple[LinkGeometry, ...]
+    links: tuple[str, ...]
+    base_T_link: NDArray[np.float64]
+
+
+def link_meshes(spec: RobotSpec, q: NDArray[np.float64]) -> LinkMeshes | None:
+    """The mesh arm at each row of ``q``; None for a robot that is not a URDF, or whose
+    geometry cannot be drawn (a mesh file gone since the recording): capsules then."""
+    if spec.format != "urdf":
+        return None
+    try:
+        geometry = rerun_geometry(spec)
+    except SpecError:
+        return None
+    if not geometry:
+        return None
+    frames = np.array([link_frames(spec, qf) for qf in q]).reshape(q.shape[0], spec.dof, 4, 4)
+    links = (spec.base_link, *(j.link for j in spec.joints))
+    return LinkMeshes(geometry, links, frames)
+
+
+def send_link_meshes(
+    stream: rr.RecordingStream,
+    episode: str,
+    t: NDArray[np.float64],
+    meshes: LinkMeshes,
+    color: tuple[int, int, int],
+) -> None:
+    """Log the link frames over time and each geometry once (static) under its link."""
+    owners = sorted({g.owner for g in meshes.geometry})
+    for owner in owners:
+        path = ent.arm_link_path(episode, meshes.links[owner + 1])
+        if owner < 0:  # the base: the episode's root frame
+            stream.log(path, rr.Transform3D(translation=[0.0, 0.0, 0.0]), static=True)
+            continue
+        frames = meshes.base_T_link[:, owner]
+        stream.send_columns(
+            path,
+            indexes=[rr.TimeColumn(ent.TIMELINE, duration=t)],
+            columns=rr.Transform3D.columns(translation=frames[:, :3, 3], mat3x3=frames[:, :3, :3]),
+        )
+    rgba = [*color, 255]
+    for k, g in enumerate(meshes.geometry):
+        path = f"{ent.arm_link_path(episode, meshes.links[g.owner + 1])}/{k}_{ent.part(g.link)}"
+        rot = g.owner_T_geometry[:3, :3]
+        scale = np.diag(g.size) if g.shape == "mesh" else np.eye(3)
+        stream.log(
+            path,
+            rr.Transform3D(translation=g.owner_T_geometry[:3, 3], mat3x3=rot @ scale),
+            static=True,
+        )
+        stream.log(path, _archetype(g, rgba), static=True)
+
+
+def _archetype(g: LinkGeometry, rgba: list[int]) -> rr.AsArchetype:
+    if g.shape == "mesh":
+        return rr.Asset3D(path=g.mesh, albedo_factor=rgba)
+    if g.shape == "box":
+        return rr.Boxes3D(half_sizes=[[0.5 * s for s in g.size]], colors=[rgba],
+                          fill_mode="solid")  # fmt: skip
+    if g.shape == "sphere":
+        return rr.Ellipsoids3D(half_sizes=[[g.size[0]] * 3], colors=[rgba], fill_mode="solid")
+    # a URDF cylinder is centred on its origin, along z; Rerun's too
+    return rr.Cylinders3D(lengths=[g.size[1]], radii=[g.size[0]], colors=[rgba],
+                          fill_mode="solid")  # fmt: skip

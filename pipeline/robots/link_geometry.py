@@ -1,0 +1,171 @@
+"""A URDF robot's link geometry (visual or collision) on the arm's link frames, for the
+viewers: ``teach`` (viser) and the report's ``.rrd`` (Rerun).
+
+Each ``<visual>``/``<collision>`` of the robot's URDF (:attr:`RobotSpec.description`) is
+placed on the link frame that carries it: the base (owner -1) or the link moved by joint
+``i`` (owner ``i``, the frame :func:`pipeline.model.dh.link_frames` poses). Links merged
+into another (fixed joints, locked fingers) are carried by their owner through their
+:attr:`RobotSpec.frames` pose. ``package://`` resolves as the loader resolves it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+from xml.etree import ElementTree
+
+import numpy as np
+from numpy.typing import NDArray
+
+from pipeline.errors import SpecError
+from pipeline.model import transforms as tf
+from pipeline.robots.spec import RobotSpec, pose_matrix
+from pipeline.robots.urdf_loader import resolve_uri
+
+__all__ = ["RERUN_MESH_SUFFIXES", "GeometryKind", "LinkGeometry", "link_geometry", "rerun_geometry"]
+
+GeometryKind = Literal["visual", "collision"]
+# What rr.Asset3D reads (Rerun 0.41); COLLADA (.dae), common in URDFs, is not among them.
+RERUN_MESH_SUFFIXES = (".stl", ".obj", ".gltf", ".glb")
+
+
+@dataclass(frozen=True)
+class LinkGeometry:
+    """One ``<visual>`` or ``<collision>`` element, on its owner's link frame.
+
+    Attributes:
+        link: the URDF link it belongs to.
+        owner: -1 for the base, else the index of the joint whose link frame carries it.
+        owner_T_geometry: its pose in the owner's link frame (4x4) [m].
+        shape: ``mesh``, ``box``, ``sphere`` or ``cylinder``.
+        size: mesh: scale (x, y, z); box: full extents [m]; sphere: (radius,) [m];
+            cylinder: (radius, length) [m].
+        mesh: absolute path of the mesh file ("" for a primitive).
+        rgba: the URDF's material colour, when it gives one inline (0..1).
+    """
+
+    link: str
+    owner: int
+    owner_T_geometry: NDArray[np.float64]
+    shape: str
+    size: tuple[float, ...]
+    mesh: str = ""
+    rgba: tuple[float, float, float, float] | None = None
+
+
+def _floats(text: str | None, n: int, where: str, default: str) -> tuple[float, ...]:
+    raw = (text if text is not None else default).split()
+    try:
+        values = tuple(float(v) for v in raw)
+    except ValueError:
+        values = ()
+    if len(values) != n or not all(math.isfinite(v) for v in values):
+        raise SpecError(f"{where}: expected {n} finite numbers, got {text!r}")
+    return values
+
+
+def _origin(el: ElementTree.Element | None, where: str) -> NDArray[np.float64]:
+    out = np.eye(4)
+    if el is not None:
+        out[:3, :3] = tf.rpy_to_matrix(*_floats(el.get("rpy"), 3, f"{where}.origin.rpy", "0 0 0"))
+        out[:3, 3] = _floats(el.get("xyz"), 3, f"{where}.origin.xyz", "0 0 0")
+    return out
+
+
+def _owners(spec: RobotSpec) -> dict[str, tuple[int, NDArray[np.float64]]]:
+    """URDF link name -> (owner index, owner_T_link)."""
+    out: dict[str, tuple[int, NDArray[np.float64]]] = {spec.base_link: (-1, np.eye(4))}
+    index = {spec.base_link: -1}
+    for i, joint in enumerate(spec.joints):
+        out[joint.link] = (i, np.eye(4))
+        index[joint.link] = i
+    for frame in spec.frames:
+        if frame.link in index and frame.name not in out:
+            out[frame.name] = (index[frame.link], pose_matrix(frame.pose))
+    return out
+
+
+def link_geometry(
+    spec: RobotSpec, kind: GeometryKind, *, package_path: tuple[str, ...] = ()
+) -> tuple[LinkGeometry, ...]:
+    """Every ``<kind>`` element of a URDF robot's links, on the arm's link frames; () for a
+    robot that is not a URDF.
+
+    Raises:
+        SpecError: an unresolved ``package://`` or a missing mesh file (one line).
+    """
+    if spec.format != "urdf" or not spec.description:
+        return ()
+    source = spec.source
+    try:
+        root = ElementTree.fromstring(spec.description)
+    except ElementTree.ParseError as err:
+        raise SpecError(f"{source}: not well-formed XML ({err})") from err
+    owners = _owners(spec)
+    base = Path(source).parent
+    out = []
+    for link in root.findall("link"):
+        name = link.get("name") or ""
+        if name not in owners:
+            continue  # the ROS "world" mount or a dropped tool0: nothing the arm carries
+        owner, owner_T_link = owners[name]
+        for k, el in enumerate(link.findall(kind)):
+            where = f"{source}: link '{name}'.{kind}[{k}]"
+            geometry = el.find("geometry")
+            if geometry is None or len(geometry) == 0:
+                continue
+            g = geometry[0]
+            pose = owner_T_link @ _origin(el.find("origin"), where)
+            rgba = _colour(el, where)
+            if g.tag == "mesh":
+                uri = g.get("filename") or ""
+                path = resolve_uri(uri, base=base, where=where, package_path=package_path)
+                if not path.is_file():
+                    raise SpecError(f"{where}: missing mesh {uri!r} ({path})")
+                scale = _floats(g.get("scale"), 3, f"{where}.mesh.scale", "1 1 1")
+                out.append(
+                    LinkGeometry(name, owner, pose, "mesh", scale, str(path.resolve()), rgba)
+                )
+            elif g.tag == "box":
+                size = _floats(g.get("size"), 3, f"{where}.box.size", "")
+                out.append(LinkGeometry(name, owner, pose, "box", size, rgba=rgba))
+            elif g.tag == "sphere":
+                radius = _floats(g.get("radius"), 1, f"{where}.sphere.radius", "")
+                out.append(LinkGeometry(name, owner, pose, "sphere", radius, rgba=rgba))
+            elif g.tag == "cylinder":
+                r = _floats(g.get("radius"), 1, f"{where}.cylinder.radius", "")[0]
+                length = _floats(g.get("length"), 1, f"{where}.cylinder.length", "")[0]
+                out.append(LinkGeometry(name, owner, pose, "cylinder", (r, length), rgba=rgba))
+    return tuple(out)
+
+
+def _colour(el: ElementTree.Element, where: str) -> tuple[float, float, float, float] | None:
+    colour = el.find("material/color")
+    if colour is None:
+        return None
+    r, g, b, a = _floats(colour.get("rgba"), 4, f"{where}.material.color.rgba", "")
+    return (r, g, b, a)
+
+
+def rerun_geometry(
+    spec: RobotSpec, *, package_path: tuple[str, ...] = ()
+) -> tuple[LinkGeometry, ...]:
+    """What the ``.rrd`` draws of a URDF robot: each link's visual geometry where Rerun
+    loads all of its meshes (:data:`RERUN_MESH_SUFFIXES`), else that link's collision
+    geometry (its meshes Rerun cannot load left out); () for a robot that is not a URDF.
+
+    Raises:
+        SpecError: an unresolved ``package://`` or a missing mesh file (one line).
+    """
+    visual = link_geometry(spec, "visual", package_path=package_path)
+    collision = link_geometry(spec, "collision", package_path=package_path)
+
+    def loadable(g: LinkGeometry) -> bool:
+        return g.shape != "mesh" or Path(g.mesh).suffix.lower() in RERUN_MESH_SUFFIXES
+
+    fallback = {g.link for g in visual if not loadable(g)}
+    drawn = [g for g in visual if g.link not in fallback]
+    drawn += [g for g in collision if g.link in fallback and loadable(g)]
+    return tuple(drawn)
