@@ -7,6 +7,12 @@ settings and the recording code's version. A re-run skips an episode only when i
 mark matches its fingerprint today and its bag is whole (metadata present, the MCAP
 file ends with the MCAP magic); anything else (no mark, a changed setting or code, a
 bag a killed run left behind) runs again and replaces what is there.
+
+With ``keep_bags: {every: k}`` in the campaign, only every k-th episode keeps its bag;
+each other one, once its bag is published, is measured by the report's code and kept as
+its metric partial (:mod:`pipeline.stages.partials`), then its bag is removed and it is
+marked done. Such an episode is done when its mark matches and its partial (or a whole
+bag) is there. ``--episode KEY`` re-runs chosen episodes into full bags.
 """
 
 from __future__ import annotations
@@ -19,7 +25,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from pipeline.errors import ParamsError
+from pipeline.errors import ParamsError, PipelineError
 from pipeline.params import (
     CampaignParams,
     Episode,
@@ -52,6 +58,7 @@ class CampaignRun:
         skipped: keys of episodes already recorded with today's settings and code.
         stray: recordings in ``out_dir`` that are not episodes of the campaign (kept).
         commit: the recording code's version the fingerprints use.
+        kept: keys of the episodes that keep their full bag (all without ``keep_bags``).
     """
 
     name: str
@@ -61,6 +68,7 @@ class CampaignRun:
     skipped: tuple[str, ...]
     stray: tuple[str, ...]
     commit: str
+    kept: frozenset[str] = frozenset()
 
 
 def bag_is_whole(bag_dir: Path) -> bool:
@@ -82,13 +90,27 @@ def bag_is_whole(bag_dir: Path) -> bool:
         return False
 
 
-def is_done(out_dir: Path, episode: Episode, fingerprint: str) -> bool:
-    """The episode's mark matches ``fingerprint`` and its bag is whole."""
+def is_done(out_dir: Path, episode: Episode, fingerprint: str, *, bag: bool = True) -> bool:
+    """The episode's mark matches ``fingerprint`` and its bag is whole (or, when it need
+    not keep a ``bag``, its metric partial is there)."""
+    from pipeline.stages.partials import partial_path
+
     try:
         mark = (out_dir / DONE_DIR / episode.name).read_text(encoding="ascii")
     except (OSError, UnicodeDecodeError):
         return False
-    return mark.strip() == fingerprint and bag_is_whole(out_dir / episode.name)
+    if mark.strip() != fingerprint:
+        return False
+    if bag_is_whole(out_dir / episode.name):
+        return True
+    return not bag and partial_path(out_dir, episode.name).is_file()
+
+
+def kept_bags(campaign: CampaignParams, episodes: Sequence[Episode]) -> frozenset[str]:
+    """Keys of the episodes that keep their full bag: all, or every k-th one (in the
+    campaign's order, the first included) with ``keep_bags: {every: k}``."""
+    every = campaign.keep_bags.every if campaign.keep_bags is not None else 1
+    return frozenset(e.name for k, e in enumerate(episodes) if k % every == 0)
 
 
 def mark_done(out_dir: Path, name: str, fingerprint: str) -> None:
@@ -105,20 +127,43 @@ def unmark(out_dir: Path, name: str) -> None:
         (out_dir / DONE_DIR / name).unlink()
 
 
-def plan_run(params: Params, name: str, *, out: Path, force: bool = False) -> CampaignRun:
+def plan_run(
+    params: Params,
+    name: str,
+    *,
+    out: Path,
+    force: bool = False,
+    only: Sequence[str] | None = None,
+) -> CampaignRun:
     """Expand campaign ``name`` and find what ``<out>/<name>`` already holds.
 
+    ``only``: run just these episode keys, each into its full bag (``--episode``: the
+    bag of an episode kept as its partial, byte for byte as a full-bag run writes it).
+
     Raises:
-        ParamsError: unknown campaign or a bad sweep (names the field).
+        ParamsError: unknown campaign or a bad sweep or key (names the field).
     """
     episodes = expand(params, name)
     out_dir = out / name
     commit = git_commit()
     keys = {e.name for e in episodes}
+    kept = kept_bags(params.campaigns[name], episodes)
+    selected = episodes
+    if only:
+        unknown = [k for k in only if k not in keys]
+        if unknown:
+            raise ParamsError(
+                f"--episode {unknown[0]}: no such episode in campaign {name} "
+                "(`pipeline campaigns` lists its size; keys look like payload_kg-0.5.ctc.s3)"
+            )
+        wanted = set(only)
+        selected = tuple(e for e in episodes if e.name in wanted)
+        kept = kept | wanted
     skipped: list[str] = []
     pending: list[Episode] = []
-    for e in episodes:
-        if not force and is_done(out_dir, e, episode_fingerprint(e, commit=commit)):
+    for e in selected:
+        fingerprint = episode_fingerprint(e, commit=commit)
+        if not force and is_done(out_dir, e, fingerprint, bag=e.name in kept):
             skipped.append(e.name)
         else:
             pending.append(e)
@@ -132,7 +177,7 @@ def plan_run(params: Params, name: str, *, out: Path, force: bool = False) -> Ca
         else []
     )
     return CampaignRun(
-        name, out_dir, episodes, tuple(pending), tuple(skipped), tuple(stray), commit
+        name, out_dir, episodes, tuple(pending), tuple(skipped), tuple(stray), commit, kept
     )
 
 
@@ -262,7 +307,9 @@ def completion_marker(
     run: CampaignRun, emit: Callable[[str, str, float], None]
 ) -> Callable[[str, str, float], None]:
     """An ``on_event`` for :func:`pipeline.stages.record.record` that marks each episode
-    done once its bag is published by this run (a new folder, or a replaced one)."""
+    done once its bag is published by this run (a new folder, or a replaced one); an
+    episode that does not keep its bag (:attr:`CampaignRun.kept`) is first measured into
+    its partial and its bag removed."""
     fingerprints = {e.name: episode_fingerprint(e, commit=run.commit) for e in run.pending}
     before: dict[str, int | None] = {}
     for e in run.pending:
@@ -280,7 +327,21 @@ def completion_marker(
             except OSError:
                 mtime = None
             if mtime is not None and mtime != before[name] and bag_is_whole(bag):
+                if run.kept and name not in run.kept:
+                    # an unreadable bag stays a bag (whole, so done): nothing is lost
+                    with contextlib.suppress(PipelineError):
+                        keep_partial(run.out_dir, name)
                 mark_done(run.out_dir, name, fingerprints[name])
         emit(kind, name, value)
 
     return on_event
+
+
+def keep_partial(out_dir: Path, name: str) -> None:
+    """Measure the published bag ``out_dir/name`` into its partial, then remove the bag
+    (the partial is written whole first: a kill in between leaves both, not neither)."""
+    from pipeline.stages.partials import measure_bag, partial_path, write_partial
+
+    bag = out_dir / name
+    write_partial(measure_bag(bag), partial_path(out_dir, name))
+    shutil.rmtree(bag)
