@@ -244,6 +244,24 @@ def _ros_distro(name: str) -> Literal["jazzy", "humble"]:
     return "humble" if name == "humble" else "jazzy"
 
 
+def _keep_sample_bags(
+    loaded: Any, run: Any, *, jobs: int, executor: str, address: str | None
+) -> None:
+    """After a ``keep_bags`` campaign: re-run by key the episodes the report shows one by
+    one (median and worst per condition and controller) whose bags were not kept."""
+    from pipeline.stages.campaign_run import plan_run, sample_without_bags
+
+    keys = sample_without_bags(run)
+    if not keys:
+        return
+    Console(stderr=True).print(
+        f"{run.name}: keeping the bags of {len(keys)} sampled episode(s) (median and worst "
+        "per condition): re-running them by key"
+    )
+    rerun = plan_run(loaded, run.name, out=run.out_dir.parent, only=keys)
+    _run_campaign(loaded, rerun, jobs=jobs, executor=executor, address=address)
+
+
 SUMMARY_TABLE_MAX = 30  # larger campaigns: counts and the failures, not a row per episode
 
 
@@ -277,6 +295,8 @@ def _record_campaign(
         run = plan_run(loaded, name, out=out, force=force, only=episodes)
         check_outputs_free(run.pending, run.out_dir, force=True)  # sweeps dead runs' work
         outcomes = _run_campaign(loaded, run, jobs=jobs, executor=executor, address=address)
+        if run.sampled and not episodes:
+            _keep_sample_bags(loaded, run, jobs=jobs, executor=executor, address=address)
     if outcomes is None:
         return
     failed = [o for o in outcomes if o.status != "ok"]

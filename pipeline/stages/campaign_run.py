@@ -25,6 +25,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import polars as pl
+
 from pipeline.errors import ParamsError, PipelineError
 from pipeline.params import (
     CampaignParams,
@@ -59,6 +61,8 @@ class CampaignRun:
         stray: recordings in ``out_dir`` that are not episodes of the campaign (kept).
         commit: the recording code's version the fingerprints use.
         kept: keys of the episodes that keep their full bag (all without ``keep_bags``).
+        sampled: the campaign keeps bags for a sample (``keep_bags``): every episode it
+            records also writes its partial, and the others' bags are removed.
     """
 
     name: str
@@ -69,6 +73,7 @@ class CampaignRun:
     stray: tuple[str, ...]
     commit: str
     kept: frozenset[str] = frozenset()
+    sampled: bool = False
 
 
 def bag_is_whole(bag_dir: Path) -> bool:
@@ -176,9 +181,11 @@ def plan_run(
         if out_dir.is_dir()
         else []
     )
+    keep = params.campaigns[name].keep_bags
     return CampaignRun(
-        name, out_dir, episodes, tuple(pending), tuple(skipped), tuple(stray), commit, kept
-    )
+        name, out_dir, episodes, tuple(pending), tuple(skipped), tuple(stray), commit, kept,
+        sampled=keep is not None and keep.every > 1,
+    )  # fmt: skip
 
 
 def distinct_settings(episodes: Sequence[Episode]) -> list[Episode]:
@@ -327,21 +334,56 @@ def completion_marker(
             except OSError:
                 mtime = None
             if mtime is not None and mtime != before[name] and bag_is_whole(bag):
-                if run.kept and name not in run.kept:
+                if run.sampled:
                     # an unreadable bag stays a bag (whole, so done): nothing is lost
                     with contextlib.suppress(PipelineError):
-                        keep_partial(run.out_dir, name)
+                        keep_partial(run.out_dir, name, bag=name in run.kept)
                 mark_done(run.out_dir, name, fingerprints[name])
         emit(kind, name, value)
 
     return on_event
 
 
-def keep_partial(out_dir: Path, name: str) -> None:
+def keep_partial(out_dir: Path, name: str, *, bag: bool) -> None:
     """Measure the published bag ``out_dir/name`` into its partial, then remove the bag
-    (the partial is written whole first: a kill in between leaves both, not neither)."""
+    unless it is to be kept (the partial is written whole first: a kill in between leaves
+    both, not neither)."""
     from pipeline.stages.partials import measure_bag, partial_path, write_partial
 
-    bag = out_dir / name
-    write_partial(measure_bag(bag), partial_path(out_dir, name))
-    shutil.rmtree(bag)
+    bag_dir = out_dir / name
+    write_partial(measure_bag(bag_dir), partial_path(out_dir, name))
+    if not bag:
+        shutil.rmtree(bag_dir)
+
+
+def sample_without_bags(run: CampaignRun) -> list[str]:
+    """Keys of the episodes the report will show one by one (the median and the worst per
+    condition and controller, or all of a small group: :func:`pipeline.report.inputs.
+    sample_roles`, from the episodes' partials) whose bag was not kept: re-run them by
+    key (:func:`plan_run` ``only``) to keep their bags. Episodes with neither a partial
+    nor a bag (failed) are left out, as the report leaves them out.
+
+    Raises:
+        ReportError: a partial is unreadable.
+    """
+    from pipeline.report.inputs import sample_roles
+    from pipeline.stages.partials import measure_bag, partial_path, read_partial
+
+    rows: list[pl.DataFrame] = []
+    metrics: list[pl.DataFrame] = []
+    for e in run.episodes:
+        path = partial_path(run.out_dir, e.name)
+        if path.is_file():
+            p = read_partial(path)
+        elif bag_is_whole(run.out_dir / e.name):
+            p = measure_bag(run.out_dir / e.name)
+        else:
+            continue
+        rows.append(p.row)
+        metrics.append(p.metrics)
+    if not rows:
+        return []
+    roles = sample_roles(
+        pl.concat(metrics, how="vertical_relaxed"), pl.concat(rows, how="vertical_relaxed")
+    )
+    return sorted(k for k in roles if not bag_is_whole(run.out_dir / k))

@@ -3,6 +3,8 @@ the report says which episodes have bags, a re-run by key gives the same bytes, 
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -11,7 +13,7 @@ import pytest
 import yaml
 
 from pipeline.params import load_params
-from pipeline.stages.campaign_run import completion_marker, plan_run
+from pipeline.stages.campaign_run import completion_marker, plan_run, sample_without_bags
 from pipeline.stages.partials import PARTIAL_DIR, read_partial
 from pipeline.stages.record import record
 from pipeline.stages.report import run_report
@@ -19,14 +21,14 @@ from pipeline.stages.report import run_report
 REPO = Path(__file__).parents[2]
 
 
-def _params(tmp_path: Path, keep: dict[str, Any] | None) -> Path:
+def _params(tmp_path: Path, keep: dict[str, Any] | None, seeds: int = 2) -> Path:
     data = yaml.safe_load((REPO / "params.yaml").read_text())
     for s in data["scenarios"].values():
         s.update(preroll_s=0.2, hold_s=0.2)  # short episodes: the bytes matter, not the length
     campaign: dict[str, Any] = {
         "scenario": "paper-realistic",  # seeded plant draws and sensor noise
         "controllers": ["pid", "ctc"],
-        "seeds": 2,
+        "seeds": seeds,
     }
     if keep is not None:
         campaign["keep_bags"] = keep
@@ -64,12 +66,15 @@ def test_sampled_bags_same_table_same_bytes_and_resume(tmp_path):
     a, b = _bags(full), _bags(kept)
     assert {Path(k).parent.name for k in b} == {episodes[0], episodes[3]}
     assert b == {k: v for k, v in a.items() if Path(k).parent.name in (episodes[0], episodes[3])}
+    # every episode keeps its partial (the kept ones too: the sample is chosen from them)
     partials = sorted(p.stem for p in (kept / "c" / PARTIAL_DIR).iterdir())
-    assert partials == sorted([episodes[1], episodes[2]])
+    assert partials == sorted(episodes)
     assert read_partial(kept / "c" / PARTIAL_DIR / f"{episodes[1]}.pkl").bag == episodes[1]
     # resume: every episode is done (partials count), nothing runs again
     again = plan_run(load_params(params), "c", out=kept)
     assert again.pending == () and len(again.skipped) == 4
+    # two episodes per controller: the report shows each, so each should keep its bag
+    assert sample_without_bags(again) == sorted([episodes[1], episodes[2]])
     # the campaign table from partials + sampled bags equals the one from full bags
     ra = run_report(recordings_dir=full, out_dir=tmp_path / "ra")
     rb = run_report(recordings_dir=kept, out_dir=tmp_path / "rb")
@@ -88,3 +93,25 @@ def test_sampled_bags_same_table_same_bytes_and_resume(tmp_path):
     assert bag and bag == {k: v for k, v in a.items() if Path(k).parent.name == episodes[1]}
     again = plan_run(load_params(params), "c", out=kept)
     assert again.pending == ()
+
+
+@pytest.mark.slow
+def test_record_cli_keeps_the_bags_of_the_median_and_worst(tmp_path):
+    """``pipeline record --campaign``: every 4th bag, then the median and the worst per
+    controller re-run by key; the report shows those from their bags."""
+    params = _params(tmp_path, {"every": 4}, seeds=4)
+    out = tmp_path / "rec"
+    cmd = [sys.executable, "-m", "pipeline", "record", "--params", str(params), "--out",
+           str(out), "--campaign", "c"]  # fmt: skip
+    done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr
+    assert "keeping the bags of" in done.stderr  # median and worst per controller
+    run = plan_run(load_params(params), "c", out=out)
+    assert run.pending == () and sample_without_bags(run) == []
+    with_bags = {p.name for p in (out / "c").iterdir() if not p.name.startswith(".")}
+    names = [e.name for e in run.episodes]
+    assert {names[0], names[4]} <= with_bags and len(with_bags) in (4, 5, 6)
+    data = run_report(recordings_dir=out, out_dir=tmp_path / "rep")
+    del data
+    roles = pl.read_csv(tmp_path / "rep" / "campaigns" / "c.bags.csv")
+    assert {e for e, b in roles.iter_rows() if b} == with_bags
