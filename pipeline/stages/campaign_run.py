@@ -74,6 +74,7 @@ class CampaignRun:
     commit: str
     kept: frozenset[str] = frozenset()
     sampled: bool = False
+    measure_code: str = ""
 
 
 def bag_is_whole(bag_dir: Path) -> bool:
@@ -95,20 +96,23 @@ def bag_is_whole(bag_dir: Path) -> bool:
         return False
 
 
-def is_done(out_dir: Path, episode: Episode, fingerprint: str, *, bag: bool = True) -> bool:
-    """The episode's mark matches ``fingerprint`` and its bag is whole (or, when it need
-    not keep a ``bag``, its metric partial is there)."""
-    from pipeline.stages.partials import partial_path
-
+def is_done(
+    out_dir: Path, episode: Episode, fingerprint: str, *, partial: str | None = None
+) -> bool:
+    """The episode's mark matches ``fingerprint`` and its bag is whole, or (when it need
+    not keep its bag) the mark matches ``partial`` (its
+    :func:`~pipeline.stages.partials.partial_fingerprint`) and its partial is there."""
     try:
-        mark = (out_dir / DONE_DIR / episode.name).read_text(encoding="ascii")
+        mark = (out_dir / DONE_DIR / episode.name).read_text(encoding="ascii").strip()
     except (OSError, UnicodeDecodeError):
         return False
-    if mark.strip() != fingerprint:
+    if mark == fingerprint:
+        return bag_is_whole(out_dir / episode.name)
+    if partial is None or mark != partial:
         return False
-    if bag_is_whole(out_dir / episode.name):
-        return True
-    return not bag and partial_path(out_dir, episode.name).is_file()
+    from pipeline.stages.partials import partial_path  # sampled campaigns only
+
+    return partial_path(out_dir, episode.name).is_file()
 
 
 def kept_bags(campaign: CampaignParams, episodes: Sequence[Episode]) -> frozenset[str]:
@@ -164,11 +168,23 @@ def plan_run(
         wanted = set(only)
         selected = tuple(e for e in episodes if e.name in wanted)
         kept = kept | wanted
+    keep = params.campaigns[name].keep_bags
+    sampled = keep is not None and keep.every > 1
+    measure_code = ""
+    if sampled:  # a full-bag campaign loads no measuring code (dvc.yaml's campaign deps)
+        from pipeline.stages.partials import measure_commit, partial_fingerprint
+
+        measure_code = measure_commit()
     skipped: list[str] = []
     pending: list[Episode] = []
     for e in selected:
         fingerprint = episode_fingerprint(e, commit=commit)
-        if not force and is_done(out_dir, e, fingerprint, bag=e.name in kept):
+        partial = (
+            partial_fingerprint(fingerprint, measure_code)
+            if sampled and e.name not in kept
+            else None
+        )
+        if not force and is_done(out_dir, e, fingerprint, partial=partial):
             skipped.append(e.name)
         else:
             pending.append(e)
@@ -181,10 +197,9 @@ def plan_run(
         if out_dir.is_dir()
         else []
     )
-    keep = params.campaigns[name].keep_bags
     return CampaignRun(
         name, out_dir, episodes, tuple(pending), tuple(skipped), tuple(stray), commit, kept,
-        sampled=keep is not None and keep.every > 1,
+        sampled=sampled, measure_code=measure_code,
     )  # fmt: skip
 
 
@@ -334,24 +349,32 @@ def completion_marker(
             except OSError:
                 mtime = None
             if mtime is not None and mtime != before[name] and bag_is_whole(bag):
+                mark = fingerprints[name]
                 if run.sampled:
+                    from pipeline.stages.partials import partial_fingerprint
+
                     # an unreadable bag stays a bag (whole, so done): nothing is lost
                     with contextlib.suppress(PipelineError):
-                        keep_partial(run.out_dir, name, bag=name in run.kept)
-                mark_done(run.out_dir, name, fingerprints[name])
+                        keep = name in run.kept
+                        keep_partial(run.out_dir, name, bag=keep, measure_code=run.measure_code)
+                        if not keep:
+                            mark = partial_fingerprint(mark, run.measure_code)
+                mark_done(run.out_dir, name, mark)
         emit(kind, name, value)
 
     return on_event
 
 
-def keep_partial(out_dir: Path, name: str, *, bag: bool) -> None:
+def keep_partial(out_dir: Path, name: str, *, bag: bool, measure_code: str) -> None:
     """Measure the published bag ``out_dir/name`` into its partial, then remove the bag
     unless it is to be kept (the partial is written whole first: a kill in between leaves
     both, not neither)."""
-    from pipeline.stages.partials import measure_bag, partial_path, write_partial
+    from pipeline.stages.partials import partial_path, write_partial
+    from pipeline.stages.report import measure_bag
 
     bag_dir = out_dir / name
-    write_partial(measure_bag(bag_dir), partial_path(out_dir, name))
+    partial = measure_bag(bag_dir, measure_code=measure_code)
+    write_partial(partial, partial_path(out_dir, name))
     if not bag:
         shutil.rmtree(bag_dir)
 
@@ -367,7 +390,8 @@ def sample_without_bags(run: CampaignRun) -> list[str]:
         ReportError: a partial is unreadable.
     """
     from pipeline.report.inputs import sample_roles
-    from pipeline.stages.partials import measure_bag, partial_path, read_partial
+    from pipeline.stages.partials import partial_path, read_partial
+    from pipeline.stages.report import measure_bag
 
     rows: list[pl.DataFrame] = []
     metrics: list[pl.DataFrame] = []

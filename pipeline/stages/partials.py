@@ -2,7 +2,7 @@
 
 A campaign with ``keep_bags: {every: k}`` keeps the full bag of every k-th episode; each
 other episode's bag is written as usual, measured by the report's own code
-(:meth:`pipeline.stages.report.Measured.add`, the same arrays a report of the full bag
+(:func:`pipeline.stages.report.measure_bag`, the same arrays a report of the full bag
 reads), and replaced by ``<campaign>/.partials/<key>.pkl``: what the report keeps of an
 episode once its frames are let go (the protocol view with the settings, the episode
 row, the metric frame, the thinned error series and the task-space model). The report
@@ -10,30 +10,53 @@ reads these instead of the missing bags, so the campaign table is the same, exac
 re-running the episode by its key reproduces the bag byte for byte (a recording depends
 on its params and seed alone).
 
-The file is a pickle of :class:`Partial`: written by this code for this code's report
-(its ``format`` and the recording code's commit are checked on reading). It is written
-to a temporary name and renamed, before the bag is removed.
+The file is a pickle of :class:`Partial`: written by this code for this code's report.
+It carries the last commit of the code that measures (:data:`MEASURE_CODE`); the report
+refuses a partial measured by other code (the campaign's completion marks fold it in
+too, so a resumed campaign re-measures such episodes). It is written to a temporary
+name and renamed, before the bag is removed.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import pickle
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-import polars as pl
-from numpy.typing import NDArray
-
-from pipeline.analysis.protocol import ProtocolView
-from pipeline.analysis.task_space import FLANGE_TOOL, TaskSpace, ToolOffset
 from pipeline.errors import ReportError
-from pipeline.log.reader import Recording
+
+if TYPE_CHECKING:  # only this file's types: a full-bag campaign loads no report code
+    import numpy as np
+    import polars as pl
+    from numpy.typing import NDArray
+
+    from pipeline.analysis.protocol import ProtocolView
+    from pipeline.analysis.task_space import TaskSpace, ToolOffset
+    from pipeline.log.reader import Recording
+    from pipeline.report.campaigns import CampaignSection
 
 PARTIAL_DIR = ".partials"
 PARTIAL_SUFFIX = ".pkl"
 PARTIAL_FORMAT = 1  # bump when Partial or what it holds changes shape
+# The code a partial's numbers depend on beyond the recording (relative to pipeline/):
+# the reader, the analysis and the report's measuring.
+MEASURE_CODE = ("analysis", "log", "report", "stages/report.py", "stages/partials.py")
+
+
+def measure_commit() -> str:
+    """Last commit that changed :data:`MEASURE_CODE` ("" outside git)."""
+    from pipeline.stages.provenance import git_commit
+
+    return git_commit(MEASURE_CODE)
+
+
+def partial_fingerprint(fingerprint: str, measure_code: str) -> str:
+    """The completion mark of an episode kept as its partial: its recording's
+    ``fingerprint`` with the measuring code's commit folded in."""
+    return hashlib.sha256(f"{fingerprint}:{measure_code}".encode()).hexdigest()
 
 
 @dataclass(frozen=True)
@@ -42,6 +65,7 @@ class Partial:
 
     Attributes:
         format: :data:`PARTIAL_FORMAT` of the writer.
+        measure_code: :func:`measure_commit` of the writer.
         bag: the bag's folder name (the episode key) it was measured from.
         tool: the TCP the task-space metrics were measured with.
         recording: the recording with its frames let go (settings, notes, counts).
@@ -53,6 +77,7 @@ class Partial:
     """
 
     format: int
+    measure_code: str
     bag: str
     tool: ToolOffset
     recording: Recording
@@ -66,31 +91,6 @@ class Partial:
 def partial_path(campaign_dir: Path, key: str) -> Path:
     """Where episode ``key``'s partial lives."""
     return campaign_dir / PARTIAL_DIR / f"{key}{PARTIAL_SUFFIX}"
-
-
-def measure_bag(bag_dir: Path, *, tool: ToolOffset = FLANGE_TOOL) -> Partial:
-    """Read a bag and measure it exactly as ``pipeline report`` does.
-
-    Raises:
-        RecordingError: the bag cannot be read.
-    """
-    from pipeline.log.reader import read_recording
-    from pipeline.stages.report import Measured
-
-    measured = Measured(tool)
-    rec = measured.add(read_recording(bag_dir, None, sink=measured))
-    episode = rec.episode
-    return Partial(
-        format=PARTIAL_FORMAT,
-        bag=bag_dir.name,
-        tool=tool,
-        recording=rec,
-        view=measured.views[episode],
-        row=measured.rows[episode],
-        metrics=measured.metrics[episode],
-        errors=measured.errors.get(episode),
-        task_space={k: v for k, v in measured.task_space.items() if k == episode},
-    )
 
 
 def write_partial(partial: Partial, path: Path) -> None:
@@ -127,3 +127,27 @@ def read_partial(path: Path) -> Partial:
 def find_partials(recordings_dir: Path) -> list[Path]:
     """Every partial under ``recordings_dir`` (its own ``.partials`` or a campaign's)."""
     return sorted(recordings_dir.glob(f"**/{PARTIAL_DIR}/*{PARTIAL_SUFFIX}"))
+
+
+def bags_listed(
+    section: CampaignSection, staging: Path, stem: str, names: list[str], missing: set[str]
+) -> CampaignSection:
+    """``section`` with the list of which episodes have bags (``<stem>.bags.csv``, written
+    into ``staging``) and one line saying so."""
+    import polars as pl
+
+    from pipeline.analysis.campaign import TABLE_DIR
+
+    rel = f"{TABLE_DIR}/{stem}.bags.csv"
+    pl.DataFrame(
+        {"episode": names, "bag": [e not in missing for e in names]},
+        schema={"episode": pl.String, "bag": pl.Boolean},
+    ).write_csv(staging / rel)
+    kept = len(names) - len(missing)
+    line = (
+        f"Bags: {kept} of {len(names)} episodes have their bag (campaign `keep_bags`); the "
+        f"other {len(missing)} were measured from their metric partials, by the same code. "
+        f"`{rel}` lists which; `pipeline record --campaign {section.name} --episode KEY` "
+        "re-runs one into its bag, byte for byte."
+    )
+    return replace(section, lines=(*section.lines, "", line), files=(*section.files, rel))

@@ -1,3 +1,4 @@
+# long: the report stage and how it measures each recording as read (Measured, also for partials)
 """The report stage: recordings -> metrics.json, plot CSVs, figures, report.md, recording.rrd.
 
 Everything is written into a fresh staging folder beside ``out``; when all of it
@@ -70,6 +71,14 @@ from pipeline.report.metrics_json import (
     write_series_csvs,
 )
 from pipeline.report.rerun_rrd import RRD_FILE, write_rrd
+from pipeline.stages.partials import (
+    PARTIAL_FORMAT,
+    Partial,
+    bags_listed,
+    find_partials,
+    measure_commit,
+    read_partial,
+)
 from pipeline.stages.report_commit import (
     commit,
     recover,
@@ -417,15 +426,21 @@ class Measured:
         Raises:
             ReportError: a partial is unreadable or was measured with another --tool.
         """
-        from pipeline.stages.partials import find_partials, read_partial
-
         have = {r.episode for r in recordings}
         out = list(recordings)
+        code = None
         for path in find_partials(recordings_dir):
             p = read_partial(path)
             episode = p.recording.episode
             if episode in have:
                 continue
+            code = measure_commit() if code is None else code
+            if p.measure_code != code:
+                raise ReportError(
+                    f"{path}: measured by other report code ({p.measure_code or 'no git'}, "
+                    f"now {code or 'no git'}); re-run its campaign (`pipeline record "
+                    "--campaign`) to measure it again, or keep full bags"
+                )
             if p.tool != self.tool:
                 raise ReportError(
                     f"{path}: measured with the TCP at {p.tool}, not at --tool {self.tool}; "
@@ -514,6 +529,32 @@ class Measured:
 _Measured = Measured  # the former name (benches, tests)
 
 
+def measure_bag(
+    bag_dir: Path, *, tool: ToolOffset = FLANGE_TOOL, measure_code: str | None = None
+) -> Partial:
+    """Read a bag and measure it exactly as ``pipeline report`` does: its partial
+    (:mod:`pipeline.stages.partials`).
+
+    Raises:
+        RecordingError: the bag cannot be read.
+    """
+    measured = Measured(tool)
+    rec = measured.add(read_recording(bag_dir, None, sink=measured))
+    episode = rec.episode
+    return Partial(
+        format=PARTIAL_FORMAT,
+        measure_code=measure_commit() if measure_code is None else measure_code,
+        bag=bag_dir.name,
+        tool=tool,
+        recording=rec,
+        view=measured.views[episode],
+        row=measured.rows[episode],
+        metrics=measured.metrics[episode],
+        errors=measured.errors.get(episode),
+        task_space={k: v for k, v in measured.task_space.items() if k == episode},
+    )
+
+
 def _campaigns(
     data: ReportData, staging: Path, progress: Progress, *, bagless: set[str] | None = None
 ) -> list[CampaignSection]:
@@ -558,31 +599,10 @@ def _campaigns(
         names = table.get_column("episode").unique().sort().to_list()
         missing = [e for e in names if e in (bagless or ())]
         if missing:
-            section = _bags_listed(section, staging, stems[name], names, set(missing))
+            section = bags_listed(section, staging, stems[name], names, set(missing))
         sections.append(section)
     progress("summarising campaigns", len(tables), len(tables))
     return sections
-
-
-def _bags_listed(
-    section: CampaignSection, staging: Path, stem: str, names: list[str], missing: set[str]
-) -> CampaignSection:
-    """``section`` with the list of which episodes have bags (a CSV and one line)."""
-    rel = f"{TABLE_DIR}/{stem}.bags.csv"
-    pl.DataFrame(
-        {"episode": names, "bag": [e not in missing for e in names]},
-        schema={"episode": pl.String, "bag": pl.Boolean},
-    ).write_csv(staging / rel)
-    kept = len(names) - len(missing)
-    line = (
-        f"Bags: {kept} of {len(names)} episodes have their bag (campaign `keep_bags`); the "
-        f"other {len(missing)} were measured from their metric partials, by the same code. "
-        f"`{rel}` lists which; `pipeline record --campaign {section.name} --episode KEY` "
-        "re-runs one into its bag, byte for byte."
-    )
-    return dataclasses.replace(
-        section, lines=(*section.lines, "", line), files=(*section.files, rel)
-    )
 
 
 def _summary(data: ReportData) -> pl.DataFrame:

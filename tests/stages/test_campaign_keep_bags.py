@@ -12,7 +12,9 @@ import polars as pl
 import pytest
 import yaml
 
+from pipeline.errors import ParamsError, ReportError
 from pipeline.params import load_params
+from pipeline.stages import report as report_stage
 from pipeline.stages.campaign_run import completion_marker, plan_run, sample_without_bags
 from pipeline.stages.partials import PARTIAL_DIR, read_partial
 from pipeline.stages.record import record
@@ -56,7 +58,7 @@ def _bags(out: Path) -> dict[str, bytes]:
 
 
 @pytest.mark.slow
-def test_sampled_bags_same_table_same_bytes_and_resume(tmp_path):
+def test_sampled_bags_same_table_same_bytes_and_resume(tmp_path, monkeypatch):
     full, kept = tmp_path / "full", tmp_path / "kept"
     assert [o.status for o in _run(_params(tmp_path, None), full)] == ["ok"] * 4
     params = _params(tmp_path, {"every": 3})
@@ -93,6 +95,24 @@ def test_sampled_bags_same_table_same_bytes_and_resume(tmp_path):
     assert bag and bag == {k: v for k, v in a.items() if Path(k).parent.name == episodes[1]}
     again = plan_run(load_params(params), "c", out=kept)
     assert again.pending == ()
+    # a partial measured by other report code is refused, not reported
+    monkeypatch.setattr(report_stage, "measure_commit", lambda: "other")
+    with pytest.raises(ReportError, match="measured by other report code"):
+        run_report(recordings_dir=kept, out_dir=tmp_path / "rc")
+
+
+def test_keep_bags_every_k_and_unknown_episode_key(tmp_path):
+    params = load_params(_params(tmp_path, {"every": 3}))
+    run = plan_run(params, "c", out=tmp_path)
+    names = [e.name for e in run.episodes]
+    assert run.sampled and run.kept == {names[0], names[3]}
+    assert not plan_run(load_params(_params(tmp_path, None)), "c", out=tmp_path).sampled
+    only = plan_run(params, "c", out=tmp_path, only=[names[1]])
+    assert [e.name for e in only.pending] == [names[1]] and names[1] in only.kept
+    with pytest.raises(ParamsError, match="--episode nope: no such episode in campaign c"):
+        plan_run(params, "c", out=tmp_path, only=["nope"])
+    with pytest.raises(ParamsError, match="keep_bags"):
+        load_params(_params(tmp_path, {"every": 0}))
 
 
 @pytest.mark.slow
