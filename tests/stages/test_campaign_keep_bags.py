@@ -3,6 +3,7 @@ the report says which episodes have bags, a re-run by key gives the same bytes, 
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -85,6 +86,11 @@ def test_sampled_bags_same_table_same_bytes_and_resume(tmp_path, monkeypatch):
     assert ta.get_column("episode").n_unique() == 4
     assert tb.equals(ta)  # exactly: the same code, the same arrays
     assert ra.summary.equals(rb.summary)
+    ma = json.loads((tmp_path / "ra" / "metrics.json").read_text())
+    mb = json.loads((tmp_path / "rb" / "metrics.json").read_text())
+    assert ma.keys() == mb.keys()
+    for key in ma:
+        assert ma[key] == mb[key], key
     bags = pl.read_csv(tmp_path / "rb" / "campaigns" / "c.bags.csv")
     assert dict(bags.iter_rows()) == {e: e in (episodes[0], episodes[3]) for e in episodes}
     assert "Bags: 2 of 4 episodes have their bag" in (tmp_path / "rb" / "report.md").read_text()
