@@ -455,6 +455,11 @@ class Episode:
     seed: int
     sim: SimParams
     campaign: CampaignInfo | None = None  # None: hand-listed
+    # ``keep_bags`` campaigns: the worker measures the bag into its metric partial with
+    # this measuring-code commit (None: no partial), and removes the bag if ``drop_bag``.
+    # Where the bytes go, not what they are: not in the fingerprint.
+    partial_code: str | None = None
+    drop_bag: bool = False
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ bag) is there. ``--episode KEY`` re-runs chosen episodes into full bags.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import shutil
@@ -27,7 +28,7 @@ from pathlib import Path
 
 import polars as pl
 
-from pipeline.errors import ParamsError, PipelineError
+from pipeline.errors import ParamsError
 from pipeline.params import (
     CampaignParams,
     Episode,
@@ -186,6 +187,10 @@ def plan_run(
         )
         if not force and is_done(out_dir, e, fingerprint, partial=partial):
             skipped.append(e.name)
+        elif sampled:  # the worker measures the bag into its partial (and may drop it)
+            pending.append(
+                dataclasses.replace(e, partial_code=measure_code, drop_bag=e.name not in kept)
+            )
         else:
             pending.append(e)
     stray = (
@@ -329,37 +334,42 @@ def completion_marker(
     run: CampaignRun, emit: Callable[[str, str, float], None]
 ) -> Callable[[str, str, float], None]:
     """An ``on_event`` for :func:`pipeline.stages.record.record` that marks each episode
-    done once its bag is published by this run (a new folder, or a replaced one); an
-    episode that does not keep its bag (:attr:`CampaignRun.kept`) is first measured into
-    its partial and its bag removed."""
+    done once this run published its bag (a new folder, or a replaced one) or, for an
+    episode of a ``keep_bags`` campaign that does not keep its bag, its partial (the
+    worker measured the bag and removed it: :func:`keep_partial`)."""
     fingerprints = {e.name: episode_fingerprint(e, commit=run.commit) for e in run.pending}
-    before: dict[str, int | None] = {}
+    partials = {e.name: e for e in run.pending if e.drop_bag}
+
+    def mtime(path: Path) -> int | None:
+        try:
+            return path.stat().st_mtime_ns
+        except OSError:
+            return None
+
+    def partial_file(name: str) -> Path:
+        from pipeline.stages.partials import partial_path
+
+        return partial_path(run.out_dir, name)
+
+    before: dict[str, tuple[int | None, int | None]] = {}
     for e in run.pending:
         unmark(run.out_dir, e.name)  # a stale mark must not survive a failed re-run
-        try:
-            before[e.name] = (run.out_dir / e.name).stat().st_mtime_ns
-        except OSError:
-            before[e.name] = None
+        partial = mtime(partial_file(e.name)) if e.name in partials else None
+        before[e.name] = (mtime(run.out_dir / e.name), partial)
 
     def on_event(kind: str, name: str, value: float) -> None:
         if kind == "done" and name in fingerprints:
             bag = run.out_dir / name
-            try:
-                mtime: int | None = bag.stat().st_mtime_ns
-            except OSError:
-                mtime = None
-            if mtime is not None and mtime != before[name] and bag_is_whole(bag):
-                mark = fingerprints[name]
-                if run.sampled:
+            published = mtime(bag)
+            if published is not None and published != before[name][0] and bag_is_whole(bag):
+                mark_done(run.out_dir, name, fingerprints[name])
+            elif name in partials:
+                written = mtime(partial_file(name))
+                if written is not None and written != before[name][1]:
                     from pipeline.stages.partials import partial_fingerprint
 
-                    # an unreadable bag stays a bag (whole, so done): nothing is lost
-                    with contextlib.suppress(PipelineError):
-                        keep = name in run.kept
-                        keep_partial(run.out_dir, name, bag=keep, measure_code=run.measure_code)
-                        if not keep:
-                            mark = partial_fingerprint(mark, run.measure_code)
-                mark_done(run.out_dir, name, mark)
+                    code = partials[name].partial_code or ""
+                    mark_done(run.out_dir, name, partial_fingerprint(fingerprints[name], code))
         emit(kind, name, value)
 
     return on_event
