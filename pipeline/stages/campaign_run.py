@@ -187,7 +187,10 @@ def plan_run(
         )
         if not force and is_done(out_dir, e, fingerprint, partial=partial):
             skipped.append(e.name)
-        elif sampled:  # the worker measures the bag into its partial (and may drop it)
+        elif sampled and not only:
+            # the worker measures its bag into the partial (and drops the bag). A re-run by
+            # key writes the bag only: its partial stays, and its parent may have used
+            # polars already, whose thread pool a forked worker must not touch (it hangs).
             pending.append(
                 dataclasses.replace(e, partial_code=measure_code, drop_bag=e.name not in kept)
             )

@@ -123,12 +123,13 @@ def test_keep_bags_every_k_and_unknown_episode_key(tmp_path):
 
 @pytest.mark.slow
 def test_record_cli_keeps_the_bags_of_the_median_and_worst(tmp_path):
-    """``pipeline record --campaign``: every 4th bag, then the median and the worst per
-    controller re-run by key; the report shows those from their bags."""
+    """``pipeline record --campaign -j 2`` (forked workers measure): every 4th bag, then
+    the median and the worst per controller re-run by key; the report shows those from
+    their bags."""
     params = _params(tmp_path, {"every": 4}, seeds=4)
     out = tmp_path / "rec"
     cmd = [sys.executable, "-m", "pipeline", "record", "--params", str(params), "--out",
-           str(out), "--campaign", "c"]  # fmt: skip
+           str(out), "--campaign", "c", "-j", "2"]  # fmt: skip
     done = subprocess.run(cmd, capture_output=True, text=True, check=False)
     assert done.returncode == 0, done.stderr
     assert "keeping the bags of" in done.stderr  # median and worst per controller
