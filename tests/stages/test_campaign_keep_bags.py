@@ -76,6 +76,12 @@ def test_sampled_bags_same_table_same_bytes_and_resume(tmp_path, monkeypatch):
     # resume: every episode is done (partials count), nothing runs again
     again = plan_run(load_params(params), "c", out=kept)
     assert again.pending == () and len(again.skipped) == 4
+    # a partial or a kept bag gone (a kill, a clean-up): only that episode runs again
+    gone = kept / "c" / PARTIAL_DIR / f"{episodes[2]}.pkl"
+    saved = gone.read_bytes()
+    gone.unlink()
+    assert [e.name for e in plan_run(load_params(params), "c", out=kept).pending] == [episodes[2]]
+    gone.write_bytes(saved)
     # two episodes per controller: the report shows each, so each should keep its bag
     assert sample_without_bags(again) == sorted([episodes[1], episodes[2]])
     # the campaign table from partials + sampled bags equals the one from full bags
