@@ -242,6 +242,15 @@ class RandomGoals(_Strict):
     radius_rad: float = Field(gt=0, le=6.3)
 
 
+class KeepBags(_Strict):
+    """Which episodes of a campaign keep their full bag: every ``every``-th one (in the
+    campaign's order, the first included). The others keep their metric partials and
+    settings (``<campaign>/.partials/<key>.pkl``); re-running one by its key reproduces
+    its bag byte for byte."""
+
+    every: int = Field(ge=1)
+
+
 SweepValue = Annotated[float, Field(allow_inf_nan=False)]
 # a list of values, or a mapping of random draws: errors come from the branch the input is
 Sweep = Annotated[
@@ -262,6 +271,7 @@ class CampaignParams(_Strict):
     # params path -> values (one value for every joint where the field is per joint)
     sweep: dict[str, Sweep] = {}
     goals: list[list[float]] | dict[str, list[float]] | RandomGoals | None = None
+    keep_bags: KeepBags | None = None  # None: every episode keeps its bag
 
     def problem(self) -> str:
         """What is wrong beyond types ("" if fine), as ``field: message``."""
@@ -450,6 +460,11 @@ class Episode:
     seed: int
     sim: SimParams
     campaign: CampaignInfo | None = None  # None: hand-listed
+    # ``keep_bags`` campaigns: the worker measures the bag into its metric partial with
+    # this measuring-code commit (None: no partial), and removes the bag if ``drop_bag``.
+    # Where the bytes go, not what they are: not in the fingerprint.
+    partial_code: str | None = None
+    drop_bag: bool = False
 
 
 @dataclass(frozen=True)

@@ -52,6 +52,14 @@ def record_cmd(
             "a re-run skips the episodes already recorded.",
         ),
     ] = None,
+    episode: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--episode",
+            help="With --campaign: run only this episode key (repeatable) into its full bag, "
+            "e.g. one a `keep_bags` campaign kept as metric partials (the same bytes).",
+        ),
+    ] = None,
     executor: Annotated[
         str,
         typer.Option("--executor", help="local (processes, --jobs) or ray (a Ray instance)."),
@@ -87,8 +95,11 @@ def record_cmd(
         if only:
             raise PipelineError("--only: not with --campaign (a campaign runs whole)")
         _record_campaign(params, campaign, out=Path(out), jobs=jobs, force=force,
-                         executor=executor, address=address, ros_distro=ros_distro)  # fmt: skip
+                         executor=executor, address=address, ros_distro=ros_distro,
+                         episodes=episode)  # fmt: skip
         return
+    if episode:
+        raise PipelineError("--episode: only with --campaign (hand-listed episodes: --only)")
 
     from pipeline.fsutil import OutputLock, check_out_dir
     from pipeline.params import load_params
@@ -233,12 +244,30 @@ def _ros_distro(name: str) -> Literal["jazzy", "humble"]:
     return "humble" if name == "humble" else "jazzy"
 
 
+def _keep_sample_bags(
+    loaded: Any, run: Any, *, jobs: int, executor: str, address: str | None
+) -> None:
+    """After a ``keep_bags`` campaign: re-run by key the episodes the report shows one by
+    one (median and worst per condition and controller) whose bags were not kept."""
+    from pipeline.stages.campaign_run import plan_run, sample_without_bags
+
+    keys = sample_without_bags(run)
+    if not keys:
+        return
+    Console(stderr=True).print(
+        f"{run.name}: keeping the bags of {len(keys)} sampled episode(s) (median and worst "
+        "per condition): re-running them by key"
+    )
+    rerun = plan_run(loaded, run.name, out=run.out_dir.parent, only=keys)
+    _run_campaign(loaded, rerun, jobs=jobs, executor=executor, address=address)
+
+
 SUMMARY_TABLE_MAX = 30  # larger campaigns: counts and the failures, not a row per episode
 
 
 def _record_campaign(
     params: str, name: str, *, out: Any, jobs: int, force: bool, executor: str,
-    address: str | None, ros_distro: str | None = None,
+    address: str | None, ros_distro: str | None = None, episodes: list[str] | None = None,
 ) -> None:  # fmt: skip
     """``pipeline record --campaign NAME``: one progress bar with ETA over the campaign."""
     from pipeline.fsutil import OutputLock, ensure_dir
@@ -255,16 +284,19 @@ def _record_campaign(
     if ros_distro is not None:
         loaded = loaded.with_ros_distro(_ros_distro(ros_distro))
     check_campaign_count(loaded, name, out=out, jobs=jobs)  # before expanding: counted
-    run = plan_run(loaded, name, out=out, force=force)
+    run = plan_run(loaded, name, out=out, force=force, only=episodes)
     # every input error first: a refused run creates nothing
     validate_episodes(loaded, distinct_settings(run.pending))
     check_campaign_size(loaded, run, motion_s=0.0, jobs=jobs)
     ensure_dir(run.out_dir)
     # one run per campaign folder at a time (two would write the same episodes)
     with OutputLock(run.out_dir, command=f"`pipeline record --campaign {name}`"):
-        run = plan_run(loaded, name, out=out, force=force)  # what is done now that we own it
+        # what is done now that we own it
+        run = plan_run(loaded, name, out=out, force=force, only=episodes)
         check_outputs_free(run.pending, run.out_dir, force=True)  # sweeps dead runs' work
         outcomes = _run_campaign(loaded, run, jobs=jobs, executor=executor, address=address)
+        if run.sampled and not episodes:
+            _keep_sample_bags(loaded, run, jobs=jobs, executor=executor, address=address)
     if outcomes is None:
         return
     failed = [o for o in outcomes if o.status != "ok"]

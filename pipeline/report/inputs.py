@@ -28,6 +28,29 @@ from pipeline.report.colors import controller_colors
 SHOW_ALL_UP_TO = 3
 
 
+def sample_roles(metrics: pl.DataFrame, episodes: pl.DataFrame) -> dict[str, str]:
+    """:attr:`ReportData.sample_roles` from the metric frame and the episode table alone
+    (a campaign run uses it on its partials to know which episodes the report shows)."""
+    worst = metrics.group_by("episode").agg(score=pl.col("max_abs_error").max())
+    eps = episodes.join(worst, on="episode", how="left").sort("episode")
+    key = "group" if "group" in eps.columns else "scenario"
+    roles: dict[str, str] = {}
+    for _, grp in eps.group_by(key, "controller", maintain_order=True):
+        if grp.height <= SHOW_ALL_UP_TO:
+            roles.update(dict.fromkeys(grp["episode"].to_list(), ""))
+            continue
+        # a salvaged episode cut before its motion end is neither a median nor a worst run
+        ok = grp.filter(comparable(grp) & pl.col("score").is_not_null())
+        ok = ok.sort("score", "episode")
+        if ok.height:
+            roles[ok["episode"][(ok.height - 1) // 2]] = "median"
+            roles[ok["episode"][-1]] = "worst"
+        failed = grp.filter(pl.col("status") != "ok")
+        if failed.height:
+            roles[failed["episode"][0]] = "failed"
+    return roles
+
+
 @dataclass(frozen=True)
 class Skipped:
     """A recording left out with --skip-bad, and why."""
@@ -178,24 +201,7 @@ class ReportData:
         "worst") and the first failed one ("failed"), so the outputs stay bounded
         whatever N is.
         """
-        worst = self.metrics.group_by("episode").agg(score=pl.col("max_abs_error").max())
-        eps = self.episodes.join(worst, on="episode", how="left").sort("episode")
-        key = "group" if "group" in eps.columns else "scenario"
-        roles: dict[str, str] = {}
-        for _, grp in eps.group_by(key, "controller", maintain_order=True):
-            if grp.height <= SHOW_ALL_UP_TO:
-                roles.update(dict.fromkeys(grp["episode"].to_list(), ""))
-                continue
-            # a salvaged episode cut before its motion end is neither a median nor a worst run
-            ok = grp.filter(comparable(grp) & pl.col("score").is_not_null())
-            ok = ok.sort("score", "episode")
-            if ok.height:
-                roles[ok["episode"][(ok.height - 1) // 2]] = "median"
-                roles[ok["episode"][-1]] = "worst"
-            failed = grp.filter(pl.col("status") != "ok")
-            if failed.height:
-                roles[failed["episode"][0]] = "failed"
-        return roles
+        return sample_roles(self.metrics, self.episodes)
 
     def sample(self) -> list[Recording]:
         """The recordings of :attr:`sample_roles`, sorted by episode."""

@@ -7,17 +7,26 @@ settings and the recording code's version. A re-run skips an episode only when i
 mark matches its fingerprint today and its bag is whole (metadata present, the MCAP
 file ends with the MCAP magic); anything else (no mark, a changed setting or code, a
 bag a killed run left behind) runs again and replaces what is there.
+
+With ``keep_bags: {every: k}`` in the campaign, only every k-th episode keeps its bag;
+each other one, once its bag is published, is measured by the report's code and kept as
+its metric partial (:mod:`pipeline.stages.partials`), then its bag is removed and it is
+marked done. Such an episode is done when its mark matches and its partial (or a whole
+bag) is there. ``--episode KEY`` re-runs chosen episodes into full bags.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import shutil
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+
+import polars as pl
 
 from pipeline.errors import ParamsError
 from pipeline.params import (
@@ -52,6 +61,9 @@ class CampaignRun:
         skipped: keys of episodes already recorded with today's settings and code.
         stray: recordings in ``out_dir`` that are not episodes of the campaign (kept).
         commit: the recording code's version the fingerprints use.
+        kept: keys of the episodes that keep their full bag (all without ``keep_bags``).
+        sampled: the campaign keeps bags for a sample (``keep_bags``): every episode it
+            records also writes its partial, and the others' bags are removed.
     """
 
     name: str
@@ -61,6 +73,9 @@ class CampaignRun:
     skipped: tuple[str, ...]
     stray: tuple[str, ...]
     commit: str
+    kept: frozenset[str] = frozenset()
+    sampled: bool = False
+    measure_code: str = ""
 
 
 def bag_is_whole(bag_dir: Path) -> bool:
@@ -82,13 +97,30 @@ def bag_is_whole(bag_dir: Path) -> bool:
         return False
 
 
-def is_done(out_dir: Path, episode: Episode, fingerprint: str) -> bool:
-    """The episode's mark matches ``fingerprint`` and its bag is whole."""
+def is_done(
+    out_dir: Path, episode: Episode, fingerprint: str, *, partial: str | None = None
+) -> bool:
+    """The episode's mark matches ``fingerprint`` and its bag is whole, or (when it need
+    not keep its bag) the mark matches ``partial`` (its
+    :func:`~pipeline.stages.partials.partial_fingerprint`) and its partial is there."""
     try:
-        mark = (out_dir / DONE_DIR / episode.name).read_text(encoding="ascii")
+        mark = (out_dir / DONE_DIR / episode.name).read_text(encoding="ascii").strip()
     except (OSError, UnicodeDecodeError):
         return False
-    return mark.strip() == fingerprint and bag_is_whole(out_dir / episode.name)
+    if mark == fingerprint:
+        return bag_is_whole(out_dir / episode.name)
+    if partial is None or mark != partial:
+        return False
+    from pipeline.stages.partials import partial_path  # sampled campaigns only
+
+    return partial_path(out_dir, episode.name).is_file()
+
+
+def kept_bags(campaign: CampaignParams, episodes: Sequence[Episode]) -> frozenset[str]:
+    """Keys of the episodes that keep their full bag: all, or every k-th one (in the
+    campaign's order, the first included) with ``keep_bags: {every: k}``."""
+    every = campaign.keep_bags.every if campaign.keep_bags is not None else 1
+    return frozenset(e.name for k, e in enumerate(episodes) if k % every == 0)
 
 
 def mark_done(out_dir: Path, name: str, fingerprint: str) -> None:
@@ -105,21 +137,63 @@ def unmark(out_dir: Path, name: str) -> None:
         (out_dir / DONE_DIR / name).unlink()
 
 
-def plan_run(params: Params, name: str, *, out: Path, force: bool = False) -> CampaignRun:
+def plan_run(
+    params: Params,
+    name: str,
+    *,
+    out: Path,
+    force: bool = False,
+    only: Sequence[str] | None = None,
+) -> CampaignRun:
     """Expand campaign ``name`` and find what ``<out>/<name>`` already holds.
 
+    ``only``: run just these episode keys, each into its full bag (``--episode``: the
+    bag of an episode kept as its partial, byte for byte as a full-bag run writes it).
+
     Raises:
-        ParamsError: unknown campaign or a bad sweep (names the field).
+        ParamsError: unknown campaign or a bad sweep or key (names the field).
     """
     episodes = expand(params, name)
     out_dir = out / name
     commit = git_commit()
     keys = {e.name for e in episodes}
+    kept = kept_bags(params.campaigns[name], episodes)
+    selected = episodes
+    if only:
+        unknown = [k for k in only if k not in keys]
+        if unknown:
+            raise ParamsError(
+                f"--episode {unknown[0]}: no such episode in campaign {name} "
+                "(`pipeline campaigns` lists its size; keys look like payload_kg-0.5.ctc.s3)"
+            )
+        wanted = set(only)
+        selected = tuple(e for e in episodes if e.name in wanted)
+        kept = kept | wanted
+    keep = params.campaigns[name].keep_bags
+    sampled = keep is not None and keep.every > 1
+    measure_code = ""
+    if sampled:  # a full-bag campaign loads no measuring code (dvc.yaml's campaign deps)
+        from pipeline.stages.partials import measure_commit, partial_fingerprint
+
+        measure_code = measure_commit()
     skipped: list[str] = []
     pending: list[Episode] = []
-    for e in episodes:
-        if not force and is_done(out_dir, e, episode_fingerprint(e, commit=commit)):
+    for e in selected:
+        fingerprint = episode_fingerprint(e, commit=commit)
+        partial = (
+            partial_fingerprint(fingerprint, measure_code)
+            if sampled and e.name not in kept
+            else None
+        )
+        if not force and is_done(out_dir, e, fingerprint, partial=partial):
             skipped.append(e.name)
+        elif sampled and not only:
+            # the worker measures its bag into the partial (and drops the bag). A re-run by
+            # key writes the bag only: its partial stays, and its parent may have used
+            # polars already, whose thread pool a forked worker must not touch (it hangs).
+            pending.append(
+                dataclasses.replace(e, partial_code=measure_code, drop_bag=e.name not in kept)
+            )
         else:
             pending.append(e)
     stray = (
@@ -132,8 +206,9 @@ def plan_run(params: Params, name: str, *, out: Path, force: bool = False) -> Ca
         else []
     )
     return CampaignRun(
-        name, out_dir, episodes, tuple(pending), tuple(skipped), tuple(stray), commit
-    )
+        name, out_dir, episodes, tuple(pending), tuple(skipped), tuple(stray), commit, kept,
+        sampled=sampled, measure_code=measure_code,
+    )  # fmt: skip
 
 
 def distinct_settings(episodes: Sequence[Episode]) -> list[Episode]:
@@ -262,25 +337,90 @@ def completion_marker(
     run: CampaignRun, emit: Callable[[str, str, float], None]
 ) -> Callable[[str, str, float], None]:
     """An ``on_event`` for :func:`pipeline.stages.record.record` that marks each episode
-    done once its bag is published by this run (a new folder, or a replaced one)."""
+    done once this run published its bag (a new folder, or a replaced one) or, for an
+    episode of a ``keep_bags`` campaign that does not keep its bag, its partial (the
+    worker measured the bag and removed it: :func:`keep_partial`)."""
     fingerprints = {e.name: episode_fingerprint(e, commit=run.commit) for e in run.pending}
-    before: dict[str, int | None] = {}
+    partials = {e.name: e for e in run.pending if e.drop_bag}
+
+    def mtime(path: Path) -> int | None:
+        try:
+            return path.stat().st_mtime_ns
+        except OSError:
+            return None
+
+    def partial_file(name: str) -> Path:
+        from pipeline.stages.partials import partial_path
+
+        return partial_path(run.out_dir, name)
+
+    before: dict[str, tuple[int | None, int | None]] = {}
     for e in run.pending:
         unmark(run.out_dir, e.name)  # a stale mark must not survive a failed re-run
-        try:
-            before[e.name] = (run.out_dir / e.name).stat().st_mtime_ns
-        except OSError:
-            before[e.name] = None
+        partial = mtime(partial_file(e.name)) if e.name in partials else None
+        before[e.name] = (mtime(run.out_dir / e.name), partial)
 
     def on_event(kind: str, name: str, value: float) -> None:
         if kind == "done" and name in fingerprints:
             bag = run.out_dir / name
-            try:
-                mtime: int | None = bag.stat().st_mtime_ns
-            except OSError:
-                mtime = None
-            if mtime is not None and mtime != before[name] and bag_is_whole(bag):
+            published = mtime(bag)
+            if published is not None and published != before[name][0] and bag_is_whole(bag):
                 mark_done(run.out_dir, name, fingerprints[name])
+            elif name in partials:
+                written = mtime(partial_file(name))
+                if written is not None and written != before[name][1]:
+                    from pipeline.stages.partials import partial_fingerprint
+
+                    code = partials[name].partial_code or ""
+                    mark_done(run.out_dir, name, partial_fingerprint(fingerprints[name], code))
         emit(kind, name, value)
 
     return on_event
+
+
+def keep_partial(out_dir: Path, name: str, *, bag: bool, measure_code: str) -> None:
+    """Measure the published bag ``out_dir/name`` into its partial, then remove the bag
+    unless it is to be kept (the partial is written whole first: a kill in between leaves
+    both, not neither)."""
+    from pipeline.stages.partials import partial_path, write_partial
+    from pipeline.stages.report import measure_bag
+
+    bag_dir = out_dir / name
+    partial = measure_bag(bag_dir, measure_code=measure_code)
+    write_partial(partial, partial_path(out_dir, name))
+    if not bag:
+        shutil.rmtree(bag_dir)
+
+
+def sample_without_bags(run: CampaignRun) -> list[str]:
+    """Keys of the episodes the report will show one by one (the median and the worst per
+    condition and controller, or all of a small group: :func:`pipeline.report.inputs.
+    sample_roles`, from the episodes' partials) whose bag was not kept: re-run them by
+    key (:func:`plan_run` ``only``) to keep their bags. Episodes with neither a partial
+    nor a bag (failed) are left out, as the report leaves them out.
+
+    Raises:
+        ReportError: a partial is unreadable.
+    """
+    from pipeline.report.inputs import sample_roles
+    from pipeline.stages.partials import partial_path, read_partial
+    from pipeline.stages.report import measure_bag
+
+    rows: list[pl.DataFrame] = []
+    metrics: list[pl.DataFrame] = []
+    for e in run.episodes:
+        path = partial_path(run.out_dir, e.name)
+        if path.is_file():
+            p = read_partial(path)
+        elif bag_is_whole(run.out_dir / e.name):
+            p = measure_bag(run.out_dir / e.name)
+        else:
+            continue
+        rows.append(p.row)
+        metrics.append(p.metrics)
+    if not rows:
+        return []
+    roles = sample_roles(
+        pl.concat(metrics, how="vertical_relaxed"), pl.concat(rows, how="vertical_relaxed")
+    )
+    return sorted(k for k in roles if not bag_is_whole(run.out_dir / k))

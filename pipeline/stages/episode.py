@@ -6,6 +6,7 @@ Ray task); it writes its bag atomically and turns an error into a failed outcome
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import time
@@ -80,6 +81,13 @@ def run_one(
             progress=progress,
             before_write=before_write,
         )
+        if episode.partial_code is not None:
+            from pipeline.stages.campaign_run import keep_partial
+
+            # an unreadable bag stays a bag (whole, so done): nothing is lost
+            with contextlib.suppress(PipelineError):
+                keep_partial(out_dir, episode.name, bag=not episode.drop_bag,
+                             measure_code=episode.partial_code)  # fmt: skip
     except (PipelineError, OSError, MemoryError) as err:
         if isinstance(err, OSError):
             reason = f"{bag_dir}: cannot write the recording ({err.strerror or err})"

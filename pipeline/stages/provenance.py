@@ -55,8 +55,9 @@ RECORD_CODE = (
 )
 
 
-def git_commit() -> str:
-    """Last commit that changed the record code, ``-dirty`` if it has local changes.
+def git_commit(paths: tuple[str, ...] = RECORD_CODE) -> str:
+    """Last commit that changed the record code (or ``paths``, relative to pipeline/),
+    ``-dirty`` if it has local changes.
 
     "" outside a git checkout.
     """
@@ -68,8 +69,8 @@ def git_commit() -> str:
         ).stdout.strip()
 
     try:
-        sha = git("log", "-1", "--format=%H", "--", *RECORD_CODE)
-        dirty = git("status", "--porcelain", "--untracked-files=no", "--", *RECORD_CODE)
+        sha = git("log", "-1", "--format=%H", "--", *paths)
+        dirty = git("status", "--porcelain", "--untracked-files=no", "--", *paths)
     except (OSError, subprocess.CalledProcessError):
         return ""
     return f"{sha}-dirty" if sha and dirty else sha

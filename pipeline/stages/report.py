@@ -1,3 +1,4 @@
+# long: the report stage and how it measures each recording as read (Measured, also for partials)
 """The report stage: recordings -> metrics.json, plot CSVs, figures, report.md, recording.rrd.
 
 Everything is written into a fresh staging folder beside ``out``; when all of it
@@ -70,6 +71,14 @@ from pipeline.report.metrics_json import (
     write_series_csvs,
 )
 from pipeline.report.rerun_rrd import RRD_FILE, write_rrd
+from pipeline.stages.partials import (
+    PARTIAL_FORMAT,
+    Partial,
+    bags_listed,
+    find_partials,
+    measure_commit,
+    read_partial,
+)
 from pipeline.stages.report_commit import (
     commit,
     recover,
@@ -243,7 +252,7 @@ def _run_report_locked(
     options: ReadOptions | None,
     tool: ToolOffset,
 ) -> ReportResult:
-    measured = _Measured(tool)
+    measured = Measured(tool)
     recordings, bad = read_all(
         recordings_dir,
         skip_bad=skip_bad,
@@ -252,6 +261,7 @@ def _run_report_locked(
         measure=measured.add,
         sink=measured,
     )
+    recordings = measured.with_partials(recordings, recordings_dir)
     recordings = merged_label_notes(recordings, options)
     episodes = pl.concat([measured.rows[r.episode] for r in recordings], how="vertical")
     if not check_baseline(episodes, baseline) and baseline != DEFAULT_BASELINE:
@@ -287,7 +297,7 @@ def _run_report_locked(
         files = [write_metrics(data, staging), write_headline(data, staging)]
         files += write_series_csvs(data, staging)
         files += write_episode_csvs(data, staging)
-        sections = _campaigns(data, staging, progress)
+        sections = _campaigns(data, staging, progress, bagless=measured.bagless)
         files += [CAMPAIGN_INDEX, *[f for sec in sections for f in (sec.table_path, *sec.files)]]
         scenarios = data.scenarios()
         drawn = scenarios[:MAX_FIGURE_SCENARIOS]
@@ -391,7 +401,7 @@ class _Streamed:
         return view, finish_metrics(pl.concat(parts, how="vertical_relaxed"))
 
 
-class _Measured:
+class Measured:
     """What the report keeps of each recording as it is read: its protocol view, episode
     row and metrics; a campaign episode's frames are let go (only a bounded sample of
     them is drawn, re-read afterwards) after keeping a thinned error series.
@@ -407,6 +417,45 @@ class _Measured:
         self.metrics: dict[str, pl.DataFrame] = {}
         self.errors: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
         self.streamed: _Streamed | None = None
+        self.bagless: set[str] = set()  # measured from their partials (keep_bags)
+
+    def with_partials(self, recordings: list[Recording], recordings_dir: Path) -> list[Recording]:
+        """``recordings`` plus the campaign episodes kept as metric partials only (an
+        episode whose bag is there too is read from its bag), sorted by episode.
+
+        Raises:
+            ReportError: a partial is unreadable or was measured with another --tool.
+        """
+        have = {r.episode for r in recordings}
+        out = list(recordings)
+        code = None
+        for path in find_partials(recordings_dir):
+            p = read_partial(path)
+            episode = p.recording.episode
+            if episode in have:
+                continue
+            code = measure_commit() if code is None else code
+            if p.measure_code != code:
+                raise ReportError(
+                    f"{path}: measured by other report code ({p.measure_code or 'no git'}, "
+                    f"now {code or 'no git'}); re-run its campaign (`pipeline record "
+                    "--campaign`) to measure it again, or keep full bags"
+                )
+            if p.tool != self.tool:
+                raise ReportError(
+                    f"{path}: measured with the TCP at {p.tool}, not at --tool {self.tool}; "
+                    "report without --tool, or re-run the campaign with full bags"
+                )
+            have.add(episode)
+            self.bagless.add(episode)
+            self.task_space.update(p.task_space)
+            self.views[episode] = p.view
+            self.rows[episode] = p.row
+            self.metrics[episode] = p.metrics
+            if p.errors is not None:
+                self.errors[episode] = p.errors
+            out.append(p.recording)
+        return sorted(out, key=lambda r: r.episode)
 
     def begin(self, header: Recording) -> None:
         self.streamed = _Streamed(header, self.tool)
@@ -454,7 +503,11 @@ class _Measured:
         """``data`` with the frames of the sampled campaign episodes read back."""
         recordings = list(data.recordings)
         for k, rec in enumerate(recordings):
-            if rec.episode in data.sample_roles and rec.episode in self.errors:
+            if (
+                rec.episode in data.sample_roles
+                and rec.episode in self.errors
+                and rec.episode not in self.bagless
+            ):
                 raw = read_recording(rec.source, options)
                 if raw.windows:  # as measured from its windows, with the notes they gave
                     was = self.views[rec.episode]
@@ -473,9 +526,42 @@ class _Measured:
         return dataclasses.replace(data, recordings=tuple(recordings), protocol=self.views)
 
 
-def _campaigns(data: ReportData, staging: Path, progress: Progress) -> list[CampaignSection]:
+_Measured = Measured  # the former name (benches, tests)
+
+
+def measure_bag(
+    bag_dir: Path, *, tool: ToolOffset = FLANGE_TOOL, measure_code: str | None = None
+) -> Partial:
+    """Read a bag and measure it exactly as ``pipeline report`` does: its partial
+    (:mod:`pipeline.stages.partials`).
+
+    Raises:
+        RecordingError: the bag cannot be read.
+    """
+    measured = Measured(tool)
+    rec = measured.add(read_recording(bag_dir, None, sink=measured))
+    episode = rec.episode
+    return Partial(
+        format=PARTIAL_FORMAT,
+        measure_code=measure_commit() if measure_code is None else measure_code,
+        bag=bag_dir.name,
+        tool=tool,
+        recording=rec,
+        view=measured.views[episode],
+        row=measured.rows[episode],
+        metrics=measured.metrics[episode],
+        errors=measured.errors.get(episode),
+        task_space={k: v for k, v in measured.task_space.items() if k == episode},
+    )
+
+
+def _campaigns(
+    data: ReportData, staging: Path, progress: Progress, *, bagless: set[str] | None = None
+) -> list[CampaignSection]:
     """Write each campaign's table (Parquet), then its section, read back from the table
-    with a lazy scan: the summary is the table's numbers."""
+    with a lazy scan: the summary is the table's numbers. A campaign some of whose
+    episodes were measured from their partials (``bagless``) also lists which episodes
+    have bags (``<stem>.bags.csv``)."""
     settings = {ep: view.settings for ep, view in data.protocol.items()}
     tables = campaign_tables(data.metrics, data.episodes, settings)
     (staging / TABLE_DIR).mkdir(exist_ok=True)
@@ -500,18 +586,21 @@ def _campaigns(data: ReportData, staging: Path, progress: Progress) -> list[Camp
         progress("summarising campaigns", k, len(tables))
         rel = f"{TABLE_DIR}/{stems[name]}.parquet"
         table.write_parquet(staging / rel)
-        sections.append(
-            campaign_section(
-                staging / rel,
-                out_dir=staging,
-                rel_table=rel,
-                name=name,
-                stem=stems[name],
-                baseline=data.baseline,
-                sample=data.sample_roles,
-                draw=k < MAX_FIGURE_SCENARIOS,
-            )
+        section = campaign_section(
+            staging / rel,
+            out_dir=staging,
+            rel_table=rel,
+            name=name,
+            stem=stems[name],
+            baseline=data.baseline,
+            sample=data.sample_roles,
+            draw=k < MAX_FIGURE_SCENARIOS,
         )
+        names = table.get_column("episode").unique().sort().to_list()
+        missing = [e for e in names if e in (bagless or ())]
+        if missing:
+            section = bags_listed(section, staging, stems[name], names, set(missing))
+        sections.append(section)
     progress("summarising campaigns", len(tables), len(tables))
     return sections
 
