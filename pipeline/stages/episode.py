@@ -188,7 +188,8 @@ def _run_and_write(
     )
     # true tracking error from the motion start (the report's definition)
     err = np.abs(result.q_ref[k0:] - result.q_true[k0:])
-    t_s = (result.stamp_ns[k0:] - result.stamp_ns[k0]) * 1e-9
+    # (a run that diverged during the pre-roll has no sample from the motion start)
+    t_s = (result.stamp_ns[k0:] - result.stamp_ns[min(k0, result.stamp_ns.size - 1)]) * 1e-9
     in_final = final_window(t_s, motion_end_s=float(trajectory.duration_s))
     return EpisodeOutcome(
         name=episode.name,

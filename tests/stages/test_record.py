@@ -201,7 +201,9 @@ def test_cartesian_goal_becomes_the_ik_solution_nearest_the_start(ur5):
 def test_diverging_episode_is_recorded_reported_and_fails_the_run(tmp_path):
     data = yaml.safe_load(_params(tmp_path).read_text())
     # without rotor armature the wrists are light enough for saturated torque to spin away
-    bare = (REPO / "pipeline" / "robots" / "ur5.yaml").read_text().replace("armature: 0.1", "")
+    ur5 = (REPO / "pipeline" / "robots" / "ur5.yaml").read_text()
+    bare = re.sub(r"^ +armature: [0-9.e+-]+\n", "", ur5, flags=re.MULTILINE)
+    assert bare != ur5 and not re.search(r"^ +armature:", bare, re.MULTILINE)
     (tmp_path / "ur5_bare.yaml").write_text(bare)
     data["scenarios"]["paper"]["robot"] = str(tmp_path / "ur5_bare.yaml")
     data["controllers"]["ctc"]["gains"] = {"kp": 1e9, "kd": 0.0}
