@@ -1,6 +1,7 @@
 """recording.rrd draws a URDF robot from its meshes (each link's geometry logged once under
-a link frame posed by FK each frame), Rerun's own formats or else the collision geometry;
-DH robots keep their capsules."""
+a link frame posed by FK each frame): Rerun's own formats as they are, COLLADA converted to
+glTF in its own colours, else the collision geometry with the reason; DH robots keep their
+capsules."""
 
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import pytest
 import rerun as rr
 
 from pipeline.report import entities as ent
-from pipeline.report.rrd_meshes import drawn_geometry, link_meshes
+from pipeline.report.rrd_meshes import drawn_geometry, link_meshes, send_link_meshes
 from pipeline.robots import load_spec
 from pipeline.robots.link_geometry import RERUN_MESH_SUFFIXES, link_geometry, rerun_geometry
 from pipeline.robots.mesh_glb import GLB_MEDIA_TYPE, mesh_glb
@@ -169,6 +170,20 @@ def test_a_collada_visual_is_drawn_converted_and_an_unreadable_one_falls_back(
     assert {g.link: g.shape for g in geometry}["lower"] == "cylinder"
     assert note.startswith("1 link(s) drawn from their collision geometry (lower)")
     assert "cube.dae" in note
+    arm = link_meshes(spec, np.zeros((2, 2)))
+    assert arm is not None and arm.note == note
+    stream = rr.RecordingStream("test-fallback")
+    stream.save(tmp_path / "arm.rrd")
+    send_link_meshes(stream, "e", np.array([0.0, 0.1]), arm, (10, 20, 30))
+    stream.disconnect()
+    from rerun.chunk import RrdReader
+
+    texts = [
+        str(chunk.to_record_batch().column("TextDocument:text").to_pylist())
+        for chunk in RrdReader(tmp_path / "arm.rrd").stream()
+        if chunk.entity_path.endswith("/arm/mesh_note")
+    ]
+    assert len(texts) == 1 and "cube.dae" in texts[0]  # the reason, beside the arm
     box = trimesh.creation.box(extents=(0.1, 0.2, 0.3))
     box.visual.face_colors = (10, 138, 199, 255)
     box.export(tmp_path / "box.dae")  # a real COLLADA file, coloured
