@@ -215,6 +215,8 @@ class EpisodeParams(_Strict):
 
 
 MAX_CAMPAIGN_EPISODES = 1_000_000  # expansion holds every episode in memory (~1 kB each)
+EXTRA_CAMPAIGNS = "extra_campaigns"  # the params section of campaigns outside `make demo`
+EXTRA_RECORDINGS_DIR = "extra"  # where `pipeline record --campaign` puts them by default
 
 
 class RandomAxis(_Strict):
@@ -339,13 +341,16 @@ class _Params(_Strict):
     controllers: dict[str, ControllerParams] = Field(min_length=1)
     episodes: dict[str, EpisodeParams] = {}
     campaigns: dict[str, CampaignParams] = {}
+    # campaigns outside the DVC stage graph (dvc.yaml's foreach reads `campaigns` only)
+    extra_campaigns: dict[str, CampaignParams] = {}
 
     @model_validator(mode="after")
     def _campaign_references(self) -> _Params:
-        if not self.episodes and not self.campaigns:
+        if not self.episodes and not self.campaigns and not self.extra_campaigns:
             raise ValueError("episodes: give at least one episode or campaign")
-        for name, c in self.campaigns.items():
-            where = f"campaigns.{name}"
+        sections = (("campaigns", self.campaigns), (EXTRA_CAMPAIGNS, self.extra_campaigns))
+        for section, name, c in ((s, n, c) for s, cs in sections for n, c in cs.items()):
+            where = f"{section}.{name}"
             if not _NAME.fullmatch(name):
                 raise ValueError(
                     f"{where}: campaign names are directory names: use letters, digits, "
@@ -353,6 +358,8 @@ class _Params(_Strict):
                 )
             if name in self.episodes:
                 raise ValueError(f"{where}: also an episode name (both would be {name}/)")
+            if section == EXTRA_CAMPAIGNS and name in self.campaigns:
+                raise ValueError(f"{where}: also in campaigns (one name, one campaign)")
             if c.problem():
                 raise ValueError(f"{where}.{c.problem()}")
             if c.scenario not in self.scenarios:
@@ -476,7 +483,15 @@ class Params:
     scenarios: Mapping[str, ScenarioParams]
     controllers: Mapping[str, ControllerParams]
     episodes: tuple[Episode, ...] = field(default_factory=tuple)
+    # every campaign: the DVC stages' (``campaigns:``) first, then ``extra_campaigns:``
     campaigns: Mapping[str, CampaignParams] = field(default_factory=dict)
+    extra_campaigns: frozenset[str] = frozenset()  # names of those outside the stage graph
+
+    def where(self, campaign: str) -> str:
+        """The campaign's field path in the params file (``campaigns.NAME`` or
+        ``extra_campaigns.NAME``)."""
+        section = EXTRA_CAMPAIGNS if campaign in self.extra_campaigns else "campaigns"
+        return f"{section}.{campaign}"
 
     def select(self, only: list[str] | None) -> tuple[Episode, ...]:
         """Episodes named in ``only`` (all when empty); unknown names are an error."""
@@ -522,7 +537,8 @@ def parse_params(data: Any, *, source: str) -> Params:
         scenarios=raw.scenarios,
         controllers=raw.controllers,
         episodes=episodes,
-        campaigns=raw.campaigns,
+        campaigns={**raw.campaigns, **raw.extra_campaigns},
+        extra_campaigns=frozenset(raw.extra_campaigns),
     )
 
 

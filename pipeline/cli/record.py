@@ -23,8 +23,14 @@ def record_cmd(
         str, typer.Option("--params", help="Scenarios, controllers and episodes (YAML).")
     ] = "params.yaml",
     out: Annotated[
-        str, typer.Option("--out", "-o", help="Directory that receives one ROS 2 bag per episode.")
-    ] = "recordings",
+        str | None,
+        typer.Option(
+            "--out",
+            "-o",
+            help="Directory that receives one ROS 2 bag per episode. Default: recordings "
+            "(a campaign of PARAMS' extra_campaigns, outside the DVC stages: extra).",
+        ),
+    ] = None,
     only: Annotated[
         list[str] | None,
         typer.Option("--only", help="Run only this episode (repeatable). Default: all."),
@@ -94,7 +100,7 @@ def record_cmd(
     if campaign is not None:
         if only:
             raise PipelineError("--only: not with --campaign (a campaign runs whole)")
-        _record_campaign(params, campaign, out=Path(out), jobs=jobs, force=force,
+        _record_campaign(params, campaign, out=out, jobs=jobs, force=force,
                          executor=executor, address=address, ros_distro=ros_distro,
                          episodes=episode)  # fmt: skip
         return
@@ -105,6 +111,7 @@ def record_cmd(
     from pipeline.params import load_params
     from pipeline.stages.record import check_outputs_free, prepare
 
+    out = "recordings" if out is None else out
     check_out_dir(out)  # not "" nor the working folder: record removes folders in --out
 
     loaded = load_params(params)
@@ -266,12 +273,14 @@ SUMMARY_TABLE_MAX = 30  # larger campaigns: counts and the failures, not a row p
 
 
 def _record_campaign(
-    params: str, name: str, *, out: Any, jobs: int, force: bool, executor: str,
+    params: str, name: str, *, out: str | None, jobs: int, force: bool, executor: str,
     address: str | None, ros_distro: str | None = None, episodes: list[str] | None = None,
 ) -> None:  # fmt: skip
     """``pipeline record --campaign NAME``: one progress bar with ETA over the campaign."""
+    from pathlib import Path
+
     from pipeline.fsutil import OutputLock, ensure_dir
-    from pipeline.params import load_params
+    from pipeline.params import EXTRA_RECORDINGS_DIR, load_params
     from pipeline.stages.campaign_run import (
         check_campaign_count,
         check_campaign_size,
@@ -281,10 +290,13 @@ def _record_campaign(
     from pipeline.stages.record import check_outputs_free, validate_episodes
 
     loaded = load_params(params)
+    # an extra campaign stays out of the DVC report's recordings/
+    default = EXTRA_RECORDINGS_DIR if name in loaded.extra_campaigns else "recordings"
+    out_dir = Path(default if out is None else out)
     if ros_distro is not None:
         loaded = loaded.with_ros_distro(_ros_distro(ros_distro))
-    check_campaign_count(loaded, name, out=out, jobs=jobs)  # before expanding: counted
-    run = plan_run(loaded, name, out=out, force=force, only=episodes)
+    check_campaign_count(loaded, name, out=out_dir, jobs=jobs)  # before expanding: counted
+    run = plan_run(loaded, name, out=out_dir, force=force, only=episodes)
     # every input error first: a refused run creates nothing
     validate_episodes(loaded, distinct_settings(run.pending))
     check_campaign_size(loaded, run, motion_s=0.0, jobs=jobs)
@@ -292,7 +304,7 @@ def _record_campaign(
     # one run per campaign folder at a time (two would write the same episodes)
     with OutputLock(run.out_dir, command=f"`pipeline record --campaign {name}`"):
         # what is done now that we own it
-        run = plan_run(loaded, name, out=out, force=force, only=episodes)
+        run = plan_run(loaded, name, out=out_dir, force=force, only=episodes)
         check_outputs_free(run.pending, run.out_dir, force=True)  # sweeps dead runs' work
         outcomes = _run_campaign(loaded, run, jobs=jobs, executor=executor, address=address)
         if run.sampled and not episodes:
@@ -332,7 +344,8 @@ def campaigns_cmd(
     ] = "params.yaml",
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
-    """List the campaigns in PARAMS: size, base scenario, and what each sweeps."""
+    """List the campaigns in PARAMS: size, base scenario, and what each sweeps (those
+    under extra_campaigns are not DVC stages: `make demo` does not run them)."""
     from pipeline.params import load_params
     from pipeline.stages.campaign import campaign_axes
 
@@ -346,7 +359,7 @@ def campaigns_cmd(
             {"axis": "seed", "values": list(c.seeds), "drawn": False},
         ]
         rows.append({"campaign": name, "scenario": c.scenario_name, "episodes": c.size,
-                     "axes": axes})  # fmt: skip
+                     "axes": axes, "extra": name in loaded.extra_campaigns})  # fmt: skip
     if as_json:
         print_json({"campaigns": rows})
         return
@@ -358,7 +371,8 @@ def campaigns_cmd(
             shown = ", ".join(vals) if len(vals) <= 6 else f"{', '.join(vals[:3])}, ... {vals[-1]}"
             tag = " drawn" if a["drawn"] else ""
             parts.append(f"{a['axis']} ({len(vals)}{tag}): {shown}")
-        table.add_row(row["campaign"], row["scenario"], f"{row['episodes']:,}", "\n".join(parts))
+        shown_name = row["campaign"] + ("\n(extra: no DVC stage)" if row["extra"] else "")
+        table.add_row(shown_name, row["scenario"], f"{row['episodes']:,}", "\n".join(parts))
     console.print(table)
     if not rows:
         console.print(f"{params}: no campaigns")

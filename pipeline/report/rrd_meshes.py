@@ -1,12 +1,13 @@
 """A URDF robot's arm in recording.rrd, drawn from its meshes: each link frame an entity
 posed over time by FK of the recorded joints, each link's geometry logged once under it
-(:func:`pipeline.robots.link_geometry.rerun_geometry`: the visual meshes where Rerun loads
-them, STL/OBJ/glTF, else the link's collision geometry). DH robots keep their capsules
-(:mod:`pipeline.report.rrd_scene`)."""
+(:func:`drawn_geometry`: the visual geometry, its COLLADA meshes converted to glTF in
+their own colours, else the link's collision geometry, with the reason). DH robots keep
+their capsules (:mod:`pipeline.report.rrd_scene`)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import rerun as rr
@@ -16,9 +17,15 @@ from pipeline.errors import SpecError
 from pipeline.model.dh import link_frames
 from pipeline.report import entities as ent
 from pipeline.robots import RobotSpec
-from pipeline.robots.link_geometry import LinkGeometry, rerun_geometry
+from pipeline.robots.link_geometry import (
+    RERUN_MESH_SUFFIXES,
+    LinkGeometry,
+    link_geometry,
+    rerun_geometry,
+)
+from pipeline.robots.mesh_glb import GLB_MEDIA_TYPE, mesh_glb
 
-__all__ = ["LinkMeshes", "link_meshes", "send_link_meshes"]
+__all__ = ["LinkMeshes", "drawn_geometry", "link_meshes", "send_link_meshes"]
 
 
 @dataclass(frozen=True)
@@ -29,11 +36,46 @@ class LinkMeshes:
         geometry: each link's drawn geometry, on its owner's link frame.
         links: the owners' link names: the base first, then each joint's link.
         base_T_link: the joints' link frames per drawn frame, (F, n, 4, 4) [m].
+        note: why some links show their collision geometry ("" when none do).
     """
 
     geometry: tuple[LinkGeometry, ...]
     links: tuple[str, ...]
     base_T_link: NDArray[np.float64]
+    note: str = ""
+
+
+def _rerun_reads(g: LinkGeometry) -> bool:
+    return g.shape != "mesh" or Path(g.mesh).suffix.lower() in RERUN_MESH_SUFFIXES
+
+
+def drawn_geometry(spec: RobotSpec) -> tuple[tuple[LinkGeometry, ...], str]:
+    """What the ``.rrd`` draws of a URDF robot, and why some links fall back ("" if none).
+
+    Each link's visual geometry; meshes Rerun cannot load (COLLADA) are converted to
+    glTF (:func:`mesh_glb`). A link with a mesh that cannot be converted shows its
+    collision geometry instead (:func:`rerun_geometry`'s fallback).
+
+    Raises:
+        SpecError: an unresolved ``package://`` or a missing mesh file (one line).
+    """
+    visual = link_geometry(spec, "visual")
+    failed: dict[str, str] = {}
+    for g in visual:
+        if not _rerun_reads(g) and g.link not in failed:
+            try:
+                mesh_glb(g.mesh)
+            except SpecError as err:
+                failed[g.link] = str(err)
+    if not failed:
+        return visual, ""
+    kept = [g for g in visual if g.link not in failed]
+    fallback = [g for g in rerun_geometry(spec) if g.link in failed]
+    first = next(iter(failed.values()))
+    note = (
+        f"{len(failed)} link(s) drawn from their collision geometry ({', '.join(failed)}): {first}"
+    )
+    return (*kept, *fallback), note
 
 
 def link_meshes(spec: RobotSpec, q: NDArray[np.float64]) -> LinkMeshes | None:
@@ -42,14 +84,14 @@ def link_meshes(spec: RobotSpec, q: NDArray[np.float64]) -> LinkMeshes | None:
     if spec.format != "urdf":
         return None
     try:
-        geometry = rerun_geometry(spec)
+        geometry, note = drawn_geometry(spec)
     except SpecError:
         return None
     if not geometry:
         return None
     frames = np.array([link_frames(spec, qf) for qf in q]).reshape(q.shape[0], spec.dof, 4, 4)
     links = (spec.base_link, *(j.link for j in spec.joints))
-    return LinkMeshes(geometry, links, frames)
+    return LinkMeshes(geometry, links, frames, note)
 
 
 def send_link_meshes(
@@ -59,7 +101,8 @@ def send_link_meshes(
     meshes: LinkMeshes,
     color: tuple[int, int, int],
 ) -> None:
-    """Log the link frames over time and each geometry once (static) under its link."""
+    """Log the link frames over time and each geometry once (static) under its link (and
+    the fallback's reason, if any, as a text document beside them)."""
     owners = sorted({g.owner for g in meshes.geometry})
     for owner in owners:
         path = ent.arm_link_path(episode, meshes.links[owner + 1])
@@ -83,9 +126,13 @@ def send_link_meshes(
             static=True,
         )
         stream.log(path, _archetype(g, rgba), static=True)
+    if meshes.note:
+        stream.log(f"{ent.arm_path(episode)}/mesh_note", rr.TextDocument(meshes.note), static=True)
 
 
 def _archetype(g: LinkGeometry, rgba: list[int]) -> rr.AsArchetype:
+    if g.shape == "mesh" and not _rerun_reads(g):  # converted: in its own colours
+        return rr.Asset3D(contents=mesh_glb(g.mesh), media_type=GLB_MEDIA_TYPE)
     if g.shape == "mesh":
         return rr.Asset3D(path=g.mesh, albedo_factor=rgba)
     if g.shape == "box":

@@ -126,7 +126,7 @@ def campaign_axes(params: Params, name: str) -> Campaign:
             texts = tuple(value_text(v, digits=KEY_DIGITS) for v in values)
             if len(set(texts)) != len(texts):
                 raise ParamsError(
-                    f"{params.source}: campaigns.{name}.sweep.{path}: two draws agree to "
+                    f"{params.source}: {params.where(name)}.sweep.{path}: two draws agree to "
                     f"{KEY_DIGITS} digits; widen uniform or draw fewer"
                 )
             axes.append(Axis(path, labels[path], tuple(values), texts, drawn=True))
@@ -141,7 +141,7 @@ def campaign_axes(params: Params, name: str) -> Campaign:
 def _goal_axis(params: Params, name: str, c: CampaignParams) -> Axis:
     goals = c.goals
     if isinstance(goals, RandomGoals):
-        vectors = draw_goals(params, c.scenario, goals, where=f"campaigns.{name}.goals")
+        vectors = draw_goals(params, c.scenario, goals, where=f"{params.where(name)}.goals")
         keys = [f"r{i}" for i in range(len(vectors))]
     elif isinstance(goals, Mapping):
         keys = list(goals)
@@ -153,7 +153,7 @@ def _goal_axis(params: Params, name: str, c: CampaignParams) -> Axis:
     for key in keys:
         if not key or _UNSAFE.search(key):
             raise ParamsError(
-                f"{params.source}: campaigns.{name}.goals.{key}: goal names become part of "
+                f"{params.source}: {params.where(name)}.goals.{key}: goal names become part of "
                 "directory names: use letters, digits, '-', '_' and '.' only"
             )
     return Axis(GOAL_AXIS, GOAL_AXIS, tuple(keys), tuple(keys), goals=tuple(vectors))
@@ -218,7 +218,7 @@ def _scenario_for(
         return ScenarioParams.model_validate(data)
     except ValidationError as err:
         values = ", ".join(f"{a.label}={a.texts[i]}" for a, i in picks)
-        where = f"campaigns.{campaign.name} ({values}): scenario"
+        where = f"{params.where(campaign.name)} ({values}): scenario"
         raise ParamsError(format_validation_error(f"{params.source}: {where}", err)) from err
 
 
@@ -274,7 +274,7 @@ def expand(params: Params, name: str) -> tuple[Episode, ...]:
 
     if campaign.size > MAX_CAMPAIGN_EPISODES:
         raise ParamsError(
-            f"{params.source}: campaigns.{name}: {campaign.size:,} episodes, more than "
+            f"{params.source}: {params.where(name)}: {campaign.size:,} episodes, more than "
             f"{MAX_CAMPAIGN_EPISODES:,}; split it into several campaigns"
         )
     scenario_axes = [a for a in campaign.axes if not a.path.startswith(("gains.", "controllers."))]
@@ -311,12 +311,12 @@ def expand(params: Params, name: str) -> tuple[Episode, ...]:
     for e in episodes:
         if len(e.name) > MAX_KEY_CHARS:
             raise ParamsError(
-                f"{params.source}: campaigns.{name}: episode key '{e.name[:40]}...' is longer "
+                f"{params.source}: {params.where(name)}: episode key '{e.name[:40]}...' is longer "
                 f"than {MAX_KEY_CHARS} characters (a directory name); sweep fewer axes"
             )
         if e.name in seen:
             raise ParamsError(
-                f"{params.source}: campaigns.{name}: two episodes share the key '{e.name}' "
+                f"{params.source}: {params.where(name)}: two episodes share the key '{e.name}' "
                 "(values that differ only in characters a directory name cannot hold?)"
             )
         seen.add(e.name)

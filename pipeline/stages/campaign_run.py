@@ -242,7 +242,7 @@ def _refuse_too_big(
     while not probe.exists() and probe != probe.parent:
         probe = probe.parent
     free = shutil.disk_usage(probe).free
-    where = f"{params.source}: campaigns.{name}"
+    where = f"{params.source}: {params.where(name)}"
     if n_bytes > DISK_SHARE * free:
         raise ParamsError(
             f"{where}: {count:,} episodes would write about {n_bytes / 1e9:.3g} GB, "

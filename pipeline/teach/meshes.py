@@ -1,13 +1,12 @@
 """A URDF robot's visual meshes on the teach page (viser), hung on the link-frame nodes
 the server poses by forward kinematics.
 
-Meshes are read with trimesh (STL, OBJ, glTF, and COLLADA through pycollada), their
-materials kept, and sent as GLB; each file is read once per process.
+Meshes are sent as GLB (:func:`pipeline.robots.mesh_glb.mesh_glb`: STL, OBJ, glTF and
+COLLADA, each part in its material's colour); each file is read once per process.
 """
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Callable
 from typing import Any
 
@@ -18,6 +17,7 @@ from pipeline.errors import SpecError
 from pipeline.model import transforms as tf
 from pipeline.robots import RobotSpec
 from pipeline.robots.link_geometry import LinkGeometry, link_geometry
+from pipeline.robots.mesh_glb import mesh_glb
 
 __all__ = ["add_link_meshes", "geometry_node"]
 
@@ -27,18 +27,6 @@ DEFAULT_RGBA = (0.8, 0.8, 0.8, 1.0)
 def geometry_node(owner_node: str, g: LinkGeometry, k: int) -> str:
     """Scene name of one geometry element under its owner's link-frame node."""
     return f"{owner_node}/visual_{k}_{g.link}"
-
-
-@functools.lru_cache(maxsize=64)
-def _mesh_glb(path: str, scale: tuple[float, ...]) -> bytes:
-    try:
-        scene: Any = trimesh.load(path, force="scene")
-    except Exception as err:  # trimesh raises what its readers raise
-        raise SpecError(f"{path}: cannot read the mesh ({err})") from err
-    if scale != (1.0, 1.0, 1.0):
-        scene.apply_transform(np.diag([*scale, 1.0]))
-    data = scene.export(file_type="glb")
-    return bytes(data)
 
 
 def _primitive(g: LinkGeometry) -> Any:
@@ -68,7 +56,7 @@ def add_link_meshes(
         return [], ""
     try:
         items = link_geometry(spec, "visual")
-        blobs = [_mesh_glb(g.mesh, g.size) if g.shape == "mesh" else None for g in items]
+        blobs = [mesh_glb(g.mesh, g.size) if g.shape == "mesh" else None for g in items]
     except SpecError as err:
         return [], f"drawn as capsules: {err}"
     if not items:

@@ -178,8 +178,9 @@ def readout_html(state: TeachState, *, solver: str) -> str:
     rows = [
         ("position error", _fmt(state.position_error_m * 1e3, "mm"), "&lt; 0.1 mm",
          c.get("position_error")),
-        ("orientation error", _fmt(state.orientation_error_rad, "rad"), "&lt; 0.01 rad",
-         c.get("orientation_error")),
+        ("orientation error", _fmt(state.orientation_error_rad, "rad"),
+         f"not judged: position-only IK ({state.q.size} joints)" if state.position_only
+         else "&lt; 0.01 rad", c.get("orientation_error")),
         ("solve time", _fmt(state.solve_time_ms, "ms") if state.source == "ik" else "n/a (FK)",
          "&lt; 5 ms", c.get("solve_time")),
     ]  # fmt: skip
@@ -202,12 +203,15 @@ def readout_html(state: TeachState, *, solver: str) -> str:
     )
 
 
-def error_map_colours(position_error_m: Array, orientation_error_rad: Array) -> NDArray[np.uint8]:
+def error_map_colours(
+    position_error_m: Array, orientation_error_rad: Array, *, position_only: bool = False
+) -> NDArray[np.uint8]:
     """Per sample: green far below the notes' targets, through yellow, to red at the target;
-    red too for a sample IK did not solve. Log scale over six decades of the target."""
-    ratio = np.maximum(
-        position_error_m / POSITION_TARGET_M, orientation_error_rad / ORIENTATION_TARGET_RAD
-    )
+    red too for a sample IK did not solve. Log scale over six decades of the target. A
+    position-only robot (fewer than 6 joints) is coloured by its position error alone."""
+    ratio = position_error_m / POSITION_TARGET_M
+    if not position_only:
+        ratio = np.maximum(ratio, orientation_error_rad / ORIENTATION_TARGET_RAD)
     t = np.clip((np.log10(np.maximum(ratio, 1e-300)) + 6.0) / 6.0, 0.0, 1.0)
     t = np.where(np.isfinite(ratio), t, 1.0)
     green, yellow, red = np.array(OK_RGB), np.array((230, 200, 40)), np.array(BAD_RGB)
@@ -504,7 +508,9 @@ class TeachServer:
             trips = sample_round_trips(
                 self._spec, solver_name=self.session.solver.name, samples=samples, seed=seed
             )
-        colours = error_map_colours(trips.position_error_m, trips.orientation_error_rad)
+        colours = error_map_colours(
+            trips.position_error_m, trips.orientation_error_rad, position_only=trips.position_only
+        )
         self._server.scene.add_point_cloud(
             ERROR_MAP_NODE, points=trips.flange_position_m.astype(np.float32), colors=colours,
             point_size=0.012, point_shape="circle",

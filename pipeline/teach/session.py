@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import KinematicsError
-from pipeline.kinematics.base import IKSolver, as_pose, pose_error
+from pipeline.kinematics.base import IKSolver, as_pose, pose_error, position_only
 from pipeline.kinematics.check import (
     ORIENTATION_TARGET_RAD,
     POSITION_TARGET_M,
@@ -60,6 +60,10 @@ class TeachState:
         manipulability: Yoshikawa's sqrt(det(J J^T)) at ``q``.
         min_singular_value: smallest singular value of the flange Jacobian at ``q``.
         source: "ik" (target moved) or "fk" (joints moved).
+        checks: each error against the notes' target (name -> passed); no
+            ``orientation_error`` where IK is position-only.
+        position_only: the robot's IK matches the flange position only (fewer than 6
+            joints): the orientation error is shown, not judged.
     """
 
     q: Array
@@ -75,6 +79,7 @@ class TeachState:
     min_singular_value: float
     source: str
     checks: dict[str, bool] = field(default_factory=dict)
+    position_only: bool = False
 
     @property
     def near_singular(self) -> bool:
@@ -91,11 +96,12 @@ class TeachState:
         return [bool(x < NEAR_LIMIT_FRACTION or x > 1.0 - NEAR_LIMIT_FRACTION) for x in f]
 
 
-def _checks(pos_m: float, ang_rad: float, time_ms: float, *, timed: bool) -> dict[str, bool]:
-    out = {
-        "position_error": pos_m < POSITION_TARGET_M,
-        "orientation_error": ang_rad < ORIENTATION_TARGET_RAD,
-    }
+def _checks(
+    pos_m: float, ang_rad: float, time_ms: float, *, timed: bool, judge_orientation: bool
+) -> dict[str, bool]:
+    out = {"position_error": pos_m < POSITION_TARGET_M}
+    if judge_orientation:
+        out["orientation_error"] = ang_rad < ORIENTATION_TARGET_RAD
     if timed:
         out["solve_time"] = time_ms < TIME_TARGET_MS
     return out
@@ -238,8 +244,12 @@ class TeachSession:
             manipulability=manipulability(self.spec, q),
             min_singular_value=min_singular_value(self.spec, q),
             source=source,
-            checks=_checks(pos_m, ang_rad, solve_ms, timed=source == "ik") if reachable else {},
-        )
+            checks=_checks(
+                pos_m, ang_rad, solve_ms, timed=source == "ik",
+                judge_orientation=not position_only(self.spec),
+            ) if reachable else {},
+            position_only=position_only(self.spec),
+        )  # fmt: skip
 
 
 __all__ = [

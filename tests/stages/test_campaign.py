@@ -20,7 +20,7 @@ REPO = Path(__file__).parents[2]
 
 def _base() -> dict[str, Any]:
     data = yaml.safe_load((REPO / "params.yaml").read_text())
-    data["campaigns"] = {}
+    data["campaigns"], data["extra_campaigns"] = {}, {}
     return data
 
 

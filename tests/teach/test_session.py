@@ -166,3 +166,35 @@ def test_joint_near_its_limit_is_flagged(ur5: RobotSpec) -> None:
     state = session.set_joints(q)
     assert state.near_limit(ur5)[2] and not state.near_limit(ur5)[0]
     assert state.joint_fraction(ur5)[2] == pytest.approx(1 - 0.01 / (ur5.upper[2] - ur5.lower[2]))
+
+
+def test_a_three_joint_robot_is_judged_on_position_only() -> None:
+    """arm3's IK is position-only: a target whose orientation it cannot reach is solved,
+    its orientation error shown but not judged (no FAIL); a 6-joint robot still is."""
+    from pipeline.model import transforms as tf
+    from pipeline.teach.server import readout_html
+
+    spec = load_spec("arm3_example")
+    session = _session(spec)
+    target = forward_kinematics(spec, [0.3, 0.4, -0.6])
+    target = target @ tf.rot_x(0.5)  # the flange turned about x: three joints cannot follow
+    state = session.set_target(target)
+    assert state.reachable and state.position_only
+    assert state.orientation_error_rad > 0.1  # the error is real ...
+    assert state.checks == {"position_error": True, "solve_time": state.checks["solve_time"]}
+    rows = readout_html(state, solver=session.solver.name).split("<tr>")
+    (orientation,) = [r for r in rows if "orientation error" in r]
+    assert "not judged: position-only IK (3 joints)" in orientation
+    assert "FAIL" not in orientation and "pass" not in orientation
+    six = _session(load_spec("ur5")).set_joints([0.1, -1.0, 1.0, 0.2, 0.8, 0.0])
+    assert not six.position_only and "orientation_error" in six.checks
+
+
+def test_the_error_map_of_a_position_only_robot_ignores_orientation() -> None:
+    from pipeline.teach.server import error_map_colours
+
+    pos, ang = np.array([1e-9]), np.array([1.0])  # 1 rad: far past the orientation target
+    assert tuple(error_map_colours(pos, ang, position_only=True)[0]) != tuple(
+        error_map_colours(pos, ang)[0]
+    )
+    assert tuple(error_map_colours(pos, ang)[0]) == (218, 54, 51)  # judged: red
