@@ -115,8 +115,10 @@ def test_only_single_pairs_still_make_a_headline(tmp_path: Path) -> None:
     """Without repeated runs every comparison is a single pair: headline.json holds them,
     with no half widths (rather than being empty)."""
     for controller in ("pid", "ctc"):
-        ep = paper_like(f"paper-{controller}", controller, scenario="paper", duration_s=0.6,
-                        motion_end_s=0.4, error_scale=1e-3 if controller == "pid" else 5e-4)  # fmt: skip
+        scale = 1e-3 if controller == "pid" else 5e-4
+        ep = paper_like(
+            f"paper-{controller}", controller, duration_s=0.6, motion_end_s=0.4, error_scale=scale
+        )
         write_bag(tmp_path / "recordings", ep)
     run_report(recordings_dir=tmp_path / "recordings", out_dir=tmp_path / "reports")
     doc = json.loads((tmp_path / "reports" / "headline.json").read_text("utf-8"))
