@@ -247,18 +247,9 @@ def three_d_config() -> dict[str, object]:
     return {
         "followTf": FLANGE,
         "followMode": "follow-position",
-        "layers": {
-            "grid": {"layerId": "foxglove.Grid", "visible": True, "frameLocked": True},
-            "urdf": {
-                "layerId": "foxglove.Urdf",
-                "instanceId": "urdf",
-                "label": f"URDF ({TOPIC_ROBOT_DESCRIPTION})",
-                "sourceType": "topic",
-                "topic": TOPIC_ROBOT_DESCRIPTION,
-                "displayMode": "auto",
-                "visible": True,
-            },
-        },
+        "layers": {"grid": {"layerId": "foxglove.Grid", "visible": True, "frameLocked": True}},
+        # the 3D panel draws a std_msgs/String URDF topic of this name when it is visible
+        "topics": {TOPIC_ROBOT_DESCRIPTION: {"visible": True}},
         "transforms": {f"frame:{FLANGE}": {"visible": True}},
     }
 

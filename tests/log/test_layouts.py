@@ -169,9 +169,8 @@ def check_foxglove(doc: dict[str, Any], bag: Bag) -> int:
     for key, panel in config.items():
         if key.startswith("3D!"):
             assert panel["followTf"] in bag.frames, f"{panel['followTf']}: not in /tf"
-            for layer in panel["layers"].values():
-                if layer.get("sourceType") == "topic":
-                    assert bag.root.get(layer["topic"]) == TYPE_STRING, layer
+            for topic in panel["topics"]:  # the URDF
+                assert bag.root.get(topic) == TYPE_STRING, f"{topic}: not a recorded String"
     # every panel the tabs lay out is configured, and every configured panel is laid out
     laid_out: set[str] = set()
 
@@ -242,12 +241,13 @@ def test_every_plotjuggler_curve_and_math_source_exists_in_a_recorded_bag(bag: B
         ("/foxglove_script/true_state_error.error[0]", "/foxglove_script/true_state_error.err[0]"),
         ("/ground_truth/joint_states.position[0]", "/ground_truth/joint_state.position[0]"),
         ('"followTf": "tool0"', '"followTf": "tool9"'),
+        ("/robot_description", "/robot_descriptions"),
     ],
 )
 def test_a_wrong_name_in_the_foxglove_layout_fails_the_check(bag: Bag, old: str, new: str) -> None:
     def replaced(node: Any) -> Any:
         if isinstance(node, dict):
-            return {k: replaced(v) for k, v in node.items()}
+            return {replaced(k): replaced(v) for k, v in node.items()}
         if isinstance(node, list):
             return [replaced(v) for v in node]
         return node.replace(old, new) if isinstance(node, str) else node
