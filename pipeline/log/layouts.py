@@ -1,5 +1,7 @@
 """Foxglove and PlotJuggler layouts for our bags: per joint, the reference vs the true and
-the measured position, the controller's error, and the applied vs the commanded effort.
+the measured position, the error against the true state (what the metrics use) beside the
+controller's own (against the measured state), and the applied vs the commanded effort; in
+Foxglove also the arm in 3D from ``/robot_description`` and ``/tf``, following the flange.
 
 One list of plots (:data:`PLOTS`, of topics of :data:`pipeline.log.topics.TOPICS`) is written in
 each viewer's path syntax:
@@ -10,12 +12,16 @@ each viewer's path syntax:
   ``/joint_states/shoulder_pan_joint/position`` (PlotJuggler names a JointState's series by
   joint name).
 
+The true-state error is not a recorded field: it is computed in the viewer from two recorded
+ones (a :class:`Difference`), in Foxglove by a user script saved in the layout (its output
+topic ``/foxglove_script/<name>``, one array element per joint), in PlotJuggler by a custom
+math series per joint (``<name>/<joint>``, Lua ``return value - v1``). The bag holds no
+TCP error (the report's ``recording.rrd`` has it) and ``/tf`` is the measured state's.
+
 ``python -m pipeline.log.layouts [FOLDER]`` writes ``foxglove.json`` and
 ``plotjuggler.xml`` (default folder ``layouts/``, what the repository ships, for the UR5);
-``tests/log/test_layouts.py`` checks the shipped files are these, and that every path in
-them exists in a bag ``pipeline record`` writes. The true-state error (reference − true
-position, what the metrics use) is not a recorded field: plot both positions, or see the
-report's ``recording.rrd``; a TCP error is not in the bag either.
+``tests/log/test_layouts.py`` checks the shipped files are these, and that every topic,
+field and script input in them exists in a bag ``pipeline record`` writes.
 """
 
 from __future__ import annotations
@@ -30,9 +36,11 @@ from pipeline.constants import (
     TOPIC_CONTROLLER_STATE,
     TOPIC_GROUND_TRUTH,
     TOPIC_JOINT_STATES,
+    TOPIC_ROBOT_DESCRIPTION,
     TYPE_JOINT_STATE,
 )
 from pipeline.log.topics import TOPICS
+from pipeline.model.chain import FLANGE
 
 FOXGLOVE_FILE = "foxglove.json"
 PLOTJUGGLER_FILE = "plotjuggler.xml"
@@ -51,17 +59,47 @@ _REFERENCE = "#c8c8c8"
 _TRUE = "#2ca02c"
 _MEASURED = "#1f77b4"
 _COMMANDED = "#ff7f0e"
+_TRUE_ERROR = "#d62728"
+# Foxglove publishes a user script's output on a topic under this prefix (Foxglove Studio
+# 1.x and Lichtblick: /studio_script/).
+FOXGLOVE_SCRIPT_PREFIX = "/foxglove_script/"
+# The field of a Difference script's output message: one element per joint.
+SCRIPT_FIELD = "error"
+
+
+@dataclass(frozen=True)
+class Source:
+    """A recorded per-joint array: ``topic``'s field path ``fields``."""
+
+    topic: str
+    fields: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Difference:
+    """``minuend − subtrahend`` per joint, computed in the viewer (recorded at the same
+    stamps); ``name`` names the Foxglove script's topic and the PlotJuggler series."""
+
+    name: str
+    minuend: Source
+    subtrahend: Source
 
 
 @dataclass(frozen=True)
 class Curve:
-    """One plotted value: ``topic``'s array ``fields`` (a path of message fields) at the
-    joint's index."""
+    """One plotted value at the joint's index: a recorded array or a :class:`Difference`."""
 
-    topic: str
-    fields: tuple[str, ...]
+    value: Source | Difference
     label: str
     color: str
+
+
+# reference − true position: the error the metrics use (the controller sees the measured one)
+TRUE_STATE_ERROR = Difference(
+    "true_state_error",
+    Source(TOPIC_CONTROLLER_STATE, ("reference", "positions")),
+    Source(TOPIC_GROUND_TRUTH, ("position",)),
+)
 
 
 @dataclass(frozen=True)
@@ -77,23 +115,38 @@ PLOTS = (
     Plot(
         "position [rad]",
         (
-            Curve(TOPIC_CONTROLLER_STATE, ("reference", "positions"), "reference", _REFERENCE),
-            Curve(TOPIC_GROUND_TRUTH, ("position",), "true", _TRUE),
-            Curve(TOPIC_JOINT_STATES, ("position",), "measured", _MEASURED),
+            Curve(
+                Source(TOPIC_CONTROLLER_STATE, ("reference", "positions")), "reference", _REFERENCE
+            ),
+            Curve(Source(TOPIC_GROUND_TRUTH, ("position",)), "true", _TRUE),
+            Curve(Source(TOPIC_JOINT_STATES, ("position",)), "measured", _MEASURED),
         ),
     ),
     Plot(
-        "error = reference − measured [rad] (the controller's)",
-        (Curve(TOPIC_CONTROLLER_STATE, ("error", "positions"), "error", _MEASURED),),
+        "error [rad]: reference − true (the metrics'), reference − measured (the controller's)",
+        (
+            Curve(TRUE_STATE_ERROR, "reference − true", _TRUE_ERROR),
+            Curve(
+                Source(TOPIC_CONTROLLER_STATE, ("error", "positions")),
+                "reference − measured",
+                _MEASURED,
+            ),
+        ),
     ),
     Plot(
         "effort [N m]",
         (
-            Curve(TOPIC_JOINT_STATES, ("effort",), "applied", _MEASURED),
-            Curve(TOPIC_CONTROLLER_STATE, ("output", "effort"), "commanded", _COMMANDED),
+            Curve(Source(TOPIC_JOINT_STATES, ("effort",)), "applied", _MEASURED),
+            Curve(Source(TOPIC_CONTROLLER_STATE, ("output", "effort")), "commanded", _COMMANDED),
         ),
     ),
 )
+
+
+def differences() -> tuple[Difference, ...]:
+    """The :class:`Difference` values :data:`PLOTS` draw, in order, each once."""
+    found = [c.value for p in PLOTS for c in p.curves if isinstance(c.value, Difference)]
+    return tuple(dict.fromkeys(found))
 
 
 def _type(topic: str) -> str:
@@ -101,17 +154,104 @@ def _type(topic: str) -> str:
     return row.type
 
 
+def script_topic(diff: Difference) -> str:
+    """The topic Foxglove publishes ``diff``'s user script output on."""
+    return f"{FOXGLOVE_SCRIPT_PREFIX}{diff.name}"
+
+
 def foxglove_path(curve: Curve, index: int) -> str:
     """Foxglove's message path of ``curve`` for the joint at ``index``."""
-    return f"{curve.topic}.{'.'.join(curve.fields)}[{index}]"
+    if isinstance(curve.value, Difference):
+        return f"{script_topic(curve.value)}.{SCRIPT_FIELD}[{index}]"
+    return f"{curve.value.topic}.{'.'.join(curve.value.fields)}[{index}]"
+
+
+def _pj_series(source: Source, index: int, joint: str) -> str:
+    if _type(source.topic) == TYPE_JOINT_STATE:
+        (leaf,) = source.fields
+        return f"{source.topic}/{joint}/{leaf}"
+    return f"{source.topic}/{'/'.join(source.fields)}[{index}]"
 
 
 def plotjuggler_name(curve: Curve, index: int, joint: str) -> str:
     """PlotJuggler's series name of ``curve`` for ``joint`` (at ``index``)."""
-    if _type(curve.topic) == TYPE_JOINT_STATE:
-        (leaf,) = curve.fields
-        return f"{curve.topic}/{joint}/{leaf}"
-    return f"{curve.topic}/{'/'.join(curve.fields)}[{index}]"
+    if isinstance(curve.value, Difference):
+        return f"{curve.value.name}/{joint}"
+    return _pj_series(curve.value, index, joint)
+
+
+def _ts_path(source: Source) -> str:
+    return ".".join(source.fields)
+
+
+def foxglove_script(diff: Difference) -> str:
+    """The TypeScript user script publishing ``diff`` per joint on :func:`script_topic`: the
+    latest message of each input, subtracted when both carry the same header stamp."""
+    a, b = diff.minuend, diff.subtrahend
+    inputs = json.dumps([a.topic, b.topic])
+    return f"""\
+// {diff.name}: {a.topic} {_ts_path(a)} − {b.topic} {_ts_path(b)}, per joint
+// (written by `python -m pipeline.log.layouts`, armlab pipeline).
+import {{ Input }} from "./types";
+
+type Stamp = {{ sec: number; nsec?: number; nanosec?: number }};
+type Latest = {{ stamp: string; values: ArrayLike<number> }};
+type Output = {{ {SCRIPT_FIELD}: number[] }};
+
+export const inputs = {inputs};
+export const output = "{script_topic(diff)}";
+
+let minuend: Latest | undefined;
+let subtrahend: Latest | undefined;
+
+function key(stamp: Stamp): string {{
+  return `${{stamp.sec}}.${{stamp.nsec ?? stamp.nanosec ?? 0}}`;
+}}
+
+export default function script(
+  event: Input<"{a.topic}"> | Input<"{b.topic}">,
+): Output | undefined {{
+  switch (event.topic) {{
+    case "{a.topic}":
+      minuend = {{
+        stamp: key(event.message.header.stamp),
+        values: event.message.{_ts_path(a)},
+      }};
+      break;
+    case "{b.topic}":
+      subtrahend = {{
+        stamp: key(event.message.header.stamp),
+        values: event.message.{_ts_path(b)},
+      }};
+      break;
+  }}
+  if (minuend === undefined || subtrahend === undefined || minuend.stamp !== subtrahend.stamp) {{
+    return undefined;
+  }}
+  const n = Math.min(minuend.values.length, subtrahend.values.length);
+  const {SCRIPT_FIELD}: number[] = [];
+  for (let i = 0; i < n; i++) {{
+    {SCRIPT_FIELD}.push(minuend.values[i] - subtrahend.values[i]);
+  }}
+  return {{ {SCRIPT_FIELD} }};
+}}
+"""
+
+
+THREE_D_PANEL = "3D!tcp"
+
+
+def three_d_config() -> dict[str, object]:
+    """Foxglove's 3D panel: the robot from the URDF on ``/robot_description``, posed by
+    ``/tf`` (the measured joint positions), the view following the flange frame."""
+    return {
+        "followTf": FLANGE,
+        "followMode": "follow-position",
+        "layers": {"grid": {"layerId": "foxglove.Grid", "visible": True, "frameLocked": True}},
+        # the 3D panel draws a std_msgs/String URDF topic of this name when it is visible
+        "topics": {TOPIC_ROBOT_DESCRIPTION: {"visible": True}},
+        "transforms": {f"frame:{FLANGE}": {"visible": True}},
+    }
 
 
 def foxglove_layout(joints: tuple[str, ...] = UR5_JOINTS) -> dict[str, object]:
@@ -143,11 +283,20 @@ def foxglove_layout(joints: tuple[str, ...] = UR5_JOINTS) -> dict[str, object]:
                 "xAxisVal": "timestamp",
             }
         tabs.append({"title": f"{j + 1} {joint}", "layout": _column(ids)})
+    config[THREE_D_PANEL] = three_d_config()
+    tabs.append({"title": f"3D ({FLANGE})", "layout": THREE_D_PANEL})
     config["Tab!joints"] = {"activeTabIdx": 0, "tabs": tabs}
+    scripts = {
+        f"{FOXGLOVE_SCRIPT_PREFIX.strip('/')}_{d.name}": {
+            "name": d.name,
+            "sourceCode": foxglove_script(d),
+        }
+        for d in differences()
+    }
     return {
         "configById": config,
         "globalVariables": {},
-        "userNodes": {},
+        "userNodes": scripts,
         "playbackConfig": {"speed": 1},
         "layout": "Tab!joints",
     }
@@ -197,10 +346,28 @@ def plotjuggler_layout(joints: tuple[str, ...] = UR5_JOINTS) -> str:
     lines.append('  <plugin ID="DataLoad MCAP"/>')
     lines.append(" </Plugins>")
     lines.append(" <previouslyLoaded_Datafiles/>")
-    lines.append(" <customMathEquations/>")
+    lines.extend(_pj_snippets(joints))
     lines.append(" <snippets/>")
     lines.append("</root>")
     return "\n".join(lines) + "\n"
+
+
+def _pj_snippets(joints: tuple[str, ...]) -> list[str]:
+    """PlotJuggler's custom math series: per :class:`Difference` and joint, ``value`` (the
+    minuend's series) minus ``v1`` (the subtrahend's), in Lua."""
+    lines = [" <customMathEquations>"]
+    for d in differences():
+        for j, joint in enumerate(joints):
+            lines.append(f"  <snippet name={quoteattr(f'{d.name}/{joint}')}>")
+            lines.append("   <global></global>")
+            lines.append("   <function>return value - v1</function>")
+            lines.append(f"   <linked_source>{_pj_series(d.minuend, j, joint)}</linked_source>")
+            lines.append("   <additional_sources>")
+            lines.append(f"    <v1>{_pj_series(d.subtrahend, j, joint)}</v1>")
+            lines.append("   </additional_sources>")
+            lines.append("  </snippet>")
+    lines.append(" </customMathEquations>")
+    return lines
 
 
 def write_layouts(folder: Path) -> list[Path]:

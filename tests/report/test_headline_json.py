@@ -35,14 +35,19 @@ def _default_experiment_shape() -> dict[str, tuple[list[str], int]]:
     return groups
 
 
-# What DVC prints (measured; docs/report.md "Headline numbers for DVC"): `dvc metrics diff`
-# one header line, then a line per changed scalar (`--all`: per scalar); `dvc exp show
-# --only-changed --csv` the Experiment, rev, typ and Created columns, then one per changed
-# param, changed dependency (`recordings`, the report's) and changed metric.
+# What DVC prints (measured in a clone after `dvc exp run`; docs/report.md "Headline numbers
+# for DVC"): `dvc metrics diff` one header line, then a line per changed scalar (`--all`:
+# per scalar); `dvc exp show --only-changed --csv` the Experiment, rev, typ and Created
+# columns (the table shows two of them), then one per changed param, changed dependency
+# (`recordings`, the report's) and changed metric.
 METRICS_DIFF_MAX_LINES = 60
 EXP_SHOW_MAX_COLUMNS = 40
 EXP_SHOW_FIXED_COLUMNS = 4
 CHANGED_DEPS = 1
+# The README's experiments: CTC's kp and kd; the gain sweep's PID omega_n_rad_s with CTC's
+# kp and kd (the baseline changes, so every reduction does).
+CTC_CHANGE_PARAMS = 2
+SWEEP_PARAMS = 3
 
 
 @pytest.fixture(scope="module")
@@ -83,27 +88,44 @@ def test_headline_json_of_the_default_experiments_shape_stays_small(
         "wrist_2_joint", "wrist_3_joint", "tcp_position", "tcp_orientation",
     }  # fmt: skip
     assert node["n"] == 5
-    cell = node["tcp_position"]
-    assert set(cell) == {"max_error_reduction_pct", "ci95_half_width"}
-    assert cell["max_error_reduction_pct"] < 0
-    # one pair: no interval, and no null scalar standing in for it
-    assert set(headline["paper"]["ctc_vs_pid"]["tcp_position"]) == {"max_error_reduction_pct"}
-    assert headline["paper"]["ctc_vs_pid"]["n"] == 1
+    for row in ("shoulder_pan_joint", "wrist_3_joint", "tcp_position", "tcp_orientation"):
+        assert set(node[row]) == {"max_error_reduction_pct", "ci95_half_width"}, row
+    assert node["tcp_position"]["max_error_reduction_pct"] < 0
+    assert set(headline["paper-realistic"]) == {"ctc_vs_pid", "ctc_pid_vs_pid"}
+    # the ideal plant's single pair has no interval: metrics.json's `headline` keeps it
+    assert "paper" not in headline
 
 
 def test_a_gain_change_fits_dvc_metrics_diff_and_exp_show(headline: dict[str, Any]) -> None:
-    """The README's two experiments. A CTC gain change (`-S controllers.ctc.gains.kp=...
-    -S ...kd=...`) changes the comparisons CTC is in; the gain sweep (PID's
-    `omega_n_rad_s` with CTC's kp and kd) changes the baseline, so every comparison: its
-    table drops the half widths (`--drop '.*ci95_half_width'`)."""
+    """The README's two experiments, counted as `dvc exp show --only-changed --csv` does. A
+    CTC gain change (`-S controllers.ctc.gains.kp=... -S ...kd=...`) changes the
+    comparisons CTC is in; the gain sweep (PID's `omega_n_rad_s` with CTC's kp and kd)
+    changes the baseline, so every comparison, half widths included."""
     keys = [k for k in _keys(headline) if not k.endswith(".n")]  # pairs do not change
     ctc = [k for k in keys if "ctc_vs_" in k or "_vs_ctc." in k]
     assert 1 + len(keys) <= METRICS_DIFF_MAX_LINES  # either experiment's metrics diff
-    assert EXP_SHOW_FIXED_COLUMNS + 2 + CHANGED_DEPS + len(ctc) <= EXP_SHOW_MAX_COLUMNS
-    reductions = [k for k in keys if not k.endswith(".ci95_half_width")]
-    assert EXP_SHOW_FIXED_COLUMNS + 3 + CHANGED_DEPS + len(reductions) <= EXP_SHOW_MAX_COLUMNS
+    fixed = EXP_SHOW_FIXED_COLUMNS + CHANGED_DEPS
+    assert fixed + CTC_CHANGE_PARAMS + len(ctc) <= EXP_SHOW_MAX_COLUMNS
+    assert fixed + SWEEP_PARAMS + len(keys) <= EXP_SHOW_MAX_COLUMNS
     readme = (REPO / "README.md").read_text(encoding="utf-8")
-    assert "dvc exp show --only-changed --drop '.*ci95_half_width'" in readme
+    assert "dvc exp run --run-all && dvc exp show --only-changed\n" in readme  # no --drop
+
+
+def test_only_single_pairs_still_make_a_headline(tmp_path: Path) -> None:
+    """Without repeated runs every comparison is a single pair: headline.json holds them,
+    with no half widths (rather than being empty)."""
+    for controller in ("pid", "ctc"):
+        scale = 1e-3 if controller == "pid" else 5e-4
+        ep = paper_like(
+            f"paper-{controller}", controller, duration_s=0.6, motion_end_s=0.4, error_scale=scale
+        )
+        write_bag(tmp_path / "recordings", ep)
+    run_report(recordings_dir=tmp_path / "recordings", out_dir=tmp_path / "reports")
+    doc = json.loads((tmp_path / "reports" / "headline.json").read_text("utf-8"))
+    node = doc["paper"]["ctc_vs_pid"]
+    assert node["n"] == 1
+    assert set(node["tcp_position"]) == {"max_error_reduction_pct"}
+    assert node["shoulder_pan_joint"]["max_error_reduction_pct"] > 0
 
 
 def test_dvc_declares_the_headline_as_its_metric_and_metrics_json_as_an_output() -> None:
