@@ -42,6 +42,7 @@ class Sidecar(StrictModel):
     flange: str | None = None
     locked: dict[str, float] = Field(default_factory=dict)
     acceleration: float | list[float] = Field(default=DEFAULT_ACCELERATION)
+    velocity: float | list[float] | None = None  # over the file's (MJCF states none)
     armature: float | list[float] = 0.0
     armature_source: str | None = None
     damping: float | list[float] = 0.0

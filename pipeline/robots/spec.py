@@ -2,8 +2,9 @@
 
 A robot is data: its joints (origin, axis, kind, limits, the inertial of the link each
 moves, actuator facts) and named frames. Loaders (:mod:`pipeline.robots.loaders`) read DH
-YAML (:mod:`pipeline.robots.dh_yaml`) and URDF (:mod:`pipeline.robots.urdf_loader`) into
-it. Inside the package everything is radians, metres, kilograms and newton-metres.
+YAML (:mod:`pipeline.robots.dh_yaml`), URDF (:mod:`pipeline.robots.urdf_loader`) and MJCF
+(:mod:`pipeline.robots.mjcf_loader`) into it. Inside the package everything is radians,
+metres, kilograms and newton-metres.
 """
 
 from __future__ import annotations

@@ -47,7 +47,14 @@ from pipeline.robots.spec import (
     as_pose,
 )
 
-__all__ = ["load_sidecar", "load_urdf", "resolve_uri", "xml_floats", "xml_origin"]
+__all__ = [
+    "load_sidecar",
+    "load_urdf",
+    "merged_inertial",
+    "resolve_uri",
+    "xml_floats",
+    "xml_origin",
+]
 
 MOVABLE = ("revolute", "continuous", "prismatic")
 MESH_SUFFIXES = (".stl", ".obj")  # what MuJoCo reads as a collision mesh
@@ -164,6 +171,32 @@ def _check_physical(mass: float, inertia: F64, where: str) -> None:
         )
     if mass == 0.0 and float(np.abs(inertia).max()) > 0.0:
         raise SpecError(f"{where}: mass 0 with a non-zero inertia")
+
+
+def merged_inertial(parts: list[tuple[float, F64, F64]], where: str) -> Inertial:
+    """Rigidly joined bodies as one inertial, in the frame their parts are given in.
+
+    Args:
+        parts: ``(mass [kg], centre of mass [m], inertia about it [kg m^2])`` per body.
+        where: the link, for errors.
+
+    Raises:
+        SpecError: zero total mass or a non-physical result (naming ``where``).
+    """
+    total = sum(m for m, _, _ in parts)
+    if total <= 0:
+        raise SpecError(f"{where}: zero mass")
+    centre: F64 = np.sum([m * c for m, c, _ in parts], axis=0) / total
+    tensor = np.zeros((3, 3))
+    for m, c, inertia in parts:
+        d = c - centre
+        tensor += inertia + m * (float(d @ d) * np.eye(3) - np.outer(d, d))
+    _check_physical(total, tensor, f"{where} (merged)")
+    return Inertial(
+        mass=float(total),
+        com=(float(centre[0]), float(centre[1]), float(centre[2])),
+        inertia=tuple((float(r[0]), float(r[1]), float(r[2])) for r in 0.5 * (tensor + tensor.T)),
+    )
 
 
 def _parse_links(
@@ -500,16 +533,9 @@ def load_urdf(
         for k in ("velocity", "effort"):
             if not (math.isfinite(lim[k]) and lim[k] > 0):
                 raise SpecError(f"{where}: limit {k} {lim[k]} must be > 0")
-        parts = mass.get(j.child, [])
-        total = sum(m for m, _, _ in parts)
-        if total <= 0:
-            raise SpecError(f"{source}: link '{j.child}' (moved by '{j.name}') has zero mass")
-        centre: F64 = np.sum([m * c for m, c, _ in parts], axis=0) / total
-        tensor = np.zeros((3, 3))
-        for m, c, inertia in parts:
-            d = c - centre
-            tensor += inertia + m * (float(d @ d) * np.eye(3) - np.outer(d, d))
-        _check_physical(total, tensor, f"{source}: link '{j.child}' (merged)")
+        inertial = merged_inertial(
+            mass.get(j.child, []), f"{source}: link '{j.child}' (moved by '{j.name}')"
+        )
         nxt = chain_origin[chain[i + 1].name] if i + 1 < len(chain) else flange
         end = nxt[:3, 3]
         capsules = (
@@ -521,13 +547,7 @@ def load_urdf(
             JointSpec(
                 name=j.name,
                 limits=JointLimits(lower, upper, lim["velocity"], acceleration[i], lim["effort"]),
-                inertial=Inertial(
-                    mass=float(total),
-                    com=(float(centre[0]), float(centre[1]), float(centre[2])),
-                    inertia=tuple(
-                        (float(r[0]), float(r[1]), float(r[2])) for r in 0.5 * (tensor + tensor.T)
-                    ),
-                ),
+                inertial=inertial,
                 collision_radius=radius,
                 armature=armature[i],
                 origin=as_pose(chain_origin[j.name]),
