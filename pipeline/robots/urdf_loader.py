@@ -507,6 +507,9 @@ def load_urdf(
     frames = [f for f in frames if f.name != "tool0"]
 
     acceleration = per_joint(opts.acceleration, names, "acceleration", source)
+    velocity = (
+        None if opts.velocity is None else per_joint(opts.velocity, names, "velocity", source)
+    )
     armature = per_joint(opts.armature, names, "armature", source)
     sidecar_name = settings_source or "defaults"
     damping, damping_from = joint_default(
@@ -530,6 +533,8 @@ def load_urdf(
         )
         if not lower < upper:
             raise SpecError(f"{where}: limit lower {lower} must be < upper {upper}")
+        if velocity is not None:  # the sidecar's, over the URDF's
+            lim = {**lim, "velocity": velocity[i]}
         for k in ("velocity", "effort"):
             if not (math.isfinite(lim[k]) and lim[k] > 0):
                 raise SpecError(f"{where}: limit {k} {lim[k]} must be > 0")
@@ -581,6 +586,7 @@ def load_urdf(
         settings_sources=(
             ("armature", opts.armature_source or sidecar_name),
             ("acceleration", sidecar_name),
+            *((("velocity", sidecar_name),) if velocity is not None else ()),
             ("damping", damping_from),
             ("frictionloss", friction_from),
         ),

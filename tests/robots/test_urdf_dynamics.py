@@ -132,3 +132,9 @@ def test_bad_dynamics_are_one_line_naming_the_joint(tmp_path, dynamics, says):
     with pytest.raises(SpecError, match="joint 'j1'") as err:
         load_spec(robot)
     assert says in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_sidecar_velocity_replaces_the_urdfs_and_says_so(tmp_path):
+    spec = load_spec(_robot(tmp_path, sidecar="velocity: [1.0, 1.5, 2.5]\n"))
+    assert spec.velocity_limits.tolist() == [1.0, 1.5, 2.5]  # the URDF's: 2, 2, 3
+    assert dict(spec.settings_sources)["velocity"] == str(tmp_path / "three.armlab.yaml")
