@@ -44,11 +44,10 @@ from pipeline.robots.spec import (
     JointLimits,
     JointSpec,
     RobotSpec,
-    Segment,
     Shape,
     as_pose,
 )
-from pipeline.robots.urdf_loader import merged_inertial
+from pipeline.robots.urdf_loader import link_capsules, merged_inertial
 
 __all__ = ["DEFAULT_VELOCITY", "load_mjcf"]
 
@@ -305,11 +304,6 @@ def load_mjcf(path: Path, *, package_path: tuple[str, ...] = ()) -> RobotSpec:
         joint_kind: JointKind = (
             "prismatic" if slide else ("revolute" if model.jnt_limited[j] else "continuous")
         )
-        capsules = (
-            (Segment((0.0, 0.0, 0.0), (float(end[0]), float(end[1]), float(end[2])), radius),)
-            if float(np.linalg.norm(end)) > 1e-6
-            else ()
-        )
         out.append(
             JointSpec(
                 name=jnames[i],
@@ -322,7 +316,7 @@ def load_mjcf(path: Path, *, package_path: tuple[str, ...] = ()) -> RobotSpec:
                 post=as_pose(post[b]),
                 kind=joint_kind,
                 link=names[b],
-                capsules=capsules,
+                capsules=link_capsules(end, radius),
                 shapes=tuple(shapes.get(b, ())),
                 length_m=length_m,
                 armature_source=armature_source,

@@ -48,6 +48,7 @@ from pipeline.robots.spec import (
 )
 
 __all__ = [
+    "link_capsules",
     "load_sidecar",
     "load_urdf",
     "merged_inertial",
@@ -196,6 +197,16 @@ def merged_inertial(parts: list[tuple[float, F64, F64]], where: str) -> Inertial
         mass=float(total),
         com=(float(centre[0]), float(centre[1]), float(centre[2])),
         inertia=tuple((float(r[0]), float(r[1]), float(r[2])) for r in 0.5 * (tensor + tensor.T)),
+    )
+
+
+def link_capsules(end_m: F64, radius_m: float) -> tuple[Segment, ...]:
+    """A link's planning capsule: from its frame's origin to ``end_m`` (the next joint or
+    the flange, link frame [m]); none for a link that carries nothing further."""
+    if float(np.linalg.norm(end_m)) <= 1e-6:
+        return ()
+    return (
+        Segment((0.0, 0.0, 0.0), (float(end_m[0]), float(end_m[1]), float(end_m[2])), radius_m),
     )
 
 
@@ -543,11 +554,6 @@ def load_urdf(
         )
         nxt = chain_origin[chain[i + 1].name] if i + 1 < len(chain) else flange
         end = nxt[:3, 3]
-        capsules = (
-            (Segment((0.0, 0.0, 0.0), (float(end[0]), float(end[1]), float(end[2])), radius),)
-            if float(np.linalg.norm(end)) > 1e-6
-            else ()
-        )
         out.append(
             JointSpec(
                 name=j.name,
@@ -559,7 +565,7 @@ def load_urdf(
                 axis=j.axis,
                 kind=j.kind,  # type: ignore[arg-type]
                 link=j.child,
-                capsules=capsules,
+                capsules=link_capsules(end, radius),
                 shapes=tuple(shapes.get(j.child, ())),
                 # reach: the joint's own offset from the previous one, the flange's on the last
                 length_m=float(np.linalg.norm(chain_origin[j.name][:3, 3]))

@@ -5,7 +5,6 @@ compile of that MJCF; bad input refused in one line."""
 from __future__ import annotations
 
 import re
-import textwrap
 from pathlib import Path
 
 import mujoco
@@ -13,12 +12,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pipeline.errors import SpecError
 from pipeline.model.dh import forward_kinematics
 from pipeline.model.mjcf import build_mujoco_model
 from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots import RobotSpec, load_spec
-from tests.robots.test_urdf_loader import PANDA_URDF, SHARE, _urdf
+from tests.robots.test_urdf_loader import PANDA_URDF, SHARE, _bad, _urdf
 
 pytestmark = pytest.mark.skipif(SHARE is None, reason="example-robot-data share not found")
 ARM = [f"panda_joint{i}" for i in range(1, 8)]
@@ -162,6 +160,11 @@ ONE_HINGE = """\
   </worldbody>
 </mujoco>
 """
+LEAF = '<geom type="sphere" size="0.05" mass="0.5"/>'
+SECOND_LEAF = (  # closes l2, opens l3 on l1
+    '</body><body name="l3" pos="0 0.1 0.2">'
+    '<joint name="j3" range="-1 1" actuatorfrcrange="-5 5"/><geom size="0.03" mass="0.2"/>'
+)
 
 
 def test_a_small_mjcf_arm_loads_and_its_sidecar_wins(tmp_path):
@@ -179,16 +182,6 @@ def test_a_small_mjcf_arm_loads_and_its_sidecar_wins(tmp_path):
     assert dict(spec.settings_sources)["damping"] == str(folder / "arm.armlab.yaml")
 
 
-def _bad(tmp_path: Path, text: str) -> str:
-    path = tmp_path / "bad.xml"
-    path.write_text(textwrap.dedent(text))
-    with pytest.raises(SpecError) as err:
-        load_spec(path)
-    message = str(err.value)
-    assert "\n" not in message and str(path) in message
-    return message
-
-
 @pytest.mark.parametrize(
     ("old", "new", "says"),
     [
@@ -198,10 +191,7 @@ def _bad(tmp_path: Path, text: str) -> str:
          '<joint name="j2" type="ball"/>', "joint 'j2' is ball"),
         ("</worldbody>", '</worldbody><equality><connect name="loop" body1="l2" body2="base" '
          'anchor="0 0 0"/></equality>', "<equality> 'loop' (connect): a closed loop"),
-        ('<geom type="sphere" size="0.05" mass="0.5"/>',
-         '<geom type="sphere" size="0.05" mass="0.5"/></body><body name="l3" pos="0 0.1 0.2">'
-         '<joint name="j3" range="-1 1" actuatorfrcrange="-5 5"/><geom size="0.03" mass="0.2"/>',
-         "several leaf chains end at bodies"),
+        (LEAF, LEAF + SECOND_LEAF, "several leaf chains end at bodies l2, l3"),
         ('actuatorfrcrange="-10 10"/>\n        <geom type="box"', '/>\n        <geom type="box"',
          "joint 'j1': no effort limit"),
         ('<joint name="j2"',
@@ -212,16 +202,11 @@ def _bad(tmp_path: Path, text: str) -> str:
 )  # fmt: skip
 def test_bad_mjcf_is_one_line_naming_the_file_and_element(tmp_path, old, new, says):
     assert old in ONE_HINGE
-    assert says in _bad(tmp_path, ONE_HINGE.replace(old, new))
+    assert says in _bad(tmp_path, ONE_HINGE.replace(old, new), name="bad.xml")
 
 
 def test_several_leaves_with_a_tip_lock_the_others(tmp_path):
-    text = ONE_HINGE.replace(
-        '<geom type="sphere" size="0.05" mass="0.5"/>',
-        '<geom type="sphere" size="0.05" mass="0.5"/></body><body name="l3" pos="0 0.1 0.2">'
-        '<joint name="j3" range="-1 1" actuatorfrcrange="-5 5"/><geom size="0.03" mass="0.2"/>',
-    )
-    (tmp_path / "arm.xml").write_text(text)
+    (tmp_path / "arm.xml").write_text(ONE_HINGE.replace(LEAF, LEAF + SECOND_LEAF))
     (tmp_path / "arm.armlab.yaml").write_text("tip: l2\n")
     spec = load_spec(tmp_path / "arm.xml")
     assert spec.joint_names == ("j1", "j2")
