@@ -139,8 +139,8 @@ def _friction_lines(robot: Any) -> list[str]:
     sources = robot.get("settings_sources") if isinstance(robot, Mapping) else None
     if not isinstance(sources, Mapping) or "damping" not in sources:
         return []
-    named = "; ".join(f"{k} from {sources[k]}" for k in ("damping", "frictionloss") if k in sources)
-    return [f"- Joint friction of the plant: {named}."]
+    named = "; ".join(f"{k}: {sources[k]}" for k in ("damping", "frictionloss") if k in sources)
+    return [f"- Where the plant's joint friction comes from: {named}."]
 
 
 def setup_section(data: ReportData, scenario: str) -> list[str]:

@@ -273,3 +273,24 @@ def mujoco_rotation(quat: np.ndarray) -> np.ndarray:
     out = np.zeros(9)
     mujoco.mju_quat2Mat(out, np.asarray(quat, dtype=np.float64))
     return out.reshape(3, 3)
+
+
+@pytest.mark.slow
+def test_an_mjcf_robot_records_and_reports(panda_xml, tmp_path, capsys):
+    from pipeline.log.reader import read_recording
+    from tests.stages.test_urdf_robot_e2e import PARAMS
+    from tests.test_bad_input import run_cli, run_cli_out
+
+    params = tmp_path / "params.yaml"
+    params.write_text(PARAMS.replace("robot: panda", f"robot: {panda_xml}"))
+    code, err = run_cli(["record", "--params", str(params), "--out", str(tmp_path / "rec")], capsys)
+    assert code == 0, err
+    rec = read_recording(tmp_path / "rec" / "panda-ctc")
+    assert rec.settings is not None and rec.settings.robot["format"] == "mjcf"
+    assert rec.settings.plant.damping == (0.003,) * 7  # the file's, the scenario gives none
+    code, _, err = run_cli_out(
+        ["report", "--recordings", str(tmp_path / "rec"), "--out", str(tmp_path / "rep")], capsys
+    )
+    assert code == 0, err
+    text = (tmp_path / "rep" / "report.md").read_text(encoding="utf-8")
+    assert "from mjcf" in text and "damping: MJCF <joint damping>" in text

@@ -64,8 +64,8 @@ def test_panda_records_and_reports_with_its_own_urdf(tmp_path: Path, capsys) -> 
     assert code == 0, err
     text = (tmp_path / "rep" / "report.md").read_text(encoding="utf-8")
     assert "7 joints" in text and "from urdf" in text and "DH convention" not in text
-    assert "Joint friction of the plant: damping from " in text
-    assert "frictionloss from URDF <dynamics>" in text
+    assert "Where the plant's joint friction comes from: damping: " in text
+    assert "frictionloss: URDF <dynamics>" in text
 
 
 def test_a_bad_urdf_is_one_error_line_and_writes_nothing(tmp_path: Path, capsys) -> None:
