@@ -74,5 +74,5 @@ def print_json(obj: Any) -> None:
 
 ROBOT_HELP = (
     "Built-in robot name (see `pipeline robots`) or path to a robot file: DH YAML, URDF, "
-    "or a .armlab.yaml naming a URDF."
+    "MJCF (.xml), or a .armlab.yaml naming a URDF."
 )

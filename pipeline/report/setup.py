@@ -133,6 +133,16 @@ def _armature_lines(robot: Any, plant: Mapping[str, Any], scenario: Mapping[str,
     return [f"- Rotor armature of the nominal model [kg m²]: {values}; source: {stated}."]
 
 
+def _friction_lines(robot: Any) -> list[str]:
+    """Where the plant's joint friction came from, for a robot that records its sources
+    (a URDF or MJCF robot: scenario, sidecar, the file's own, or not stated)."""
+    sources = robot.get("settings_sources") if isinstance(robot, Mapping) else None
+    if not isinstance(sources, Mapping) or "damping" not in sources:
+        return []
+    named = "; ".join(f"{k}: {sources[k]}" for k in ("damping", "frictionloss") if k in sources)
+    return [f"- Where the plant's joint friction comes from: {named}."]
+
+
 def setup_section(data: ReportData, scenario: str) -> list[str]:
     """The ``### Setup`` section of a scenario (or campaign condition): its first
     episode's settings, and one row per episode (per controller and gains when many)."""
@@ -159,6 +169,7 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
         f"hold after the motion: {md.value(_given(sc, 'hold_s'))} s.",
         f"- Planner: {_planner_line(planner)}.",
         *_armature_lines(s.robot if s is not None else None, plant, sc),
+        *_friction_lines(s.robot if s is not None else None),
         f"- Plant: {_settings_line(plant, _PLANT_KEYS, skip=('links',))}"
         + (
             "; link masses, centres of mass and inertias (and the armature above) drawn per "

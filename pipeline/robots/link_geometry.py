@@ -10,7 +10,6 @@ into another (fixed joints, locked fingers) are carried by their owner through t
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -20,9 +19,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import SpecError
-from pipeline.model import transforms as tf
 from pipeline.robots.spec import RobotSpec, pose_matrix
-from pipeline.robots.urdf_loader import resolve_uri
+from pipeline.robots.urdf_loader import resolve_uri, xml_floats, xml_origin
 
 __all__ = ["RERUN_MESH_SUFFIXES", "GeometryKind", "LinkGeometry", "link_geometry", "rerun_geometry"]
 
@@ -53,25 +51,6 @@ class LinkGeometry:
     size: tuple[float, ...]
     mesh: str = ""
     rgba: tuple[float, float, float, float] | None = None
-
-
-def _floats(text: str | None, n: int, where: str, default: str) -> tuple[float, ...]:
-    raw = (text if text is not None else default).split()
-    try:
-        values = tuple(float(v) for v in raw)
-    except ValueError:
-        values = ()
-    if len(values) != n or not all(math.isfinite(v) for v in values):
-        raise SpecError(f"{where}: expected {n} finite numbers, got {text!r}")
-    return values
-
-
-def _origin(el: ElementTree.Element | None, where: str) -> NDArray[np.float64]:
-    out = np.eye(4)
-    if el is not None:
-        out[:3, :3] = tf.rpy_to_matrix(*_floats(el.get("rpy"), 3, f"{where}.origin.rpy", "0 0 0"))
-        out[:3, 3] = _floats(el.get("xyz"), 3, f"{where}.origin.xyz", "0 0 0")
-    return out
 
 
 def _owners(spec: RobotSpec) -> dict[str, tuple[int, NDArray[np.float64]]]:
@@ -117,26 +96,26 @@ def link_geometry(
             if geometry is None or len(geometry) == 0:
                 continue
             g = geometry[0]
-            pose = owner_T_link @ _origin(el.find("origin"), where)
+            pose = owner_T_link @ xml_origin(el.find("origin"), where)
             rgba = _colour(el, where)
             if g.tag == "mesh":
                 uri = g.get("filename") or ""
                 path = resolve_uri(uri, base=base, where=where, package_path=package_path)
                 if not path.is_file():
                     raise SpecError(f"{where}: missing mesh {uri!r} ({path})")
-                scale = _floats(g.get("scale"), 3, f"{where}.mesh.scale", "1 1 1")
+                scale = xml_floats(g.get("scale"), 3, f"{where}.mesh.scale", "1 1 1")
                 out.append(
                     LinkGeometry(name, owner, pose, "mesh", scale, str(path.resolve()), rgba)
                 )
             elif g.tag == "box":
-                size = _floats(g.get("size"), 3, f"{where}.box.size", "")
+                size = xml_floats(g.get("size"), 3, f"{where}.box.size", "")
                 out.append(LinkGeometry(name, owner, pose, "box", size, rgba=rgba))
             elif g.tag == "sphere":
-                radius = _floats(g.get("radius"), 1, f"{where}.sphere.radius", "")
+                radius = xml_floats(g.get("radius"), 1, f"{where}.sphere.radius", "")
                 out.append(LinkGeometry(name, owner, pose, "sphere", radius, rgba=rgba))
             elif g.tag == "cylinder":
-                r = _floats(g.get("radius"), 1, f"{where}.cylinder.radius", "")[0]
-                length = _floats(g.get("length"), 1, f"{where}.cylinder.length", "")[0]
+                r = xml_floats(g.get("radius"), 1, f"{where}.cylinder.radius", "")[0]
+                length = xml_floats(g.get("length"), 1, f"{where}.cylinder.length", "")[0]
                 out.append(LinkGeometry(name, owner, pose, "cylinder", (r, length), rgba=rgba))
     return tuple(out)
 
@@ -145,7 +124,7 @@ def _colour(el: ElementTree.Element, where: str) -> tuple[float, float, float, f
     colour = el.find("material/color")
     if colour is None:
         return None
-    r, g, b, a = _floats(colour.get("rgba"), 4, f"{where}.material.color.rgba", "")
+    r, g, b, a = xml_floats(colour.get("rgba"), 4, f"{where}.material.color.rgba", "")
     return (r, g, b, a)
 
 

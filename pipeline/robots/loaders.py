@@ -35,6 +35,7 @@ LOADERS: dict[str, str] = {
     ".yaml": "pipeline.robots.dh_yaml:load_dh_yaml",
     ".yml": "pipeline.robots.dh_yaml:load_dh_yaml",
     ".urdf": "pipeline.robots.urdf_loader:load_urdf",
+    ".xml": "pipeline.robots.mjcf_loader:load_mjcf",
     ".armlab.yaml": "pipeline.robots.urdf_loader:load_sidecar",
 }
 """Robot file loaders by suffix, ``module:function`` taking ``(path, *, package_path)`` and
@@ -49,7 +50,7 @@ def loader_suffix(path: Path) -> str | None:
 
 
 def load_spec(name_or_path: str | Path, *, package_path: tuple[str, ...] = ()) -> RobotSpec:
-    """Load a robot by built-in name (``"ur5"``) or by path to a robot file (DH YAML, URDF:
+    """Load a robot by built-in name (``"ur5"``) or by path to a robot file (DH YAML, URDF, MJCF:
     see :data:`LOADERS`).
 
     Built-in robots are parsed once per process (they are package data); a file once per

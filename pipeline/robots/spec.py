@@ -2,8 +2,9 @@
 
 A robot is data: its joints (origin, axis, kind, limits, the inertial of the link each
 moves, actuator facts) and named frames. Loaders (:mod:`pipeline.robots.loaders`) read DH
-YAML (:mod:`pipeline.robots.dh_yaml`) and URDF (:mod:`pipeline.robots.urdf_loader`) into
-it. Inside the package everything is radians, metres, kilograms and newton-metres.
+YAML (:mod:`pipeline.robots.dh_yaml`), URDF (:mod:`pipeline.robots.urdf_loader`) and MJCF
+(:mod:`pipeline.robots.mjcf_loader`) into it. Inside the package everything is radians,
+metres, kilograms and newton-metres.
 """
 
 from __future__ import annotations
@@ -185,11 +186,12 @@ class JointSpec:
     armature_source: str = ""
     """Where ``armature`` comes from (file, sidecar or scenario)."""
     damping_nm_s_rad: float = 0.0
-    """Viscous friction the description states [N m s/rad]: a fact for a scenario to use
-    (the simulated plant's friction is the scenario's ``plant``, so ``plant: {}`` stays the
-    nominal model)."""
+    """Viscous joint friction the robot states [N m s/rad] (a sidecar's ``damping``, else
+    the URDF's ``<dynamics damping>``): the simulated plant's default where the scenario's
+    ``plant.damping`` is not given (:func:`pipeline.stages.assemble.plant_friction`)."""
     frictionloss_nm: float = 0.0
-    """Coulomb friction the description states [N m] (as ``damping_nm_s_rad``)."""
+    """Coulomb joint friction the robot states [N m] (a sidecar's ``frictionloss``, else the
+    URDF's ``<dynamics friction>``), a plant default as ``damping_nm_s_rad``."""
     dh: DHRow | None = None
     """The DH row the joint came from (provenance; the analytic UR solver needs it)."""
 
@@ -282,6 +284,16 @@ class RobotSpec:
     def armature(self) -> np.ndarray:
         """Rotor (reflected) inertia per joint [kg m^2]."""
         return np.array([j.armature for j in self.joints])
+
+    @property
+    def damping(self) -> tuple[float, ...]:
+        """Viscous joint friction the robot states, per joint [N m s/rad] (0: none)."""
+        return tuple(j.damping_nm_s_rad for j in self.joints)
+
+    @property
+    def frictionloss(self) -> tuple[float, ...]:
+        """Coulomb joint friction the robot states, per joint [N m] (0: none)."""
+        return tuple(j.frictionloss_nm for j in self.joints)
 
     @property
     def dh_rows(self) -> tuple[DHRow, ...] | None:

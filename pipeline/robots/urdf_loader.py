@@ -7,10 +7,12 @@ the URDF's zero) and merged, as fixed joints are, into the link it hangs from: i
 counts, its frame stays addressable (:attr:`RobotSpec.frames`). ``package://NAME/...``
 resolves through :func:`pipeline.robots.spec.package_search_path`.
 
-A URDF carries no armature, joint friction or acceleration limits: they come from the
-settings sidecar ``<stem>.armlab.yaml`` next to the URDF (or a sidecar loaded as the robot
-file, naming its ``urdf:``), else documented defaults, and the spec says where each came
-from (:attr:`RobotSpec.settings_sources`).
+A URDF carries no armature or acceleration limits: they come from the settings sidecar
+``<stem>.armlab.yaml`` next to the URDF (or a sidecar loaded as the robot file, naming its
+``urdf:``), else documented defaults, and the spec says where each came from
+(:attr:`RobotSpec.settings_sources`). Joint friction (viscous ``damping``, Coulomb
+``frictionloss``) is the sidecar's where it states it, else the URDF's
+``<dynamics damping friction>``, else 0; a scenario's ``plant`` overrides both.
 """
 
 from __future__ import annotations
@@ -23,12 +25,17 @@ from typing import Any
 from xml.etree import ElementTree
 
 import numpy as np
-from pydantic import Field, ValidationError
 
 from pipeline.errors import SpecError
 from pipeline.model import transforms as tf
-from pipeline.robots.dh_yaml import StrictModel, format_validation_error
 from pipeline.robots.packages import package_search_path
+from pipeline.robots.sidecar import (
+    SIDECAR_SUFFIX,
+    joint_default,
+    per_joint,
+    read_sidecar,
+    validate_sidecar,
+)
 from pipeline.robots.spec import (
     Frame,
     Inertial,
@@ -39,31 +46,21 @@ from pipeline.robots.spec import (
     Shape,
     as_pose,
 )
-from pipeline.yamlio import parse_yaml
 
-__all__ = ["SIDECAR_SUFFIX", "load_sidecar", "load_urdf"]
+__all__ = [
+    "link_capsules",
+    "load_sidecar",
+    "load_urdf",
+    "merged_inertial",
+    "resolve_uri",
+    "xml_floats",
+    "xml_origin",
+]
 
-SIDECAR_SUFFIX = ".armlab.yaml"
 MOVABLE = ("revolute", "continuous", "prismatic")
 MESH_SUFFIXES = (".stl", ".obj")  # what MuJoCo reads as a collision mesh
-DEFAULT_ACCELERATION = 5.0  # [rad/s^2]: a planning default, as the DH robots' files state
-DEFAULT_RADIUS_M = 0.04
 CONTINUOUS_RANGE_RAD = 2 * math.pi
 F64 = np.ndarray
-
-
-class _Sidecar(StrictModel):
-    urdf: str | None = None
-    srdf: str | None = None
-    tip: str | None = None
-    flange: str | None = None
-    locked: dict[str, float] = Field(default_factory=dict)
-    acceleration: float | list[float] = Field(default=DEFAULT_ACCELERATION)
-    armature: float | list[float] = 0.0
-    armature_source: str | None = None
-    damping: float | list[float] = 0.0
-    frictionloss: float | list[float] = 0.0
-    collision_radius: float = Field(default=DEFAULT_RADIUS_M, gt=0, le=1.0)
 
 
 @dataclass
@@ -85,9 +82,16 @@ class _Joint:
     axis: tuple[float, float, float]
     limit: dict[str, float] | None
     mimic: tuple[str, float, float] | None
+    damping: float | None  # <dynamics damping> [N m s/rad], None: not stated
+    friction: float | None  # <dynamics friction> [N m], None: not stated
 
 
-def _floats(text: str | None, n: int, where: str, default: str) -> tuple[float, ...]:
+def xml_floats(text: str | None, n: int, where: str, default: str) -> tuple[float, ...]:
+    """``n`` finite numbers from a URDF attribute (``default`` when it is absent).
+
+    Raises:
+        SpecError: another count or a non-finite value, naming ``where`` and the text.
+    """
     raw = (text if text is not None else default).split()
     try:
         values = tuple(float(v) for v in raw)
@@ -98,11 +102,16 @@ def _floats(text: str | None, n: int, where: str, default: str) -> tuple[float, 
     return values
 
 
-def _origin(el: ElementTree.Element | None, where: str) -> F64:
+def xml_origin(el: ElementTree.Element | None, where: str) -> F64:
+    """A URDF ``<origin xyz rpy>`` as a 4x4 transform (identity when absent).
+
+    Raises:
+        SpecError: a malformed ``xyz`` or ``rpy`` (as :func:`xml_floats`).
+    """
     if el is None:
         return np.eye(4)
-    x, y, z = _floats(el.get("xyz"), 3, f"{where}.origin.xyz", "0 0 0")
-    r, p, yaw = _floats(el.get("rpy"), 3, f"{where}.origin.rpy", "0 0 0")
+    x, y, z = xml_floats(el.get("xyz"), 3, f"{where}.origin.xyz", "0 0 0")
+    r, p, yaw = xml_floats(el.get("rpy"), 3, f"{where}.origin.rpy", "0 0 0")
     out = np.eye(4)
     out[:3, :3] = tf.rpy_to_matrix(r, p, yaw)
     out[:3, 3] = (x, y, z)
@@ -140,7 +149,7 @@ def resolve_uri(uri: str, *, base: Path, where: str, package_path: tuple[str, ..
 
 def _inertia(el: ElementTree.Element, where: str) -> F64:
     keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
-    v = {k: _floats(el.get(k), 1, f"{where}.inertia.{k}", "0")[0] for k in keys}
+    v = {k: xml_floats(el.get(k), 1, f"{where}.inertia.{k}", "0")[0] for k in keys}
     return np.array(
         [
             [v["ixx"], v["ixy"], v["ixz"]],
@@ -165,6 +174,42 @@ def _check_physical(mass: float, inertia: F64, where: str) -> None:
         raise SpecError(f"{where}: mass 0 with a non-zero inertia")
 
 
+def merged_inertial(parts: list[tuple[float, F64, F64]], where: str) -> Inertial:
+    """Rigidly joined bodies as one inertial, in the frame their parts are given in.
+
+    Args:
+        parts: ``(mass [kg], centre of mass [m], inertia about it [kg m^2])`` per body.
+        where: the link, for errors.
+
+    Raises:
+        SpecError: zero total mass or a non-physical result (naming ``where``).
+    """
+    total = sum(m for m, _, _ in parts)
+    if total <= 0:
+        raise SpecError(f"{where}: zero mass")
+    centre: F64 = np.sum([m * c for m, c, _ in parts], axis=0) / total
+    tensor = np.zeros((3, 3))
+    for m, c, inertia in parts:
+        d = c - centre
+        tensor += inertia + m * (float(d @ d) * np.eye(3) - np.outer(d, d))
+    _check_physical(total, tensor, f"{where} (merged)")
+    return Inertial(
+        mass=float(total),
+        com=(float(centre[0]), float(centre[1]), float(centre[2])),
+        inertia=tuple((float(r[0]), float(r[1]), float(r[2])) for r in 0.5 * (tensor + tensor.T)),
+    )
+
+
+def link_capsules(end_m: F64, radius_m: float) -> tuple[Segment, ...]:
+    """A link's planning capsule: from its frame's origin to ``end_m`` (the next joint or
+    the flange, link frame [m]); none for a link that carries nothing further."""
+    if float(np.linalg.norm(end_m)) <= 1e-6:
+        return ()
+    return (
+        Segment((0.0, 0.0, 0.0), (float(end_m[0]), float(end_m[1]), float(end_m[2])), radius_m),
+    )
+
+
 def _parse_links(
     root: ElementTree.Element, source: str, base: Path, package_path: tuple[str, ...]
 ) -> dict[str, _Link]:
@@ -178,11 +223,11 @@ def _parse_links(
         inertial = el.find("inertial")
         if inertial is not None:
             mass_el = inertial.find("mass")
-            mass = _floats(mass_el.get("value") if mass_el is not None else None, 1,
+            mass = xml_floats(mass_el.get("value") if mass_el is not None else None, 1,
                            f"{where}.mass", "0")[0]  # fmt: skip
             if mass < 0:
                 raise SpecError(f"{where}: mass {mass} kg must be > 0")
-            frame = _origin(inertial.find("origin"), where)
+            frame = xml_origin(inertial.find("origin"), where)
             inertia_el = inertial.find("inertia")
             tensor = _inertia(inertia_el, where) if inertia_el is not None else np.zeros((3, 3))
             _check_physical(mass, tensor, where)
@@ -201,7 +246,7 @@ def _shape(
     el: ElementTree.Element, where: str, base: Path, package_path: tuple[str, ...]
 ) -> tuple[str, F64, tuple[float, ...], str] | None:
     geometry = el.find("geometry")
-    pose = _origin(el.find("origin"), where)
+    pose = xml_origin(el.find("origin"), where)
     if geometry is None or len(geometry) == 0:
         raise SpecError(f"{where}: no <geometry>")
     g = geometry[0]
@@ -210,16 +255,16 @@ def _shape(
         path = resolve_uri(uri, base=base, where=where, package_path=package_path)
         if not path.is_file():
             raise SpecError(f"{where}: missing mesh {uri!r} ({path})")
-        scale = _floats(g.get("scale"), 3, f"{where}.mesh.scale", "1 1 1")
+        scale = xml_floats(g.get("scale"), 3, f"{where}.mesh.scale", "1 1 1")
         return ("mesh", pose, scale, str(path.resolve()))
     if g.tag == "box":
-        size = _floats(g.get("size"), 3, f"{where}.box.size", "")
+        size = xml_floats(g.get("size"), 3, f"{where}.box.size", "")
         return ("box", pose, tuple(0.5 * s for s in size), "")
     if g.tag == "sphere":
-        return ("sphere", pose, _floats(g.get("radius"), 1, f"{where}.sphere.radius", ""), "")
+        return ("sphere", pose, xml_floats(g.get("radius"), 1, f"{where}.sphere.radius", ""), "")
     if g.tag == "cylinder":
-        r = _floats(g.get("radius"), 1, f"{where}.cylinder.radius", "")[0]
-        length = _floats(g.get("length"), 1, f"{where}.cylinder.length", "")[0]
+        r = xml_floats(g.get("radius"), 1, f"{where}.cylinder.radius", "")[0]
+        length = xml_floats(g.get("length"), 1, f"{where}.cylinder.length", "")[0]
         return ("cylinder", pose, (r, 0.5 * length), "")
     raise SpecError(f"{where}: unknown geometry <{g.tag}>")
 
@@ -242,7 +287,7 @@ def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link
                 raise SpecError(f"{where}: {role} link {link!r} is not a <link> of the file")
         assert parent is not None and child is not None
         axis_el = el.find("axis")
-        ax = _floats(axis_el.get("xyz") if axis_el is not None else None, 3, f"{where}.axis",
+        ax = xml_floats(axis_el.get("xyz") if axis_el is not None else None, 3, f"{where}.axis",
                      "1 0 0")  # fmt: skip
         norm = math.sqrt(sum(a * a for a in ax))
         if kind in MOVABLE and norm == 0.0:
@@ -252,7 +297,7 @@ def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link
         limit = None
         if limit_el is not None:
             limit = {
-                k: _floats(limit_el.get(k), 1, f"{where}.limit.{k}", "nan")[0]
+                k: xml_floats(limit_el.get(k), 1, f"{where}.limit.{k}", "nan")[0]
                 if limit_el.get(k) is not None
                 else math.nan
                 for k in ("lower", "upper", "velocity", "effort")
@@ -262,11 +307,31 @@ def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link
         if mimic_el is not None:
             mimic = (
                 mimic_el.get("joint") or "",
-                _floats(mimic_el.get("multiplier"), 1, f"{where}.mimic.multiplier", "1")[0],
-                _floats(mimic_el.get("offset"), 1, f"{where}.mimic.offset", "0")[0],
+                xml_floats(mimic_el.get("multiplier"), 1, f"{where}.mimic.multiplier", "1")[0],
+                xml_floats(mimic_el.get("offset"), 1, f"{where}.mimic.offset", "0")[0],
             )
+        dynamics_el = el.find("dynamics")
+        stated = {}
+        for key in ("damping", "friction"):
+            text = dynamics_el.get(key) if dynamics_el is not None else None
+            if text is not None:
+                stated[key] = xml_floats(text, 1, f"{where}.dynamics.{key}", "")[0]
+                if stated[key] < 0:
+                    raise SpecError(f"{where}: dynamics {key} {stated[key]} must be >= 0")
+        origin = xml_origin(el.find("origin"), where)
         joints.append(
-            _Joint(name, kind, parent, child, _origin(el.find("origin"), where), axis, limit, mimic)
+            _Joint(
+                name,
+                kind,
+                parent,
+                child,
+                origin,
+                axis,
+                limit,
+                mimic,
+                damping=stated.get("damping"),
+                friction=stated.get("friction"),
+            )
         )
     return joints
 
@@ -336,14 +401,7 @@ def _choose_tip(
     return ends[0]
 
 
-def _per_joint(value: float | list[float], names: list[str], what: str, source: str) -> list[float]:
-    if isinstance(value, list):
-        if len(value) != len(names):
-            raise SpecError(
-                f"{source}: {what}: expected 1 or {len(names)} values, got {len(value)}"
-            )
-        return [float(v) for v in value]
-    return [float(value)] * len(names)
+URDF_DYNAMICS = "URDF <dynamics>"
 
 
 def _motion(joint: _Joint, q: float) -> F64:
@@ -366,8 +424,8 @@ def load_urdf(
         sidecar = path.with_name(path.stem + SIDECAR_SUFFIX)
         if sidecar.is_file():
             settings_source = str(sidecar)
-            settings = _read_yaml(sidecar)
-    opts = _validate_sidecar(settings or {}, settings_source or source)
+            settings = read_sidecar(sidecar)
+    opts = validate_sidecar(settings or {}, settings_source or source)
     try:
         text = path.read_text(encoding="utf-8")
         root = ElementTree.fromstring(text)
@@ -459,11 +517,19 @@ def load_urdf(
             flange = np.array(match[0].pose)
     frames = [f for f in frames if f.name != "tool0"]
 
-    acceleration = _per_joint(opts.acceleration, names, "acceleration", source)
-    armature = _per_joint(opts.armature, names, "armature", source)
-    damping = _per_joint(opts.damping, names, "damping", source)
-    friction = _per_joint(opts.frictionloss, names, "frictionloss", source)
+    acceleration = per_joint(opts.acceleration, names, "acceleration", source)
+    velocity = (
+        None if opts.velocity is None else per_joint(opts.velocity, names, "velocity", source)
+    )
+    armature = per_joint(opts.armature, names, "armature", source)
     sidecar_name = settings_source or "defaults"
+    damping, damping_from = joint_default(
+        opts, "damping", [j.damping for j in chain], sidecar=sidecar_name, stated=URDF_DYNAMICS
+    )
+    friction, friction_from = joint_default(
+        opts, "frictionloss", [j.friction for j in chain], sidecar=sidecar_name,
+        stated=URDF_DYNAMICS,
+    )  # fmt: skip
     out = []
     for i, j in enumerate(chain):
         where = f"{source}: joint '{j.name}'"
@@ -478,44 +544,28 @@ def load_urdf(
         )
         if not lower < upper:
             raise SpecError(f"{where}: limit lower {lower} must be < upper {upper}")
+        if velocity is not None:  # the sidecar's, over the URDF's
+            lim = {**lim, "velocity": velocity[i]}
         for k in ("velocity", "effort"):
             if not (math.isfinite(lim[k]) and lim[k] > 0):
                 raise SpecError(f"{where}: limit {k} {lim[k]} must be > 0")
-        parts = mass.get(j.child, [])
-        total = sum(m for m, _, _ in parts)
-        if total <= 0:
-            raise SpecError(f"{source}: link '{j.child}' (moved by '{j.name}') has zero mass")
-        centre: F64 = np.sum([m * c for m, c, _ in parts], axis=0) / total
-        tensor = np.zeros((3, 3))
-        for m, c, inertia in parts:
-            d = c - centre
-            tensor += inertia + m * (float(d @ d) * np.eye(3) - np.outer(d, d))
-        _check_physical(total, tensor, f"{source}: link '{j.child}' (merged)")
+        inertial = merged_inertial(
+            mass.get(j.child, []), f"{source}: link '{j.child}' (moved by '{j.name}')"
+        )
         nxt = chain_origin[chain[i + 1].name] if i + 1 < len(chain) else flange
         end = nxt[:3, 3]
-        capsules = (
-            (Segment((0.0, 0.0, 0.0), (float(end[0]), float(end[1]), float(end[2])), radius),)
-            if float(np.linalg.norm(end)) > 1e-6
-            else ()
-        )
         out.append(
             JointSpec(
                 name=j.name,
                 limits=JointLimits(lower, upper, lim["velocity"], acceleration[i], lim["effort"]),
-                inertial=Inertial(
-                    mass=float(total),
-                    com=(float(centre[0]), float(centre[1]), float(centre[2])),
-                    inertia=tuple(
-                        (float(r[0]), float(r[1]), float(r[2])) for r in 0.5 * (tensor + tensor.T)
-                    ),
-                ),
+                inertial=inertial,
                 collision_radius=radius,
                 armature=armature[i],
                 origin=as_pose(chain_origin[j.name]),
                 axis=j.axis,
                 kind=j.kind,  # type: ignore[arg-type]
                 link=j.child,
-                capsules=capsules,
+                capsules=link_capsules(end, radius),
                 shapes=tuple(shapes.get(j.child, ())),
                 # reach: the joint's own offset from the previous one, the flange's on the last
                 length_m=float(np.linalg.norm(chain_origin[j.name][:3, 3]))
@@ -542,6 +592,9 @@ def load_urdf(
         settings_sources=(
             ("armature", opts.armature_source or sidecar_name),
             ("acceleration", sidecar_name),
+            *((("velocity", sidecar_name),) if velocity is not None else ()),
+            ("damping", damping_from),
+            ("frictionloss", friction_from),
         ),
     )
     srdf = opts.srdf
@@ -566,27 +619,10 @@ def load_urdf(
     )
 
 
-def _read_yaml(path: Path) -> dict[str, Any]:
-    try:
-        data = parse_yaml(path.read_text(encoding="utf-8"), source=str(path), error=SpecError)
-    except (OSError, UnicodeDecodeError) as err:
-        raise SpecError(f"{path}: cannot read ({err})") from err
-    if not isinstance(data, dict):
-        raise SpecError(f"{path}: expected a mapping (urdf, tip, locked, armature, ...)")
-    return data
-
-
-def _validate_sidecar(data: dict[str, Any], source: str) -> _Sidecar:
-    try:
-        return _Sidecar.model_validate(data)
-    except ValidationError as err:
-        raise SpecError(format_validation_error(source, err)) from err
-
-
 def load_sidecar(path: Path, *, package_path: tuple[str, ...] = ()) -> RobotSpec:
     """A settings sidecar loaded as the robot file: its ``urdf:`` with its settings."""
-    data = _read_yaml(path)
-    opts = _validate_sidecar(data, str(path))
+    data = read_sidecar(path)
+    opts = validate_sidecar(data, str(path))
     if opts.urdf is None:
         raise SpecError(f"{path}: urdf: required (the URDF this sidecar describes)")
     urdf = resolve_uri(opts.urdf, base=path.parent, where=f"{path}: urdf",

@@ -126,6 +126,11 @@ def scenario_spec(scenario: ScenarioParams) -> RobotSpec:
     from pipeline.robots.loaders import load_spec
 
     spec = load_spec(scenario.robot)
+    stated = dict(spec.settings_sources)
+    given = [k for k in FRICTION_KEYS if k in stated and k in scenario.plant.model_fields_set]
+    if given:  # the recording names where the plant's friction came from
+        stated.update({k: f"scenario plant.{k} (the robot's: {stated[k]})" for k in given})
+        spec = replace(spec, settings_sources=tuple(stated.items()))
     scale = scenario.armature_scale
     if scale == 1.0:
         return spec
@@ -137,6 +142,25 @@ def scenario_spec(scenario: ScenarioParams) -> RobotSpec:
 def param_values(value: float | list[float]) -> tuple[float, ...]:
     """A params entry given as one number or one per joint, as a tuple (not yet per joint)."""
     return tuple(value) if isinstance(value, list) else (float(value),)
+
+
+FRICTION_KEYS = ("damping", "frictionloss")
+
+
+def plant_friction(
+    spec: RobotSpec, scenario: ScenarioParams
+) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """The plant's joint friction, ``(damping [N m s/rad], frictionloss [N m])``, each one
+    value or one per joint: the scenario's ``plant`` where it gives the key, else the
+    robot's own (:attr:`RobotSpec.damping`: its sidecar's, else its URDF's ``<dynamics>``)
+    where the robot states any, else the scenario's default 0."""
+    p = scenario.plant
+
+    def pick(key: str, robot: tuple[float, ...]) -> tuple[float, ...]:
+        given = key in p.model_fields_set or not any(robot)
+        return param_values(getattr(p, key)) if given else robot
+
+    return pick("damping", spec.damping), pick("frictionloss", spec.frictionloss)
 
 
 def draw_scenario_plant(
@@ -158,11 +182,8 @@ def draw_scenario_plant(
     plant_spec = with_plant(
         drawn, link_inertials(drawn), [a + x for a, x in zip(drawn.armature, extra, strict=True)]
     )
-    plant = PlantOptions(
-        damping=param_values(p.damping),
-        frictionloss=param_values(p.frictionloss),
-        payload_kg=p.payload_kg,
-    )
+    damping, frictionloss = plant_friction(spec, scenario)
+    plant = PlantOptions(damping=damping, frictionloss=frictionloss, payload_kg=p.payload_kg)
     return plant_spec, plant, uncertainty
 
 
@@ -176,8 +197,7 @@ def _plant_is_exact(spec: RobotSpec, plant_spec: RobotSpec, scenario: ScenarioPa
     and the loop is ideal (no delay, no quantisation, the plant's velocity)."""
     p = scenario.plant
     zero = (
-        param_values(p.damping),
-        param_values(p.frictionloss),
+        *plant_friction(plant_spec, scenario),
         (p.payload_kg,),
         (p.position_noise_std_rad, p.velocity_noise_std_rad_s),
     )
@@ -222,13 +242,14 @@ def episode_settings(
     p = scenario.plant
     k0 = int(result.extra["motion_start_row"])
     at_start = min(k0, len(result.stamp_ns) - 1)
+    damping, frictionloss = plant_friction(spec, scenario)
     plant = PlantSettings(
         exact=_plant_is_exact(nominal, plant_spec, scenario),
         links=link_inertials(plant_spec),
         armature=tuple(float(a) for a in plant_spec.armature),
         nominal_armature=tuple(float(a) for a in nominal.armature),
-        damping=per_joint(param_values(p.damping), spec.dof),
-        frictionloss=per_joint(param_values(p.frictionloss), spec.dof),
+        damping=per_joint(damping, spec.dof),
+        frictionloss=per_joint(frictionloss, spec.dof),
         payload_kg=p.payload_kg,
         position_noise_std_rad=p.position_noise_std_rad,
         velocity_noise_std_rad_s=p.velocity_noise_std_rad_s,

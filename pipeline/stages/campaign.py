@@ -208,7 +208,9 @@ def _set(data: dict[str, Any], path: Sequence[str], value: Any) -> None:
 def _scenario_for(
     params: Params, campaign: Campaign, picks: Sequence[tuple[Axis, int]]
 ) -> ScenarioParams:
-    data = params.scenarios[campaign.scenario_name].model_dump()
+    # what the scenario gives, not its defaults: a key it leaves out keeps meaning "not
+    # given" (the robot's own joint friction applies, stages/assemble.py plant_friction)
+    data = params.scenarios[campaign.scenario_name].model_dump(exclude_unset=True)
     for axis, i in picks:
         if axis.path == GOAL_AXIS:
             data["goal"] = {"joints": list(axis.goals[i]), "pose": None}

@@ -52,6 +52,9 @@ def test_panda_records_and_reports_with_its_own_urdf(tmp_path: Path, capsys) -> 
     assert robot["source"] == panda.source and robot["format"] == "urdf"
     assert robot["sha256"] == hashlib.sha256(Path(panda.source).read_bytes()).hexdigest()
     assert "Menagerie" in robot["settings_sources"]["armature"]
+    # plant: {} gives no friction: the sidecar's damping, the URDF's <dynamics friction>
+    assert robot["settings_sources"]["frictionloss"] == "URDF <dynamics>"
+    assert rec.settings.plant.damping == (1.0,) * 7
     from pipeline.analysis.episodes import robot_spec
 
     assert robot_spec(rec) == panda  # the recording loads its robot again (same SHA-256)
@@ -61,6 +64,8 @@ def test_panda_records_and_reports_with_its_own_urdf(tmp_path: Path, capsys) -> 
     assert code == 0, err
     text = (tmp_path / "rep" / "report.md").read_text(encoding="utf-8")
     assert "7 joints" in text and "from urdf" in text and "DH convention" not in text
+    assert "Where the plant's joint friction comes from: damping: " in text
+    assert "frictionloss: URDF <dynamics>" in text
 
 
 def test_a_bad_urdf_is_one_error_line_and_writes_nothing(tmp_path: Path, capsys) -> None:
