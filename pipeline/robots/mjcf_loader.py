@@ -30,6 +30,7 @@ import numpy as np
 
 from pipeline.errors import SpecError
 from pipeline.model import transforms as tf
+from pipeline.robots.link_facts import link_capsules, merged_inertial
 from pipeline.robots.sidecar import (
     SIDECAR_SUFFIX,
     Sidecar,
@@ -47,7 +48,6 @@ from pipeline.robots.spec import (
     Shape,
     as_pose,
 )
-from pipeline.robots.urdf_loader import link_capsules, merged_inertial
 
 __all__ = ["DEFAULT_VELOCITY", "load_mjcf"]
 

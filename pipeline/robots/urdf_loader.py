@@ -28,6 +28,7 @@ import numpy as np
 
 from pipeline.errors import SpecError
 from pipeline.model import transforms as tf
+from pipeline.robots.link_facts import check_physical, link_capsules, merged_inertial
 from pipeline.robots.packages import package_search_path
 from pipeline.robots.sidecar import (
     SIDECAR_SUFFIX,
@@ -38,20 +39,16 @@ from pipeline.robots.sidecar import (
 )
 from pipeline.robots.spec import (
     Frame,
-    Inertial,
     JointLimits,
     JointSpec,
     RobotSpec,
-    Segment,
     Shape,
     as_pose,
 )
 
 __all__ = [
-    "link_capsules",
     "load_sidecar",
     "load_urdf",
-    "merged_inertial",
     "resolve_uri",
     "xml_floats",
     "xml_origin",
@@ -159,57 +156,6 @@ def _inertia(el: ElementTree.Element, where: str) -> F64:
     )
 
 
-def _check_physical(mass: float, inertia: F64, where: str) -> None:
-    eig = np.linalg.eigvalsh(inertia)
-    tol = 1e-12 * max(1.0, float(np.abs(eig).max()))
-    if eig[0] < -tol:
-        raise SpecError(f"{where}: non-physical inertia (eigenvalues {eig.tolist()})")
-    a, b, c = eig
-    if a + b < c - tol:
-        raise SpecError(
-            f"{where}: non-physical inertia: principal moments violate the triangle "
-            f"inequality ({a:.6g} + {b:.6g} < {c:.6g})"
-        )
-    if mass == 0.0 and float(np.abs(inertia).max()) > 0.0:
-        raise SpecError(f"{where}: mass 0 with a non-zero inertia")
-
-
-def merged_inertial(parts: list[tuple[float, F64, F64]], where: str) -> Inertial:
-    """Rigidly joined bodies as one inertial, in the frame their parts are given in.
-
-    Args:
-        parts: ``(mass [kg], centre of mass [m], inertia about it [kg m^2])`` per body.
-        where: the link, for errors.
-
-    Raises:
-        SpecError: zero total mass or a non-physical result (naming ``where``).
-    """
-    total = sum(m for m, _, _ in parts)
-    if total <= 0:
-        raise SpecError(f"{where}: zero mass")
-    centre: F64 = np.sum([m * c for m, c, _ in parts], axis=0) / total
-    tensor = np.zeros((3, 3))
-    for m, c, inertia in parts:
-        d = c - centre
-        tensor += inertia + m * (float(d @ d) * np.eye(3) - np.outer(d, d))
-    _check_physical(total, tensor, f"{where} (merged)")
-    return Inertial(
-        mass=float(total),
-        com=(float(centre[0]), float(centre[1]), float(centre[2])),
-        inertia=tuple((float(r[0]), float(r[1]), float(r[2])) for r in 0.5 * (tensor + tensor.T)),
-    )
-
-
-def link_capsules(end_m: F64, radius_m: float) -> tuple[Segment, ...]:
-    """A link's planning capsule: from its frame's origin to ``end_m`` (the next joint or
-    the flange, link frame [m]); none for a link that carries nothing further."""
-    if float(np.linalg.norm(end_m)) <= 1e-6:
-        return ()
-    return (
-        Segment((0.0, 0.0, 0.0), (float(end_m[0]), float(end_m[1]), float(end_m[2])), radius_m),
-    )
-
-
 def _parse_links(
     root: ElementTree.Element, source: str, base: Path, package_path: tuple[str, ...]
 ) -> dict[str, _Link]:
@@ -230,7 +176,7 @@ def _parse_links(
             frame = xml_origin(inertial.find("origin"), where)
             inertia_el = inertial.find("inertia")
             tensor = _inertia(inertia_el, where) if inertia_el is not None else np.zeros((3, 3))
-            _check_physical(mass, tensor, where)
+            check_physical(mass, tensor, where)
             rot = frame[:3, :3]
             link.mass, link.com, link.inertia = mass, frame[:3, 3].copy(), rot @ tensor @ rot.T
         for kind in ("visual", "collision"):
