@@ -107,7 +107,7 @@ def _worker(work: Path, reps: int) -> dict[str, Any]:
         del force
         captured[episode.name] = (bag_dir, recorded)
 
-    episode_stage._write_outputs = capture  # type: ignore[assignment]
+    episode_stage._write_outputs = capture
     record(params, run.pending, out_dir=run.out_dir, force=True, commit=run.commit)
     times: dict[str, dict[str, list[float]]] = {}
     for name, (bag_dir, recorded) in captured.items():
