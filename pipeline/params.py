@@ -247,7 +247,7 @@ class RandomGoals(_Strict):
 class KeepBags(_Strict):
     """Which episodes of a campaign keep their full bag: every ``every``-th one (in the
     campaign's order, the first included). The others keep their metric partials and
-    settings (``<campaign>/.partials/<key>.pkl``); re-running one by its key reproduces
+    settings (``<campaign>/.partials/<key>.arrow``); re-running one by its key reproduces
     its bag byte for byte."""
 
     every: int = Field(ge=1)

@@ -54,7 +54,17 @@ from pipeline.model.frames import tf_edges
 from pipeline.robots.spec import RobotSpec
 from pipeline.sim.result import EpisodeResult, TrajectorySamples
 
-__all__ = ["CHUNK_BYTES", "BagSummary", "MessageBlock", "encode_episode", "write_episode_bag"]
+__all__ = [
+    "CHUNK_BYTES",
+    "BagSummary",
+    "MessageBlock",
+    "check_metadata",
+    "check_rates",
+    "check_result",
+    "encode_episode",
+    "planned_arrays",
+    "write_episode_bag",
+]
 
 REQUIRED_METADATA_KEYS = ("episode", "scenario", "controller", "robot", "seed", "settings")
 
@@ -144,7 +154,7 @@ def write_episode_bag(
         distro = check_distro(ros_distro)
     except ValueError as err:
         raise RecordingError(f"ros_distro: {err}") from err
-    meta = _check_metadata(metadata)
+    meta = check_metadata(metadata)
     blocks = encode_episode(
         spec,
         result,
@@ -268,13 +278,8 @@ def encode_episode(
     stamp).
     """
     distro = check_distro(ros_distro)
-    stamps, arrays = _check_result(spec, result)
-    if not isinstance(joint_state_decimation, int | np.integer) or joint_state_decimation < 1:
-        raise RecordingError(
-            f"joint_state_decimation: {joint_state_decimation!r}, expected an integer >= 1"
-        )
-    if not (math.isfinite(tf_rate_hz) and tf_rate_hz > 0):
-        raise RecordingError(f"tf_rate_hz: {tf_rate_hz!r}, expected a positive rate [Hz]")
+    stamps, arrays = check_result(spec, result)
+    check_rates(joint_state_decimation=joint_state_decimation, tf_rate_hz=tf_rate_hz)
     if tf_source not in ("measured", "true"):
         raise RecordingError(f"tf_source: {tf_source!r}, expected 'measured' or 'true'")
     # Imported here: the URDF module pulls in Pinocchio, which readers of pipeline.log skip.
@@ -397,7 +402,32 @@ def _planned_value(
     names: list[str], header: Mapping[str, Any], planned: TrajectorySamples
 ) -> dict[str, Any]:
     """trajectory_msgs/JointTrajectory of the planned samples (effort left empty)."""
-    n = len(names)
+    tfs_ns, pos, vel, acc = planned_arrays(len(names), planned)
+    return {
+        "header": header,
+        "joint_names": names,
+        "points": [
+            {
+                "positions": pos[i],
+                "velocities": vel[i],
+                "accelerations": acc[i],
+                "time_from_start": cdr.time_value(tfs_ns[i]),
+            }
+            for i in range(len(tfs_ns))
+        ],
+    }
+
+
+def planned_arrays(
+    n: int, planned: TrajectorySamples
+) -> tuple[list[int], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The planned samples as recorded: each point's ``time_from_start`` [ns], positions,
+    velocities and accelerations ((K, n) float64), checked.
+
+    Raises:
+        RecordingError: a shape is not (K, n), or the times are not K >= 1 finite,
+            non-decreasing times >= 0.
+    """
     times = np.asarray(planned.times_s, dtype=float).reshape(-1)
     k = times.size
     for field in ("positions", "velocities", "accelerations"):
@@ -411,24 +441,25 @@ def _planned_value(
         np.asarray(getattr(planned, f), dtype=np.float64)
         for f in ("positions", "velocities", "accelerations")
     )
-    return {
-        "header": header,
-        "joint_names": names,
-        "points": [
-            {
-                "positions": pos[i],
-                "velocities": vel[i],
-                "accelerations": acc[i],
-                "time_from_start": cdr.time_value(tfs_ns[i]),
-            }
-            for i in range(k)
-        ],
-    }
+    return tfs_ns, pos, vel, acc
 
 
-def _check_result(
+def check_rates(*, joint_state_decimation: int, tf_rate_hz: float) -> None:
+    """Refuse a /joint_states decimation that is not an integer >= 1 or a /tf rate that
+    is not positive (a :class:`RecordingError` naming the setting)."""
+    if not isinstance(joint_state_decimation, int | np.integer) or joint_state_decimation < 1:
+        raise RecordingError(
+            f"joint_state_decimation: {joint_state_decimation!r}, expected an integer >= 1"
+        )
+    if not (math.isfinite(tf_rate_hz) and tf_rate_hz > 0):
+        raise RecordingError(f"tf_rate_hz: {tf_rate_hz!r}, expected a positive rate [Hz]")
+
+
+def check_result(
     spec: RobotSpec, result: EpisodeResult
 ) -> tuple[NDArray[np.int64], dict[str, NDArray[np.float64]]]:
+    """The result's stamps [ns] and float64 arrays by name, checked against ``spec``
+    (a :class:`RecordingError` naming the field otherwise)."""
     if tuple(result.joint_names) != spec.joint_names:
         raise RecordingError(
             f"result.joint_names {list(result.joint_names)} differ from robot "
@@ -452,7 +483,9 @@ def _check_result(
     return stamps, arrays
 
 
-def _check_metadata(metadata: Mapping[str, str]) -> dict[str, str]:
+def check_metadata(metadata: Mapping[str, str]) -> dict[str, str]:
+    """The metadata as stored (keys sorted), checked: strings, the required keys, the
+    settings JSON."""
     bad = [k for k, v in metadata.items() if not (isinstance(k, str) and isinstance(v, str))]
     if bad:
         raise RecordingError(f"metadata: keys and values must be strings (not at {bad})")

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,6 +27,7 @@ __all__ = [
     "DurationCheck",
     "Labels",
     "check_trajectory_duration",
+    "labels_of",
     "read_labels",
     "reference_end_s",
     "typed_settings",
@@ -82,9 +83,30 @@ def read_labels(
 ) -> Labels:
     """Metadata (ours, else labels), typed settings, the URDF, the notes about them and
     whether the bag carries our metadata."""
+    return labels_of(
+        collector.metadata.get(METADATA_EPISODE),
+        robot_description(collector, chosen["robot_description"]),
+        source=source,
+        options=options,
+        urdf_topic=chosen["robot_description"],
+        names=names,
+    )
+
+
+def labels_of(
+    ours_meta: Mapping[str, str] | None,
+    urdf: str | None,
+    *,
+    source: Path,
+    options: ReadOptions,
+    urdf_topic: str | None,
+    names: Sequence[str],
+) -> Labels:
+    """:func:`read_labels` of our ``armlab.episode`` record ``ours_meta`` (None: the bag
+    has none) and the recorded URDF ``urdf``."""
     notes: list[str] = []
-    raw_meta = dict(collector.metadata.get(METADATA_EPISODE, {}))
-    ours = METADATA_EPISODE in collector.metadata
+    raw_meta = dict(ours_meta or {})
+    ours = ours_meta is not None
     bag = source.name.removesuffix(".mcap")
     labels = {
         "controller": options.labels.get(bag) or options.controller,
@@ -97,13 +119,12 @@ def read_labels(
             "scenario": "external",
         }
     raw_meta |= {k: v for k, v in labels.items() if v}
-    urdf = robot_description(collector, chosen["robot_description"])
     problem = urdf_problem(urdf) if urdf is not None else None
     if problem is not None:
         # dropped, so nothing downstream (names, limits, a 3D model) parses it again
         urdf = None
         notes.append(
-            f"{chosen['robot_description'] or TOPIC_ROBOT_DESCRIPTION}: malformed URDF "
+            f"{urdf_topic or TOPIC_ROBOT_DESCRIPTION}: malformed URDF "
             f"({problem}): ignored; the robot's name, effort limits and saturation at the "
             "limit are n/a"
         )
@@ -112,7 +133,7 @@ def read_labels(
         if robot:
             raw_meta["robot"] = robot
     if not ours and problem is None:
-        notes.append(_limits_note(urdf, names, chosen["robot_description"]))
+        notes.append(_limits_note(urdf, names, urdf_topic))
     settings: dict[str, Any] = {}
     if "settings" in raw_meta:
         try:

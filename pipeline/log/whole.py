@@ -4,17 +4,26 @@ into the tidy frames of a :class:`~pipeline.log.recording.Recording`.
 :func:`pipeline.log.reader.read_recording` sends recordings up to
 :data:`pipeline.log.recording.STREAM_ABOVE_BYTES` here (longer ones to
 :mod:`pipeline.log.windowed`, which builds the same frames from the same parts).
+:func:`assemble` is the second half: decoded arrays -> the recording; an episode's own
+arrays take the same way without a file (:mod:`pipeline.log.direct`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pipeline.log.collect import Collector, pick_roles, planned_trajectory, scan_storage
-from pipeline.log.labels import check_trajectory_duration, read_labels, reference_end_s
+from pipeline.log.labels import (
+    Labels,
+    check_trajectory_duration,
+    read_labels,
+    reference_end_s,
+)
 from pipeline.log.notes import (
     JS_OPTIONAL,
     dropped_note,
@@ -24,9 +33,62 @@ from pipeline.log.notes import (
     truth_note,
 )
 from pipeline.log.pairing import error_feedback, match_stamps, tidy, truth_at
-from pipeline.log.recording import F64, ReadOptions, Recording, episode_name
+from pipeline.log.recording import (
+    F64,
+    PlannedTrajectory,
+    ReadOptions,
+    Recording,
+    episode_name,
+)
 
-__all__ = ["read_whole"]
+__all__ = ["Decoded", "assemble", "read_whole"]
+
+
+@dataclass(frozen=True)
+class Decoded:
+    """A recording's messages decoded to arrays, before the topics are paired: what
+    :func:`assemble` makes the :class:`Recording` of (from a file, :func:`read_whole`;
+    from an episode's arrays, :mod:`pipeline.log.direct`).
+
+    Attributes:
+        source, mcap_path, sha256, size_bytes: the recording as found (the file's bytes).
+        names: joint order.
+        js_topic, cs_topic: the joint-state and controller-state topics read.
+        js_t, js_a: joint-state stamps [ns] and (N, joints) arrays (``position``,
+            ``velocity``, ``effort``).
+        cs_t, cs_a: controller-state stamps [ns] and arrays (:data:`WANT`'s keys).
+        truth: ground-truth stamps and arrays, with ``gt_perm`` (its joints in ``names``
+            order); None without that topic.
+        notes: the read's first notes (storage, salvage, joints analysed).
+        lost_pct: the share a salvage lost [%] (None: not salvaged, or unknown).
+        damaged: read with salvage up to damage, or from a file short of what it declares.
+        labels: the recording's labels (:func:`pipeline.log.labels.read_labels`).
+        planned: the planned trajectory, and the topic it came from.
+        topic_counts: messages per topic.
+        decoded_messages: messages decoded into the frames.
+    """
+
+    source: Path
+    mcap_path: Path
+    sha256: str
+    size_bytes: int
+    names: tuple[str, ...]
+    js_topic: str
+    cs_topic: str
+    js_t: NDArray[np.int64]
+    js_a: dict[str, F64]
+    cs_t: NDArray[np.int64]
+    cs_a: dict[str, F64]
+    truth: tuple[NDArray[np.int64], dict[str, F64]] | None
+    gt_perm: list[int]
+    notes: list[str]
+    lost_pct: float | None
+    damaged: bool
+    labels: Labels
+    planned: PlannedTrajectory | None
+    planned_topic: str
+    topic_counts: dict[str, int]
+    decoded_messages: int
 
 
 def read_whole(
@@ -40,38 +102,69 @@ def read_whole(
     cs_t, cs_a = roles.cs_group.concat()
     js_cols = roles.js_cols
     js_a = js_all if js_cols is None else {k: v[:, js_cols] for k, v in js_all.items()}
-    names = roles.names
-    js_topic, cs_topic = roles.js_dec.topic, roles.cs_dec.topic
+    notes, lost_pct = read_notes(scanned, roles)
+    truth = roles.truth
+    return assemble(
+        Decoded(
+            source=source,
+            mcap_path=mcap_path,
+            sha256=scanned.sha256,
+            size_bytes=scanned.size,
+            names=roles.names,
+            js_topic=roles.js_dec.topic,
+            cs_topic=roles.cs_dec.topic,
+            js_t=js_t,
+            js_a=js_a,
+            cs_t=cs_t,
+            cs_a=cs_a,
+            truth=truth.concat() if truth is not None else None,
+            gt_perm=roles.gt_perm if truth is not None else [],
+            notes=notes,
+            lost_pct=lost_pct,
+            damaged=scanned.damaged,
+            labels=read_labels(collector, source, options, roles.chosen, roles.names),
+            planned=planned_trajectory(collector, roles.chosen["planned_trajectory"]),
+            planned_topic=str(roles.chosen["planned_trajectory"]),
+            topic_counts=dict(collector.topic_counts),
+            decoded_messages=roles.js_group.count
+            + roles.cs_group.count
+            + (truth.count if truth else 0),
+        )
+    )
+
+
+def assemble(d: Decoded) -> Recording:
+    """The :class:`Recording` of decoded messages: the topics paired by stamp, the notes,
+    the duration check and the tidy frames."""
+    js_t, js_a, cs_t, names = d.js_t, d.js_a, d.cs_t, d.names
+    mcap_path, source, labels = d.mcap_path, d.source, d.labels
     rows_js, rows_cs = match_stamps(js_t, cs_t)
     if rows_js.size == 0:
         raise no_pairs(mcap_path)
-    notes, lost_pct = read_notes(scanned, roles)
+    notes = list(d.notes)
     notes += dropped_note(js_t.size - rows_js.size)
-    notes += missing_array_notes(js_a, js_topic, JS_OPTIONAL)
-    labels = read_labels(collector, source, options, roles.chosen, names)
+    notes += missing_array_notes(js_a, d.js_topic, JS_OPTIONAL)
     notes += labels.notes
 
     # Relative times: wall-clock header stamps (1.7e9 s) would otherwise swamp float64
     # resolution and put the motion end (a duration from the start) 50 years early.
     t0_ns = int(min(js_t[0], cs_t[0]))
     episode = episode_name(labels.metadata, source)
-    cs_all = cs_a
+    cs_all = d.cs_a
     error, feedback = error_feedback(cs_all)
-    truth = roles.truth
-    truth_pos, truth_vel, rows_cs_gt = truth_at(
-        cs_t, truth.concat() if truth else None, roles.gt_perm if truth else [], error
-    )
+    truth = d.truth
+    truth_pos, truth_vel, rows_cs_gt = truth_at(cs_t, truth, d.gt_perm, error)
     if truth is not None:
-        notes += truth_note(cs_t.size - rows_cs_gt.size, cs_topic)
-    planned = planned_trajectory(collector, roles.chosen["planned_trajectory"])
+        notes += truth_note(cs_t.size - rows_cs_gt.size, d.cs_topic)
+    planned = d.planned
     contradicted = check_trajectory_duration(
         labels.settings,
         planned,
         end_s=(int(max(js_t[-1], cs_t[-1])) - t0_ns) * 1e-9,
-        salvaged=scanned.damaged,
+        salvaged=d.damaged,
         control_period_s=float(np.median(np.diff(cs_t))) * 1e-9 if cs_t.size > 1 else 0.0,
         reference_end=reference_end_s(cs_t, cs_all["reference_position"], t0_ns),
-        planned_topic=str(roles.chosen["planned_trajectory"]),
+        planned_topic=d.planned_topic,
     )
     notes += [contradicted.note] if contradicted else []
     every_cs = rows_cs.size == cs_t.size and bool(np.all(rows_cs == np.arange(cs_t.size)))
@@ -119,8 +212,8 @@ def read_whole(
     return Recording(
         source=source,
         mcap_path=mcap_path,
-        sha256=scanned.sha256,
-        size_bytes=scanned.size,
+        sha256=d.sha256,
+        size_bytes=d.size_bytes,
         metadata=labels.metadata,
         settings=labels.settings,
         joint_names=names,
@@ -128,14 +221,12 @@ def read_whole(
         controller_states=controller_states,
         planned=planned,
         robot_description=labels.urdf,
-        topic_counts=dict(collector.topic_counts),
-        decoded_messages=roles.js_group.count
-        + roles.cs_group.count
-        + (truth.count if truth else 0),
+        topic_counts=d.topic_counts,
+        decoded_messages=d.decoded_messages,
         notes=(*notes, *labels.settings_notes),
         has_ground_truth=truth is not None,
-        salvaged=scanned.damaged,
-        salvage_lost_pct=lost_pct,
+        salvaged=d.damaged,
+        salvage_lost_pct=d.lost_pct,
         armlab_metadata=labels.ours,
         duration_contradicted=contradicted is not None,
         data_trajectory_duration_s=contradicted.duration_s if contradicted else None,

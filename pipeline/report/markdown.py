@@ -460,8 +460,8 @@ def _provenance(data: ReportData) -> list[str]:
         [
             rec.episode,
             f"`{rec.mcap_path.as_posix()}`",
-            f"{rec.size_bytes:,}",
-            f"`{rec.sha256}`",
+            f"{rec.size_bytes:,}" if rec.sha256 else "-",
+            f"`{rec.sha256}`" if rec.sha256 else "no bag (metric partial)",
         ]
         for rec in data.recordings[:MAX_ROWS]
     ]

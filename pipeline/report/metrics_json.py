@@ -148,7 +148,7 @@ def metrics_document(data: ReportData) -> dict[str, Any]:
             "warnings": list(rec.notes),
             "recording": {
                 "path": _relative(rec.source, data.recordings_dir),
-                "sha256": rec.sha256,
+                "sha256": rec.sha256 or None,  # None: a campaign episode without its bag
             },
             "joints": joints,
         }
@@ -290,8 +290,9 @@ def write_episode_csvs(data: ReportData, out_dir: Path) -> list[str]:
         {
             "episode": [r.episode for r in data.recordings],
             "file": [_relative(r.mcap_path, data.recordings_dir) for r in data.recordings],
-            "bytes": [r.size_bytes for r in data.recordings],
-            "sha256": [r.sha256 for r in data.recordings],
+            # null: a campaign episode kept as its metric partial, without its bag
+            "bytes": [r.size_bytes if r.sha256 else None for r in data.recordings],
+            "sha256": [r.sha256 or None for r in data.recordings],
         },
         schema={"episode": pl.String, "file": pl.String, "bytes": pl.Int64, "sha256": pl.String},
     ).write_csv(out_dir / RECORDINGS_CSV)

@@ -182,7 +182,7 @@ def readable_range(lo: float, hi: float, *, max_steps: int = 3) -> tuple[float, 
 
 def _recording_id(data: ReportData) -> str:
     # Same recordings -> same id, so re-runs open as the same recording in the viewer.
-    digest = "".join(sorted(r.sha256 for r in data.recordings))
+    digest = "".join(sorted(r.sha256 or r.episode for r in data.recordings))  # no bag: key
     return str(uuid.uuid5(uuid.NAMESPACE_URL, f"armlab:{digest}"))
 
 

@@ -8,11 +8,13 @@ mark matches its fingerprint today and its bag is whole (metadata present, the M
 file ends with the MCAP magic); anything else (no mark, a changed setting or code, a
 bag a killed run left behind) runs again and replaces what is there.
 
-With ``keep_bags: {every: k}`` in the campaign, only every k-th episode keeps its bag;
-each other one, once its bag is published, is measured by the report's code and kept as
-its metric partial (:mod:`pipeline.stages.partials`), then its bag is removed and it is
-marked done. Such an episode is done when its mark matches and its partial (or a whole
-bag) is there. ``--episode KEY`` re-runs chosen episodes into full bags.
+With ``keep_bags: {every: k}`` in the campaign, only every k-th episode keeps its bag.
+Every episode is measured by the report's code from the recording its bag reads back as,
+made in memory from its arrays (:mod:`pipeline.log.direct`), and kept as its metric
+partial (:mod:`pipeline.stages.partials`); the others write no bag at all and are marked
+done once their partial is written. Such an episode is done when its mark matches and
+its partial (or a whole bag) is there. ``--episode KEY`` re-runs chosen episodes into
+full bags.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import shutil
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import polars as pl
 
@@ -40,11 +43,15 @@ from pipeline.params import (
 from pipeline.stages.campaign import episode_fingerprint, expand
 from pipeline.stages.provenance import git_commit
 
+if TYPE_CHECKING:
+    from pipeline.log.recording import Recording
+
 DONE_DIR = ".done"
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 # Bag bytes per logged control step and joint (paper episode: 1.7 MB for ~4,300 steps x 6
 # joints with /tf, ground truth, reference and effort), rounded up: a disk upper bound.
 BAG_BYTES_PER_JOINT_STEP = 100
+PARTIAL_BYTES = 32 << 10  # a metric partial and its mark, rounded up (measured ~20 KB)
 DISK_SHARE = 0.9  # of the free space on --out a campaign may fill
 MAX_CAMPAIGN_WALL_S = 7 * 24 * 3600.0  # longer is a typo (seeds: 1e6), not a study
 
@@ -323,7 +330,7 @@ def check_campaign_size(
             dof = dofs[e.scenario.robot] = load_spec(e.scenario.robot).dof
         duration_s = e.scenario.preroll_s + motion_s + e.scenario.hold_s
         b, w = _episode_cost(dof=dof, duration_s=duration_s, sim=e.sim)
-        n_bytes += b
+        n_bytes += PARTIAL_BYTES if e.drop_bag else b
         wall_s += w
     wall_s /= max(1, jobs)
     _refuse_too_big(
@@ -339,7 +346,7 @@ def completion_marker(
     """An ``on_event`` for :func:`pipeline.stages.record.record` that marks each episode
     done once this run published its bag (a new folder, or a replaced one) or, for an
     episode of a ``keep_bags`` campaign that does not keep its bag, its partial (the
-    worker measured the bag and removed it: :func:`keep_partial`)."""
+    worker wrote it and no bag: :func:`keep_partial`)."""
     fingerprints = {e.name: episode_fingerprint(e, commit=run.commit) for e in run.pending}
     partials = {e.name: e for e in run.pending if e.drop_bag}
 
@@ -378,18 +385,24 @@ def completion_marker(
     return on_event
 
 
-def keep_partial(out_dir: Path, name: str, *, bag: bool, measure_code: str) -> None:
-    """Measure the published bag ``out_dir/name`` into its partial, then remove the bag
-    unless it is to be kept (the partial is written whole first: a kill in between leaves
-    both, not neither)."""
-    from pipeline.stages.partials import partial_path, write_partial
-    from pipeline.stages.report import measure_bag
+def keep_partial(
+    out_dir: Path, name: str, *, measure_code: str, recording: Recording | None = None
+) -> None:
+    """Measure episode ``name`` into its partial: from ``recording`` (made in memory as
+    its bag reads back: :func:`pipeline.log.direct.episode_recording`) or, without one,
+    from its published bag ``out_dir/name``.
 
-    bag_dir = out_dir / name
-    partial = measure_bag(bag_dir, measure_code=measure_code)
+    Raises:
+        PipelineError: the bag cannot be read, or the recording not measured.
+    """
+    from pipeline.stages.partials import partial_path, write_partial
+    from pipeline.stages.report import measure_bag, measure_recording
+
+    if recording is not None:
+        partial = measure_recording(recording, measure_code=measure_code)
+    else:
+        partial = measure_bag(out_dir / name, measure_code=measure_code)
     write_partial(partial, partial_path(out_dir, name))
-    if not bag:
-        shutil.rmtree(bag_dir)
 
 
 def sample_without_bags(run: CampaignRun) -> list[str]:

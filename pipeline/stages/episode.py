@@ -9,10 +9,12 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import shutil
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -81,13 +83,6 @@ def run_one(
             progress=progress,
             before_write=before_write,
         )
-        if episode.partial_code is not None:
-            from pipeline.stages.campaign_run import keep_partial
-
-            # an unreadable bag stays a bag (whole, so done): nothing is lost
-            with contextlib.suppress(PipelineError):
-                keep_partial(out_dir, episode.name, bag=not episode.drop_bag,
-                             measure_code=episode.partial_code)  # fmt: skip
     except (PipelineError, OSError, MemoryError) as err:
         if isinstance(err, OSError):
             reason = f"{bag_dir}: cannot write the recording ({err.strerror or err})"
@@ -112,7 +107,6 @@ def _run_and_write(
 ) -> EpisodeOutcome:
     from pipeline.control import controller_origin, make_controller
     from pipeline.identify.model_file import nominal_path, nominal_spec, with_nominal_friction
-    from pipeline.log.bag import write_episode_bag
     from pipeline.sim.runner import run_episode
     from pipeline.sim.safety import SKIP_WITHIN_M, assess_execution
 
@@ -174,8 +168,7 @@ def _run_and_write(
     )
     if before_write is not None:
         before_write()
-    write_episode_bag(
-        bag_dir,
+    recorded: dict[str, Any] = dict(
         spec=spec,
         result=result,
         planned=trajectory.samples(0.01),
@@ -184,8 +177,8 @@ def _run_and_write(
         joint_state_decimation=sim.joint_state_decimation,
         tf_rate_hz=sim.tf_rate_hz,
         ros_distro=sim.ros_distro,
-        force=force,
     )
+    _write_outputs(episode, bag_dir, recorded, force=force)
     # true tracking error from the motion start (the report's definition)
     err = np.abs(result.q_ref[k0:] - result.q_true[k0:])
     # (a run that diverged during the pre-roll has no sample from the motion start)
@@ -202,6 +195,56 @@ def _run_and_write(
         wall_s=0.0,
         contact=safety.summary() if safety.touched else "",
     )
+
+
+def _write_outputs(
+    episode: Episode, bag_dir: Path, recorded: dict[str, Any], *, force: bool
+) -> None:
+    """Write the episode's bag and, in a ``keep_bags`` campaign, its metric partial.
+
+    ``recorded``: the episode's arguments of
+    :func:`~pipeline.log.bag.write_episode_bag` (but ``bag_dir`` and ``force``). The
+    partial is measured from the recording made in memory from the episode's arrays
+    (:func:`pipeline.log.direct.episode_recording`: what the bag reads back as), so an
+    episode that does not keep its bag writes none; its old bag, if any, goes once the
+    partial is written. A recording the reader would read in windows (very long), or one
+    the measuring refuses, is written as a bag and measured from it as before (an
+    unreadable bag stays a bag, whole, so done: nothing is lost).
+    """
+    from pipeline.log.bag import write_episode_bag
+
+    def write() -> None:
+        write_episode_bag(bag_dir, **recorded, force=force)
+
+    if episode.partial_code is None:
+        write()
+        return
+    from pipeline.log.direct import episode_recording, reads_whole
+    from pipeline.stages.campaign_run import keep_partial
+
+    out_dir = bag_dir.parent
+    if not reads_whole(recorded["result"]):
+        write()
+        with contextlib.suppress(PipelineError):
+            keep_partial(out_dir, episode.name, measure_code=episode.partial_code)
+            if episode.drop_bag:
+                shutil.rmtree(bag_dir)
+        return
+    if not episode.drop_bag:
+        write()
+    try:
+        keep_partial(
+            out_dir,
+            episode.name,
+            measure_code=episode.partial_code,
+            recording=episode_recording(bag_dir, **recorded),
+        )
+    except PipelineError:
+        if episode.drop_bag:
+            write()
+        return
+    if episode.drop_bag and os.path.lexists(bag_dir):
+        shutil.rmtree(bag_dir)  # a stale bag of an earlier run: the partial stands for it
 
 
 def final_window(t_s: np.ndarray, *, motion_end_s: float) -> np.ndarray:

@@ -430,6 +430,8 @@ class Measured:
         out = list(recordings)
         code = None
         for path in find_partials(recordings_dir):
+            if path.stem in have:  # its bag was read (a partial is named by its key)
+                continue
             p = read_partial(path)
             episode = p.recording.episode
             if episode in have:
@@ -540,11 +542,26 @@ def measure_bag(
     """
     measured = Measured(tool)
     rec = measured.add(read_recording(bag_dir, None, sink=measured))
+    return _partial(measured, rec, bag_dir.name, tool, measure_code)
+
+
+def measure_recording(
+    rec: Recording, *, tool: ToolOffset = FLANGE_TOOL, measure_code: str | None = None
+) -> Partial:
+    """Measure a recording read whole (or made in memory as its bag would read back:
+    :func:`pipeline.log.direct.episode_recording`) exactly as ``pipeline report`` does."""
+    measured = Measured(tool)
+    return _partial(measured, measured.add(rec), rec.source.name, tool, measure_code)
+
+
+def _partial(
+    measured: Measured, rec: Recording, bag: str, tool: ToolOffset, measure_code: str | None
+) -> Partial:
     episode = rec.episode
     return Partial(
         format=PARTIAL_FORMAT,
         measure_code=measure_commit() if measure_code is None else measure_code,
-        bag=bag_dir.name,
+        bag=bag,
         tool=tool,
         recording=rec,
         view=measured.views[episode],
