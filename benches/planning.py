@@ -46,13 +46,15 @@ TARGET_MEDIAN_MS = 50.0
 
 VARIANTS = {
     # name: plan_path keywords
-    "new": {"batched": False},
+    "new": {},
     "new_batched": {"batched": True},
-    "old": {"legacy": True},
+    "before": {"recipe": "ompl_rope"},
+    "old": {"recipe": "legacy"},
 }
 """``new``: the default; ``new_batched``: the same plans, motions checked by
-``BatchChecker``; ``old``: the recipe before issue 21 (OMPL's default RRTConnect range,
-``simplifySolution`` + three shortcut rounds; one MuJoCo call per configuration)."""
+``BatchChecker``; ``before``: issue 21's first round (OMPL's ``ropeShortcutPath``, main
+before this change); ``old``: the recipe before issue 21 (OMPL's default RRTConnect
+range, ``simplifySolution`` + three shortcut rounds; one MuJoCo call per configuration)."""
 
 
 def _count_checks() -> list[int]:
