@@ -12,8 +12,8 @@ between them is measured under the same load: the default is judged against the
 target; the recipe before this change ("before") and before issue 21 ("old") give
 the ratios.
 
-Run: ``python benches/planning.py [--seeds 20] [--repeats 2] [--variants new,before,old,new_batched]``;
-prints one JSON object.
+Run: ``python benches/planning.py [--seeds 20] [--repeats 2] [--variants new,before,old]``
+(default: all of ``VARIANTS``); prints one JSON object.
 """
 
 from __future__ import annotations
