@@ -3,17 +3,17 @@
 The scenario of the planning tests: UR5, the paper's start and goal, a 6 cm cube
 beside the midpoint of the flange positions so that the straight segment hits
 it. Each seed is one ``plan_path`` call, timed whole (checker build, start/goal
-checks, solve, OMPL simplification + shortcut rounds, the independent re-check
-of the result); ``planning_time_s`` (solve + simplification) is reported too.
+checks, solve, shortening, the independent re-check of the result).
 Wall-clock and process CPU time are both given: the machine is shared, and CPU
 time moves less with other load. Also counted: configurations checked
 (``mj_collision`` calls, plus the rows of ``BatchChecker`` batches) per plan, and
 the path lengths. Variants (``VARIANTS``) run interleaved seed by seed, so a ratio
 between them is measured under the same load: the default is judged against the
-target, the recipe before issue 21 ("old") gives the ratio.
+target; the recipe before this change ("before") and before issue 21 ("old") give
+the ratios.
 
-Run: ``python benches/planning.py [--seeds 20] [--repeats 2] [--variants new,old,new_batched]``;
-prints one JSON object.
+Run: ``python benches/planning.py [--seeds 20] [--repeats 2] [--variants new,before,old]``
+(default: all of ``VARIANTS``); prints one JSON object.
 """
 
 from __future__ import annotations
@@ -46,13 +46,15 @@ TARGET_MEDIAN_MS = 50.0
 
 VARIANTS = {
     # name: plan_path keywords
-    "new": {"batched": False},
+    "new": {},
     "new_batched": {"batched": True},
-    "old": {"legacy": True},
+    "before": {"recipe": "ompl_rope"},
+    "old": {"recipe": "legacy"},
 }
 """``new``: the default; ``new_batched``: the same plans, motions checked by
-``BatchChecker``; ``old``: the recipe before issue 21 (OMPL's default RRTConnect range,
-``simplifySolution`` + three shortcut rounds; one MuJoCo call per configuration)."""
+``BatchChecker``; ``before``: issue 21's first round (OMPL's ``ropeShortcutPath``, main
+before this change); ``old``: the recipe before issue 21 (OMPL's default RRTConnect
+range, ``simplifySolution`` + three shortcut rounds; one MuJoCo call per configuration)."""
 
 
 def _count_checks() -> list[int]:
@@ -142,11 +144,12 @@ def measure(*, seeds: int = 20, repeats: int = 2, variants: list[str]) -> dict[s
     out["straight_line_rad"] = float(np.linalg.norm(np.subtract(PAPER_GOAL_RAD, PAPER_START_RAD)))
     if "new" in variants and "new_batched" in variants:
         out["batched_same_paths"] = paths["new"] == paths["new_batched"]
-    if "new" in variants and "old" in variants:
-        out["old_over_new"] = {
-            key: out["old"][key]["median"] / out["new"][key]["median"]
-            for key in ("plan_path_wall_ms", "plan_path_cpu_ms", "configurations_checked")
-        }
+    for other in ("before", "old"):
+        if "new" in variants and other in variants:
+            out[f"{other}_over_new"] = {
+                key: out[other][key]["median"] / out["new"][key]["median"]
+                for key in ("plan_path_wall_ms", "plan_path_cpu_ms", "configurations_checked")
+            }
     return out
 
 
@@ -156,7 +159,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument(
         "--variants",
-        default="new,old,new_batched",
+        default="new,before,old,new_batched",
         help=f"comma-separated, from {', '.join(VARIANTS)}; the first is judged",
     )
     args = ap.parse_args()

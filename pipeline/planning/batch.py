@@ -24,6 +24,7 @@ and near-contact segments); only the work per configuration is different.
 from __future__ import annotations
 
 import math
+from itertools import pairwise
 
 import mujoco
 import numpy as np
@@ -69,8 +70,9 @@ def _hom(rot: F64, pos: F64) -> F64:
     return t
 
 
-def _filtered_out(m: mujoco.MjModel, g1: int, g2: int) -> bool:
-    """MuJoCo's broad-phase filter (``engine_collision_driver.c``): is the pair never checked?"""
+def _filtered_out(m: mujoco.MjModel, g1: int, g2: int, excluded: frozenset[int]) -> bool:
+    """MuJoCo's broad-phase filter (``engine_collision_driver.c``): is the pair never checked?
+    (``excluded``: the model's ``exclude_signature`` values.)"""
     if not (
         (m.geom_contype[g1] & m.geom_conaffinity[g2])
         or (m.geom_contype[g2] & m.geom_conaffinity[g1])
@@ -86,7 +88,7 @@ def _filtered_out(m: mujoco.MjModel, g1: int, g2: int) -> bool:
     if filter_parent and w1 and w2 and (w1 == wp2 or w2 == wp1):
         return True
     lo, hi = min(b1, b2), max(b1, b2)
-    return ((lo << 16) + hi) in {int(s) for s in m.exclude_signature}
+    return ((lo << 16) + hi) in excluded
 
 
 def segment_distance_m(p1: F64, q1: F64, p2: F64, q2: F64) -> F64:
@@ -160,7 +162,8 @@ class BatchChecker:
     def __init__(self, checker: CollisionChecker) -> None:
         self.checker = checker
         m = checker.model
-        data = mujoco.MjData(m)
+        data = checker.data  # (every check sets its own qpos: borrowing it is harmless)
+        data.qpos[:] = 0.0
         mujoco.mj_kinematics(m, data)
         dof = checker.spec.dof
         where = checker.spec.source
@@ -244,9 +247,10 @@ class BatchChecker:
         box_centre: list[F64] = []
         box_half: list[F64] = []
         self._box_ids: list[tuple[int, int]] = []  # (robot geom, box geom) for MuJoCo
+        excluded = frozenset(int(s) for s in m.exclude_signature)
         for g1 in range(m.ngeom):
             for g2 in range(g1 + 1, m.ngeom):
-                if _filtered_out(m, g1, g2):
+                if _filtered_out(m, g1, g2, excluded):
                     continue
                 if g1 in moving and g2 in moving:
                     seg1.append(moving[g1])
@@ -495,3 +499,19 @@ class BatchChecker:
         if not len(rest):
             return True
         return bool((self.clear_radius_rad(qa + np.outer(rest / n_steps, delta)) >= 0.0).all())
+
+    def first_invalid(self, path: F64, *, step_rad: float) -> F64 | None:
+        """``CollisionChecker.first_invalid`` (the same states, the same answer) in one batch."""
+        parts = []
+        for qa, qb in pairwise(path):
+            n_steps = max(1, math.ceil(float(np.linalg.norm(qb - qa)) / step_rad))
+            parts.append(qa + np.outer(np.arange(n_steps) / n_steps, qb - qa))
+        qs = np.concatenate([*parts, path[-1:]])
+        lower, upper = self.checker.spec.lower, self.checker.spec.upper
+        ok = np.all((qs >= lower) & (qs <= upper), axis=1)
+        ok[ok] = self.clear(qs[ok])
+        bad = np.flatnonzero(~ok)
+        if not len(bad):
+            return None
+        first: F64 = qs[bad[0]]
+        return first

@@ -30,6 +30,7 @@ from pipeline.errors import PlanningError
 from pipeline.model.scene import Box
 from pipeline.planning.batch import BatchChecker
 from pipeline.planning.collision import CollisionChecker, motion_check_step_rad
+from pipeline.planning.shortcut import rope_shortcut
 from pipeline.robots.spec import RobotSpec
 
 F64 = NDArray[np.float64]
@@ -41,6 +42,8 @@ _RRT_RANGE_RAD = 0.5
 0.5 rad checks fewer configurations per plan and gives shorter detours (issue 21)."""
 _ROPE_DELTAS = (0.2, 0.1)  # rope shortcutting passes (see _shorten)
 _ROPE_TOLERANCE = 0.1  # OMPL's default equivalence tolerance
+RECIPES = ("rope", "ompl_rope", "legacy")
+"""``plan_path(recipe=...)``: the default first, then two kept for benchmarks."""
 
 
 def quiet_ompl() -> None:
@@ -137,7 +140,7 @@ def _states_to_array(path: og.PathGeometric, dof: int) -> F64:
 
 
 def _shorten_rounds(ss: og.SimpleSetup, si: ob.SpaceInformation) -> og.PathGeometric:
-    """The recipe before issue 21, kept for benchmarks (``legacy=True``): OMPL's
+    """The recipe before issue 21, kept for benchmarks (``recipe="legacy"``): OMPL's
     ``simplifySolution``, then three subdivide + partial shortcut + reduceVertices
     rounds (fixed counts), since ``simplifySolution`` leaves detours of radians."""
     ss.simplifySolution()
@@ -150,19 +153,29 @@ def _shorten_rounds(ss: og.SimpleSetup, si: ob.SpaceInformation) -> og.PathGeome
     return path
 
 
-def _shorten(path: og.PathGeometric, simplifier: og.PathSimplifier) -> None:
-    """Shorten RRTConnect's path with few collision checks, deterministically.
-
-    ``reduceVertices`` drops needless vertices (random pairs, OMPL's seeded RNG),
-    then two passes of OMPL's rope shortcutting (deterministic: it walks the path
-    in steps of ``delta`` and pulls it taut), a coarse one and a fine one. With the
-    0.5 rad range, against the recipe before (``_shorten_rounds``, default range)
-    this checks ~8x fewer configurations per plan for detours as short
-    (docs/BENCHMARKS.md, "Planning").
-    """
+def _shorten_ompl_rope(path: og.PathGeometric, simplifier: og.PathSimplifier) -> None:
+    """The recipe of issue 21's first round, kept for benchmarks (``recipe="ompl_rope"``):
+    ``reduceVertices``, then OMPL's ``ropeShortcutPath`` with each of ``_ROPE_DELTAS``."""
     simplifier.reduceVertices(path)
     for delta in _ROPE_DELTAS:
         simplifier.ropeShortcutPath(path, delta, _ROPE_TOLERANCE)
+
+
+def _shorten(waypoints: F64, validator: _MotionValidator) -> F64:
+    """Shorten RRTConnect's path with few collision checks, deterministically.
+
+    Two passes of rope shortcutting (``rope_shortcut``: it walks the path in steps of
+    ``delta`` and pulls it taut), a coarse one and a fine one. Unlike OMPL's
+    ``ropeShortcutPath`` it checks only the motions that would shorten the path, and
+    OMPL's ``reduceVertices`` before it is left out (rope removes needless vertices
+    anyway): about half the configurations of the recipe before (``"ompl_rope"``),
+    for paths as short (docs/BENCHMARKS.md, "Planning").
+    """
+    for delta in _ROPE_DELTAS:
+        waypoints = rope_shortcut(
+            waypoints, delta=delta, tolerance=_ROPE_TOLERANCE, motion_clear=validator.clear
+        )
+    return waypoints
 
 
 class _MotionValidator(ob.MotionValidator):  # type: ignore[misc]
@@ -189,7 +202,10 @@ class _MotionValidator(ob.MotionValidator):  # type: ignore[misc]
     def checkMotion(self, s1: ob.State, s2: ob.State, *last_valid: object) -> bool:
         if last_valid:
             raise PlanningError("checkMotion with a last valid state is not supported")
-        qa, qb = self._coords(s1), self._coords(s2)
+        return self.clear(self._coords(s1), self._coords(s2))
+
+    def clear(self, qa: F64, qb: F64) -> bool:
+        """Is the motion ``qa -> qb`` [rad] clear (``qa`` assumed valid)? Remembered."""
         key = qa.tobytes() + qb.tobytes()
         known = self._known.get(key)
         if known is None:
@@ -207,7 +223,7 @@ def plan_path(
     seed: int,
     simplify: bool = True,
     batched: bool = False,
-    legacy: bool = False,
+    recipe: str = "rope",
 ) -> PlannedPath:
     """Plan a collision-free joint path with RRTConnect within the joint limits.
 
@@ -221,8 +237,11 @@ def plan_path(
             ``_shorten``).
         batched: check each motion with ``BatchChecker`` (whole batches of states in
             numpy) rather than state by state in MuJoCo; same answers, so the same path.
-        legacy: plan as before issue 21 (OMPL's default range, ``_shorten_rounds``),
-            ~8x more configurations checked; kept for comparison benchmarks.
+        recipe: how to plan and shorten, one of ``RECIPES``: ``"rope"`` (the default,
+            ``_shorten``); kept for comparison benchmarks, ``"ompl_rope"`` (OMPL's own
+            rope shortcutting, ``_shorten_ompl_rope``: ~7x more configurations
+            checked) and ``"legacy"`` (before issue 21: OMPL's default range and
+            ``_shorten_rounds``, ~50x more).
 
     Raises:
         PlanningError: start/goal out of limits or in collision (names the joint or
@@ -234,6 +253,8 @@ def plan_path(
         raise PlanningError(
             f"time_limit_s: expected a positive number of seconds, got {time_limit_s!r}"
         )
+    if recipe not in RECIPES:
+        raise PlanningError(f"recipe: expected one of {', '.join(RECIPES)}, got {recipe!r}")
     seed_ompl(seed)
     checker = CollisionChecker(spec, obstacles=obstacles)
     q_start = checker.check_state(start, "start")
@@ -261,10 +282,15 @@ def plan_path(
     ss.setStateValidityChecker(state_valid)
     si = ss.getSpaceInformation()
     si.setStateValidityCheckingResolution(step / space.getMaximumExtent())
-    motions = BatchChecker(checker) if batched else checker
-    si.setMotionValidator(_MotionValidator(si, motions, coords, step))
+    try:
+        batch: BatchChecker | None = BatchChecker(checker)
+    except PlanningError:
+        batch = None  # a robot it does not cover (meshes): MuJoCo alone
+    motions = batch if batched and batch is not None else checker
+    validator = _MotionValidator(si, motions, coords, step)
+    si.setMotionValidator(validator)
     rrt = og.RRTConnect(si)
-    if not legacy:
+    if recipe != "legacy":
         rrt.setRange(_RRT_RANGE_RAD)
     ss.setPlanner(rrt)
     # SpaceInformation.allocState hands ownership to Python (freed with the
@@ -290,19 +316,24 @@ def plan_path(
             )
         n_raw = ss.getSolutionPath().getStateCount()
         direct, simplified = False, simplify
-        if simplify and legacy:
-            path = _shorten_rounds(ss, si)
+        path = og.PathGeometric(ss.getSolutionPath())
+        if not simplify:
+            waypoints = _states_to_array(path, n)
+        elif recipe == "rope":
+            waypoints = _shorten(_states_to_array(path, n), validator)
+        elif recipe == "ompl_rope":
+            _shorten_ompl_rope(path, og.PathSimplifier(si))
+            waypoints = _states_to_array(path, n)
         else:
-            path = og.PathGeometric(ss.getSolutionPath())
-            if simplify:
-                _shorten(path, og.PathSimplifier(si))
-        waypoints = _states_to_array(path, n)
+            waypoints = _states_to_array(_shorten_rounds(ss, si), n)
     elapsed = time.perf_counter() - t0
 
     # Endpoints exactly as given (OMPL copies them, but keep the bits identical),
-    # then re-check the whole path independently of OMPL's motion validator.
+    # then re-check the whole path independently of the motion validator (in numpy
+    # where BatchChecker covers the robot: one batch, and a second implementation).
     waypoints[0], waypoints[-1] = q_start, q_goal
-    bad = checker.first_invalid(waypoints, step_rad=step)
+    recheck = batch if batch is not None else checker
+    bad = recheck.first_invalid(waypoints, step_rad=step)
     if bad is not None:
         raise PlanningError(
             f"planned path fails the re-check at q = {np.round(bad, 4).tolist()} "

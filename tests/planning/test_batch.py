@@ -136,11 +136,11 @@ def test_batched_motion_check_agrees_on_random_segments(ur5):
 def test_batched_and_per_state_planning_give_the_same_path(ur5):
     box = blocking_box(ur5)
     for seed in (0, 1):
-        fast = plan_path(ur5, start=START, goal=PAPER_GOAL, obstacles=[box], seed=seed)
-        slow = plan_path(
-            ur5, start=START, goal=PAPER_GOAL, obstacles=[box], seed=seed, batched=False
+        per_state = plan_path(ur5, start=START, goal=PAPER_GOAL, obstacles=[box], seed=seed)
+        batched = plan_path(
+            ur5, start=START, goal=PAPER_GOAL, obstacles=[box], seed=seed, batched=True
         )
-        np.testing.assert_array_equal(fast.waypoints, slow.waypoints)
+        np.testing.assert_array_equal(per_state.waypoints, batched.waypoints)
 
 
 @pytest.mark.parametrize("seed", [2, 3, 4, 5])

@@ -17,6 +17,7 @@ from pipeline.planning import (
     motion_check_step_rad,
     reach_bound_m,
 )
+from tests.planning.scenarios import PAPER_GOAL, blocking_box
 
 
 def test_zero_pose_of_the_ur_arms_is_collision_free(ur5):
@@ -163,3 +164,25 @@ def test_padding_sees_a_box_along_a_capsule_that_mujocos_box_collider_misses(ur5
     checker.padding_m = 0.004
     assert checker.is_clear(q)
     assert checker.motion_clear(lifted, q, step_rad=0.01 * 0.4)
+
+
+def test_motion_check_probes_then_checks_every_state_like_the_state_check(ur5):
+    from pipeline.planning.collision import _coarse_prefix, coarse_to_fine
+
+    for n in (2, 3, 7, 64, 301, 1000):
+        for count in (1, 6, 40):
+            prefix = _coarse_prefix(n, count)
+            assert list(prefix) == coarse_to_fine(n).tolist()[: min(count, n)]
+    box = blocking_box(ur5)
+    checker = CollisionChecker(ur5, obstacles=[box], padding_m=0.0056)
+    rng = np.random.default_rng(12)
+    outcomes = set()
+    for _ in range(40):
+        qa = PAPER_GOAL * rng.uniform(0.0, 1.0) + rng.normal(scale=0.1, size=6)
+        qb = PAPER_GOAL * rng.uniform(0.0, 1.0) + rng.normal(scale=0.1, size=6)
+        step = 0.003
+        n = int(np.ceil(np.sqrt(float(np.dot(qb - qa, qb - qa))) / step))
+        want = all(checker.is_clear(qa + (k / n) * (qb - qa)) for k in range(1, n + 1))
+        assert checker.motion_clear(qa, qb, step_rad=step) == want
+        outcomes.add(want)
+    assert outcomes == {True, False}

@@ -29,14 +29,35 @@ def test_panda_at_rest_is_not_in_self_collision():
     assert checker.is_valid(0.5 * (panda.lower + panda.upper))
 
 
-def test_panda_meets_a_box_placed_on_its_path():
+def _panda_around_a_box():
+    """The Panda, a start and goal, and a box on the straight path between them."""
     panda = load_spec("panda")
     start = panda.named_state("default")
     goal = np.array([1.3, -0.5, 0.0, -2.0, 0.0, 1.5, 0.785398])
     box = Box(name="box", center=(0.28, 0.21, 0.26), half_size=(0.05, 0.05, 0.26))
+    return panda, start, goal, box
+
+
+def test_panda_meets_a_box_placed_on_its_path():
+    panda, start, goal, box = _panda_around_a_box()
     checker = CollisionChecker(panda, obstacles=[box])
     assert checker.is_valid(start) and checker.is_valid(goal)
     assert not checker.is_valid(0.5 * (start + goal))
+
+
+def test_panda_plans_around_the_box_on_its_meshes_with_mujoco_alone():
+    from pipeline.errors import PlanningError
+    from pipeline.planning import plan_path
+    from pipeline.planning.batch import BatchChecker
+
+    panda, start, goal, box = _panda_around_a_box()
+    checker = CollisionChecker(panda, obstacles=[box])
+    with pytest.raises(PlanningError, match="batched checks need capsules or spheres"):
+        BatchChecker(checker)  # so plan_path checks and re-checks in MuJoCo
+    plan = plan_path(panda, start=start, goal=goal, obstacles=[box], seed=1)
+    assert not plan.direct and plan.simplified
+    checker.padding_m = plan.padding_m
+    assert checker.first_invalid(plan.waypoints, step_rad=plan.check_step_rad) is None
 
 
 def test_the_motion_check_step_bounds_how_far_the_meshes_move():
