@@ -86,7 +86,8 @@ Array = NDArray[np.float64]
 
 _RESTART_STREAM = 0x5EED_1C  # spawn key of the restart generator
 TABLE_STARTS = 8
-"""Attempts started from the seed table's nearest poses (after the caller's seed, if any)."""
+"""Restarts started from the seed table's poses nearest the target (after the first
+attempt, which starts from the seed)."""
 STALL_AFTER = 6
 STALL_WINDOW = 4
 STALL_RATIO = 0.9
@@ -282,7 +283,7 @@ class NumericLMSolver:
                     return q, it - 1, (pos, ang)
             if fresh:
                 jac = self._task_jacobian()
-                jtj = np.dot(jac.T, jac)  # np.dot: a few microseconds less than @ at this size
+                jtj = np.dot(jac.T, jac)  # np.dot: a little cheaper than @ at this size
                 g = np.dot(e, jac)
                 fresh = False
             _, dq, info = lapack.dposv(jtj + lam * eye, g)

@@ -31,7 +31,8 @@ from pipeline.robots.spec import RobotSpec
 Array = NDArray[np.float64]
 
 TABLE_SIZE = 32_768
-"""Joint vectors in a robot's seed table (building it takes about 0.15 s on the Panda)."""
+"""Joint vectors in a robot's seed table (the Panda's took 0.15-0.36 s to build on a
+shared, loaded 2-core machine)."""
 TABLE_SEED = 0x5EED_7AB
 """Seed of the table's generator: the table, and so every IK answer, is reproducible."""
 ROTATION_LENGTH_M = 0.2
