@@ -224,8 +224,9 @@ class IKOptions:
         rest_q: rest posture [rad], one value per joint within the limits, that a
             redundant arm's spare joints are pulled toward once the target is
             reached (numeric); None: the middle of each joint's range.
-        null_space_iterations: steps of that pull (numeric; 0 turns it off). Ignored
-            for arms without spare joints (6 joints for a pose, 3 for a position).
+        null_space_iterations: iterations that pull may spend, its landing steps
+            included (numeric; 0 turns it off). Ignored for arms without spare joints
+            (6 joints for a pose, 3 for a position).
     """
 
     tol_m: float = DEFAULT_TOL_M
