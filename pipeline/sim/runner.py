@@ -22,6 +22,7 @@ and the cause; the rows before it are kept.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -377,11 +378,12 @@ class _Loop:
         def physics(steps: int) -> None:
             step(model, data, steps)
 
-        # one row view of every array per step, from one zip (cheaper than indexing each)
-        rows = zip(
-            range(n), q_true, qd_true, q_meas, qd_meas, noise_q,
-            qd_true if noise_qd is None else noise_qd, q_ref, qd_ref, qdd_ref, tau_cmd,
-        )  # fmt: skip
+        # one row view of every array per step from one zip (cheaper than indexing each);
+        # the arrays a loop does not use are a repeated None
+        unused = itertools.repeat(None)
+        measured = (q_meas, qd_meas) if sensor is not None or noisy else (unused, unused)
+        noises = (noise_q, noise_qd) if noisy and sensor is None else (unused, unused)
+        rows = zip(range(n), q_true, qd_true, *measured, *noises, q_ref, qd_ref, qdd_ref, tau_cmd)
         for k, qt, vt, qm, vm, nq, nv, qr, vr, ar, tc_row in rows:
             qt[:] = qpos
             vt[:] = qvel
@@ -395,6 +397,8 @@ class _Loop:
             elif noisy:
                 add(qt, nq, qm)
                 add(vt, nv, vm)
+            else:
+                qm, vm = qt, vt
             try:
                 tc = compute(qm, vm, qr, vr, ar, dt)
                 if tc.shape != shape:  # a (1,) or scalar torque would broadcast silently
