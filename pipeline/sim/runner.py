@@ -355,15 +355,13 @@ class _Loop:
         qpos, qvel, ctrl = data.qpos, data.qvel, data.ctrl
         warn = data.warning.number  # a live view of MuJoCo's warning counters
         clean = np.zeros_like(warn).tobytes()
-        # weighted |qd|^2 against the speed limit: one dot product catches NaN, inf
-        # and runaway speed; the per-joint diagnosis runs only when it trips
+        # divergence: a MuJoCo warning, or the weighted |qd|^2 beyond speed_factor^2 (NaN
+        # and inf fail it too) sends a row to the per-joint diagnosis. Before the weighted
+        # test, |qd| (math.hypot, cheaper) against the slowest joint's limit with a 1 %
+        # margin: a row within it has no joint near its limit, so the diagnosis would find
+        # nothing there; the same rows end the episode as with the weighted test alone.
         weights = 1.0 / self.speed_limits**2
         limit_sq = self.speed_factor**2
-        # ... and before it a cheaper test, |qd| (math.hypot) against the slowest joint's
-        # limit with a 1 % margin: when that holds, no joint is near its limit and the
-        # weighted test could only trip a diagnosis that finds nothing, so it is
-        # evaluated only when this one fails (NaN and inf fail both): the same rows are
-        # diagnosed as without it
         slowest = float(np.min(self.speed_limits, initial=np.inf))
         bound = 0.99 * self.speed_factor * slowest if math.isfinite(slowest) else 0.0
         hypot = math.hypot
@@ -383,15 +381,17 @@ class _Loop:
         unused = itertools.repeat(None)
         measured = (q_meas, qd_meas) if sensor is not None or noisy else (unused, unused)
         noises = (noise_q, noise_qd) if noisy and sensor is None else (unused, unused)
-        rows = zip(range(n), q_true, qd_true, *measured, *noises, q_ref, qd_ref, qdd_ref, tau_cmd)
+        arrays = (q_true, qd_true, *measured, *noises, q_ref, qd_ref, qdd_ref, tau_cmd)
+        rows = zip(range(n), *arrays, strict=False)  # (the repeated None is endless)
         for k, qt, vt, qm, vm, nq, nv, qr, vr, ar, tc_row in rows:
             qt[:] = qpos
             vt[:] = qvel
-            if warn.tobytes() != clean or not hypot(*vt.tolist()) <= bound:
-                if warn.tobytes() != clean or not (vt * weights).dot(vt) <= limit_sq:
-                    reason = self._diagnose(k, qt, vt)
-                    if reason:
-                        return k, reason
+            if warn.tobytes() != clean or (
+                not hypot(*vt.tolist()) <= bound and not (vt * weights).dot(vt) <= limit_sq
+            ):
+                reason = self._diagnose(k, qt, vt)
+                if reason:
+                    return k, reason
             if sensor is not None:
                 sensor.measure(k, qt, vt, qm, vm)
             elif noisy:
