@@ -1,13 +1,31 @@
-"""Record-stage speed: wall time per control step vs the physics floor, same run.
+"""Record-stage speed: the control loop and the whole episode per control step vs the physics floor.
 
-Prints one JSON object. The floor is a bare loop of ``mj_step`` plus one
-Pinocchio RNEA call per step on the same UR5 model; the episode is the paper's
-CTC episode with full logging: controller and plant setup, control loop and bag
-writing included; planning and time-parameterization excluded (done once per
-scenario, shared by its controllers). ``--jobs`` scaling runs ``pipeline record``
-on four episodes with 1 and 2 processes.
+Prints one JSON object. The floor, measured in the same run (``campaign_profile.
+physics_floor_s``): per control step of the episode, the control period's ``mj_step``
+calls with the scenario's integrator and step (two RK4 steps of 0.5 ms since issue 19)
+plus one Pinocchio RNEA, on the nominal UR5 plant; the plant floor is the same loop on
+the realistic episode's drawn plant (Coulomb friction: MuJoCo's constraint solver runs
+every step). Until this round the floor here was one 1 ms step per control step, half
+the physics the episode runs.
 
-Usage: python benches/record.py [--repeat 3] [--no-jobs]
+Episodes (planning and time-parameterization excluded: once per scenario, shared):
+the paper's CTC episode (ideal plant) and the ``paper-realistic`` pid, ctc and ctc_pid
+episodes (seed 1: a drawn plant, friction, damping, sensor noise), all with full
+logging (4,011 control steps: 2 s pre-roll, the motion, 1 s hold). Per episode:
+
+- ``loop``: ``sim.runner._Loop.run``, the hot loop (physics, the law, the logged state
+  rows, sensor noise, the divergence check);
+- ``physics``: the episode's own torques replayed on a copy of its plant from the same
+  start (``mj_step`` alone along the same trajectory; checked to end in the same state):
+  ``loop - physics`` is what the Python around the physics costs;
+- ``whole``: ``run_one`` (controller and plant setup, loop, contact check, bag write).
+
+Each figure is the best of ``--repeat``, interleaved (the floors, then each episode), so
+other load on the machine hits all of them; wall time and this thread's CPU time
+(``time.thread_time``: less moved by other processes on a shared machine) are both given.
+``--jobs`` scaling runs ``pipeline record`` on four episodes with 1 and 2 processes.
+
+Usage: python benches/record.py [--repeat 5] [--no-jobs] [--no-marginal]
 """
 
 from __future__ import annotations
@@ -22,6 +40,7 @@ import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -29,36 +48,175 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "benches"))
 
-from sim_loop import physics_floor_s  # noqa: E402
+from campaign_profile import physics_floor_s  # noqa: E402
 
-from pipeline.params import load_params  # noqa: E402
-from pipeline.robots import load_spec  # noqa: E402
+import pipeline.sim.runner as runner  # noqa: E402
+from pipeline.params import Episode, load_params  # noqa: E402
 from pipeline.stages.episode import run_one  # noqa: E402
-from pipeline.stages.plans import plan_scenario  # noqa: E402
+from pipeline.stages.plans import ScenarioPlan, plan_scenario  # noqa: E402
+
+REALISTIC_SEED = 1
+TARGET_RATIO = 2.0
 
 
-def physics_floor_s_per_step(n_steps: int) -> float:
-    return physics_floor_s(load_spec("ur5"), steps=n_steps) / n_steps
+class LoopProbe:
+    """Wraps ``_Loop.run``: times it (wall and CPU) and replays its physics alone."""
+
+    def __init__(self) -> None:
+        self.wall_s = self.cpu_s = self.physics_wall_s = self.physics_cpu_s = 0.0
+        self._run = runner._Loop.run
+        probe = self
+
+        def run(loop: Any, *args: Any) -> tuple[int, str]:
+            return probe.timed(loop, *args)
+
+        runner._Loop.run = run  # type: ignore[method-assign]
+
+    def timed(self, loop: Any, *args: Any) -> tuple[int, str]:
+        import mujoco
+
+        start = mujoco.MjData(loop.model)
+        start.qpos[:] = loop.data.qpos
+        start.qvel[:] = loop.data.qvel
+        mujoco.mj_forward(loop.model, start)
+        c0, w0 = time.thread_time(), time.perf_counter()
+        rows, reason = self._run(loop, *args)
+        self.wall_s, self.cpu_s = time.perf_counter() - w0, time.thread_time() - c0
+        if loop.actuator is None and not reason:
+            self._replay(loop, start, q_true=args[0], tau_cmd=args[9], rows=rows)
+        return rows, reason
+
+    def _replay(self, loop: Any, data: Any, *, q_true: Any, tau_cmd: Any, rows: int) -> None:
+        """The same torques on the same plant from the same start: ``mj_step`` alone."""
+        import mujoco
+
+        model, step, ctrl, nstep = loop.model, mujoco.mj_step, data.ctrl, loop.nstep
+        c0, w0 = time.thread_time(), time.perf_counter()
+        for k in range(rows - 1):
+            ctrl[:] = tau_cmd[k]
+            step(model, data, nstep)
+        self.physics_wall_s = time.perf_counter() - w0
+        self.physics_cpu_s = time.thread_time() - c0
+        if not (data.qpos == q_true[rows - 1]).all():
+            raise RuntimeError("the physics replay left the episode's trajectory")
 
 
-def _episode_wall_s(hold_s: float, repeat: int) -> tuple[float, int]:
-    """Best wall time of the paper's CTC episode (plan and timing excluded) and its steps."""
-    params = load_params(REPO / "params.yaml")
-    episode = next(e for e in params.episodes if e.controller.type == "ctc")
-    scenario = episode.scenario.model_copy(update={"hold_s": hold_s})
-    episode = replace(episode, scenario=scenario)
-    plan = plan_scenario(episode.scenario_name, scenario, params.source)
-    best = float("inf")
+def _episodes() -> list[tuple[str, Episode, ScenarioPlan]]:
+    """(label, episode, plan): the paper's CTC episode, the realistic pid, ctc, ctc_pid."""
+    data = yaml.safe_load((REPO / "params.yaml").read_text())
+    data["episodes"] = {"paper-ctc": {"scenario": "paper", "controller": "ctc", "seed": 0}} | {
+        f"realistic-{c}": {"scenario": "paper-realistic", "controller": c, "seed": REALISTIC_SEED}
+        for c in ("pid", "ctc", "ctc_pid")
+    }
+    data["campaigns"] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "params.yaml"
+        path.write_text(yaml.safe_dump(data))
+        params = load_params(path)
+    plans: dict[str, ScenarioPlan] = {}
+    out = []
+    for e in params.episodes:
+        if e.scenario_name not in plans:
+            plans[e.scenario_name] = plan_scenario(e.scenario_name, e.scenario, params.source)
+        out.append((e.name, e, plans[e.scenario_name]))
+    return out
+
+
+def _run(episode: Episode, plan: ScenarioPlan) -> tuple[float, int]:
+    """Wall time of ``run_one`` and the episode's control steps."""
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        outcome = run_one(episode, plan, out_dir=Path(tmp), force=False, commit="")
+        wall_s = time.perf_counter() - t0
+    if outcome.status != "ok":
+        raise RuntimeError(f"{episode.name}: {outcome.reason}")
+    control_dt_s = episode.sim.physics_dt_s * episode.sim.control_period_steps
+    return wall_s, round(outcome.duration_s / control_dt_s) + 1
+
+
+def _floors(episode: Episode, steps: int) -> dict[str, float]:
+    """Wall and CPU time of the nominal floor [s] for ``steps`` control steps."""
+    c0 = time.thread_time()
+    wall = physics_floor_s(episode, steps)
+    return {"wall": wall, "cpu": time.thread_time() - c0}
+
+
+def measure(repeat: int, *, marginal: bool) -> dict[str, Any]:
+    """Best-of-``repeat`` figures per episode and the floors, interleaved."""
+    probe = LoopProbe()
+    cases = _episodes()
+    realistic = next(e for name, e, _ in cases if name.startswith("realistic"))
+    inf = float("inf")
+    best: dict[str, dict[str, float]] = {}
+    floor = {"wall": inf, "cpu": inf}
+    plant_floor = inf
     steps = 0
     for _ in range(repeat):
-        with tempfile.TemporaryDirectory() as tmp:
-            t0 = time.perf_counter()
-            outcome = run_one(episode, plan, out_dir=Path(tmp), force=False, commit="")
-            best = min(best, time.perf_counter() - t0)
-        assert outcome.status == "ok", outcome.reason
-        control_dt_s = episode.sim.physics_dt_s * episode.sim.control_period_steps
-        steps = round(outcome.duration_s / control_dt_s) + 1
-    return best, steps
+        for name, episode, plan in cases:
+            whole_s, steps = _run(episode, plan)
+            got = {
+                "whole": whole_s,
+                "loop": probe.wall_s,
+                "loop_cpu": probe.cpu_s,
+                "physics": probe.physics_wall_s,
+                "physics_cpu": probe.physics_cpu_s,
+            }
+            mine = best.setdefault(name, dict.fromkeys(got, inf))
+            for key, value in got.items():
+                mine[key] = min(mine[key], value)
+        for key, value in _floors(realistic, steps).items():
+            floor[key] = min(floor[key], value)
+        plant_floor = min(plant_floor, physics_floor_s(realistic, steps, drawn=True))
+    per_step = 1e6 / steps
+    out: dict[str, Any] = {
+        "control_steps": steps,
+        "physics_steps_per_control_step": realistic.sim.control_period_steps,
+        "physics_dt_s": realistic.sim.physics_dt_s,
+        "integrator": realistic.sim.integrator,
+        "floor_us_per_control_step": round(floor["wall"] * per_step, 2),
+        "floor_cpu_us_per_control_step": round(floor["cpu"] * per_step, 2),
+        "plant_floor_us_per_control_step": round(plant_floor * per_step, 2),
+        "plant_floor_x_floor": round(plant_floor / floor["wall"], 3),
+        "target_ratio_to_floor": TARGET_RATIO,
+    }
+    for name, b in best.items():
+        out[name] = {
+            "loop_us_per_step": round(b["loop"] * per_step, 2),
+            "loop_x_floor": round(b["loop"] / floor["wall"], 3),
+            "loop_cpu_x_floor_cpu": round(b["loop_cpu"] / floor["cpu"], 3),
+            "physics_us_per_step": round(b["physics"] * per_step, 2),
+            "physics_x_floor": round(b["physics"] / floor["wall"], 3),
+            "physics_cpu_x_floor_cpu": round(b["physics_cpu"] / floor["cpu"], 3),
+            "python_us_per_step": round((b["loop"] - b["physics"]) * per_step, 2),
+            "python_cpu_us_per_step": round((b["loop_cpu"] - b["physics_cpu"]) * per_step, 2),
+            "whole_us_per_step": round(b["whole"] * per_step, 2),
+            "whole_x_floor": round(b["whole"] / floor["wall"], 3),
+        }
+    for key in ("loop_x_floor", "loop_cpu_x_floor_cpu"):  # the campaign profile's laws
+        pair = [out[f"realistic-{c}"][key] for c in ("pid", "ctc")]
+        out[f"realistic_pid_ctc_{key}"] = round(sum(pair) / 2, 3)
+    if marginal:
+        out["paper_ctc_marginal"] = _marginal(cases[0][1], repeat, floor["wall"] / steps)
+    return out
+
+
+def _marginal(episode: Episode, repeat: int, floor_s_per_step: float) -> dict[str, Any]:
+    """Per extra control step of a 31 s hold over the paper's 1 s (no fixed setup)."""
+    long = replace(episode, scenario=episode.scenario.model_copy(update={"hold_s": 31.0}))
+    params = load_params(REPO / "params.yaml")
+    plan = plan_scenario(episode.scenario_name, episode.scenario, params.source)
+    short_s = long_s = float("inf")
+    short_steps = long_steps = 0
+    for _ in range(repeat):
+        s, short_steps = _run(episode, plan)
+        x, long_steps = _run(long, plan)
+        short_s, long_s = min(short_s, s), min(long_s, x)
+    marginal = (long_s - short_s) / (long_steps - short_steps)
+    return {
+        "note": "(31 s-hold episode - paper episode) / extra steps: excludes fixed setup",
+        "us_per_step": round(marginal * 1e6, 2),
+        "ratio_to_floor": round(marginal / floor_s_per_step, 3),
+    }
 
 
 def jobs_scaling(hold_s: float) -> dict[str, float]:
@@ -80,39 +238,29 @@ def jobs_scaling(hold_s: float) -> dict[str, float]:
     return out
 
 
+def _shell(*cmd: str) -> str:
+    return subprocess.run(cmd, capture_output=True, text=True, cwd=REPO).stdout.strip()
+
+
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--repeat", type=int, default=3)
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--no-jobs", action="store_true", help="skip the --jobs scaling run")
+    ap.add_argument("--no-marginal", action="store_true", help="skip the 31 s-hold episode")
     args = ap.parse_args()
-    floor = min(physics_floor_s_per_step(5000) for _ in range(args.repeat))
-    paper_s, paper_steps = _episode_wall_s(1.0, args.repeat)
-    long_s, long_steps = _episode_wall_s(31.0, args.repeat)
-    marginal = (long_s - paper_s) / (long_steps - paper_steps)
-    machine = {
-        "cpus": os.cpu_count(),
-        "python": platform.python_version(),
-        "machine": platform.machine(),
-    }
-    result: dict[str, object] = {
-        "machine": machine,
-        "physics_floor_us_per_step": floor * 1e6,
-        "paper_ctc_episode": {
-            "steps": paper_steps,
-            "wall_s": paper_s,
-            "us_per_step": paper_s / paper_steps * 1e6,
-            "ratio_to_floor": paper_s / paper_steps / floor,
+    result: dict[str, Any] = {
+        "commit": _shell("git", "rev-parse", "--short", "HEAD"),
+        "uptime_before": _shell("uptime"),
+        "machine": {
+            "cpus": os.cpu_count(),
+            "python": platform.python_version(),
+            "machine": platform.machine(),
         },
-        "marginal_per_step": {
-            "note": "(31 s-hold episode - paper episode) / extra steps: excludes fixed setup",
-            "us_per_step": marginal * 1e6,
-            "ratio_to_floor": marginal / floor,
-        },
-        "target_ratio_to_floor": 2.0,
-        "real_time_factor_paper_episode": 1e-3 * paper_steps / paper_s,
     }
+    result |= measure(args.repeat, marginal=not args.no_marginal)
     if not args.no_jobs:
         result["jobs"] = jobs_scaling(hold_s=240.0)
+    result["uptime_after"] = _shell("uptime")
     print(json.dumps(result, indent=2))
 
 

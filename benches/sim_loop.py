@@ -1,13 +1,15 @@
-"""Benchmark: the episode loop's cost per physics step against the physics floor.
+"""Benchmark: the episode loop's cost per control step against the physics floor.
 
-The floor is a bare loop of ``mj_step`` plus one Pinocchio RNEA call per step
-on the same plant, the least any Python loop running a model-based controller
-can cost. Every ``run_episode`` call is timed whole (model build, reference
-sampling, noise, result assembly included) and divided by its physics steps.
-Best of ``repeats`` runs, interleaved, so other load on the machine hits both.
+The floor is a bare loop of one Pinocchio RNEA call plus the control period's
+``mj_step`` calls per control step on the same plant, the least any Python loop
+running a model-based controller can cost. Every ``run_episode`` call is timed whole
+(model build, reference sampling, noise, result assembly included) and divided by its
+control steps. The defaults are the recorded experiment's (RK4, 0.5 ms, 2 physics steps
+per 1 kHz control step). Best of ``repeats`` runs, interleaved, so other load on the
+machine hits both.
 
-Run: ``python benches/sim_loop.py [--robot ur5] [--seconds 10] [--repeats 3]``;
-prints one JSON object.
+Run: ``python benches/sim_loop.py [--robot ur5] [--seconds 10] [--repeats 3]
+[--physics-dt-s 0.0005] [--period 2]``; prints one JSON object.
 """
 
 from __future__ import annotations
@@ -31,8 +33,11 @@ from pipeline.sim.references import PAPER_GOAL_RAD, PAPER_START_RAD, QuinticRefe
 from pipeline.sim.runner import run_episode
 
 
-def physics_floor_s(spec: RobotSpec, *, steps: int, physics_dt_s: float = 0.001) -> float:
-    """Wall time [s] of ``steps`` x (pin.rnea + mj_step) on the nominal plant, at rest start.
+def physics_floor_s(
+    spec: RobotSpec, *, steps: int, physics_dt_s: float = 0.001, control_period_steps: int = 1
+) -> float:
+    """Wall time [s] of ``steps`` x (pin.rnea + ``control_period_steps`` x mj_step) on the
+    nominal plant, at rest start.
 
     The RNEA torque (gravity + Coriolis) is applied, so the arm stays up and no contact
     is ever computed: the same contact-free physics an episode runs. (Leaving ctrl at
@@ -43,19 +48,25 @@ def physics_floor_s(spec: RobotSpec, *, steps: int, physics_dt_s: float = 0.001)
     pmodel = build_pinocchio_model(spec)
     pdata = pmodel.createData()
     zeros = np.zeros(spec.dof)
-    step, rnea = mujoco.mj_step, pin.rnea
+    step, rnea, nstep = mujoco.mj_step, pin.rnea, control_period_steps
     t0 = time.perf_counter()
     ctrl = data.ctrl
     for _ in range(steps):
         ctrl[:] = rnea(pmodel, pdata, data.qpos, data.qvel, zeros)
-        step(model, data)
+        step(model, data, nstep)
     return time.perf_counter() - t0
 
 
 def measure(
-    robot: str = "ur5", *, seconds: float = 10.0, repeats: int = 3, motion_s: float = 2.0
+    robot: str = "ur5",
+    *,
+    seconds: float = 10.0,
+    repeats: int = 3,
+    motion_s: float = 2.0,
+    physics_dt_s: float = 0.0005,
+    period: int = 2,
 ) -> dict[str, Any]:
-    """Floor and per-controller episode cost [us per physics step] (best of ``repeats``)."""
+    """Floor and per-controller episode cost [us per control step] (best of ``repeats``)."""
     spec = load_spec(robot)
     if spec.dof == len(PAPER_START_RAD):
         start, goal = PAPER_START_RAD, PAPER_GOAL_RAD
@@ -72,10 +83,16 @@ def measure(
         "ctc_noisy": {"controller": "ctc", "noise": True},
         "ctc_period_5": {"controller": "ctc", "period": 5},
     }
-    best: dict[str, float] = {"floor": float("inf"), **{k: float("inf") for k in cases}}
-    steps = round(seconds / 0.001)
+    periods = sorted({case.get("period", period) for case in cases.values()})
+    floors = dict.fromkeys(periods, float("inf"))
+    best = {k: float("inf") for k in cases}
+    physics_steps = round(seconds / physics_dt_s)
     for _ in range(repeats):
-        best["floor"] = min(best["floor"], physics_floor_s(spec, steps=steps))
+        for p, floor in floors.items():
+            took = physics_floor_s(
+                spec, steps=physics_steps // p, physics_dt_s=physics_dt_s, control_period_steps=p
+            )
+            floors[p] = min(floor, took)
         for key, case in cases.items():
             controller = make_controller(case["controller"], spec)
             noise = 1e-4 if case.get("noise") else 0.0
@@ -86,27 +103,31 @@ def measure(
                 controller=controller,
                 seed=0,
                 hold_s=hold_s,
-                control_period_steps=case.get("period", 1),
+                physics_dt_s=physics_dt_s,
+                control_period_steps=case.get("period", period),
                 position_noise_std_rad=noise,
                 velocity_noise_std_rad_s=noise,
             )
             best[key] = min(best[key], time.perf_counter() - t0)
             if not result.ok:
                 raise RuntimeError(f"{key}: {result.reason}")
-    floor_us = best["floor"] / steps * 1e6
-    return {
+    out: dict[str, Any] = {
         "robot": robot,
-        "physics_steps": steps,
-        "physics_dt_s": 0.001,
-        "floor_us_per_step": round(floor_us, 3),
-        "episodes": {
-            key: {
-                "us_per_step": round(best[key] / steps * 1e6, 3),
-                "ratio_to_floor": round(best[key] / best["floor"], 3),
-            }
-            for key in cases
+        "physics_steps": physics_steps,
+        "physics_dt_s": physics_dt_s,
+        "floor_us_per_control_step": {
+            f"period_{p}": round(floors[p] / (physics_steps // p) * 1e6, 3) for p in periods
         },
+        "episodes": {},
     }
+    for key, case in cases.items():
+        p = case.get("period", period)
+        out["episodes"][key] = {
+            "control_period_steps": p,
+            "us_per_control_step": round(best[key] / (physics_steps // p) * 1e6, 3),
+            "ratio_to_floor": round(best[key] / floors[p], 3),
+        }
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -114,8 +135,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--robot", default="ur5")
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--physics-dt-s", type=float, default=0.0005)
+    parser.add_argument("--period", type=int, default=2, help="physics steps per control step")
     args = parser.parse_args(argv)
-    out = measure(args.robot, seconds=args.seconds, repeats=args.repeats)
+    out = measure(
+        args.robot,
+        seconds=args.seconds,
+        repeats=args.repeats,
+        physics_dt_s=args.physics_dt_s,
+        period=args.period,
+    )
     sys.stdout.write(json.dumps(out, indent=2) + "\n")
     return 0
 

@@ -308,8 +308,12 @@ class NominalPDController:
         )
         self._kp: F64 = self._gains["kp"]
         self._kd: F64 = self._gains["kd"]
+        self._friction_ff: bool = bool(self._gains.get("friction_ff", False))
         self._model = build_pinocchio_model(spec)
         self._data = self._model.createData()
+        # per-step work buffers of the laws' outer loops
+        self._a: F64 = np.zeros(spec.dof)
+        self._e: F64 = np.zeros(spec.dof)
 
     @property
     def name(self) -> str:

@@ -13,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
 import pinocchio as pin
 
 from pipeline.control.base import (
@@ -59,7 +60,13 @@ class ComputedTorqueController(NominalPDController):
     DEFAULT_GAINS = staticmethod(default_gains)
 
     def compute(self, q: F64, qd: F64, q_ref: F64, qd_ref: F64, qdd_ref: F64, dt_s: float) -> F64:
-        a = qdd_ref + self._kd * (qd_ref - qd) + self._kp * (q_ref - q)
+        # a = qdd_r + Kd (qd_r - qd) + Kp (q_r - q), the same operations in the same
+        # order as that expression, into preallocated buffers (no per-step allocation)
+        sub, mul, add = np.subtract, np.multiply, np.add
+        a = add(qdd_ref, mul(self._kd, sub(qd_ref, qd, self._a), self._a), self._a)
+        add(a, mul(self._kp, sub(q_ref, q, self._e), self._e), a)
         tau: F64 = pin.rnea(self._model, self._data, q, qd, a)
+        if not self._friction_ff:
+            return tau
         friction = friction_feedforward(self._gains, qd_ref)
         return tau if friction is None else tau + friction

@@ -99,7 +99,9 @@ class ComputedTorquePidController(NominalPDController):
         super().__init__(spec, gains, where=where)
         self._ki: F64 = self._gains["ki"]
         self._i_clamp: F64 = self._gains["i_clamp"]
+        self._i_clamp_low: F64 = -self._i_clamp
         self._integral: F64 = np.zeros(spec.dof)
+        self._tmp: F64 = np.zeros(spec.dof)
 
     @property
     def integral_rad_s(self) -> F64:
@@ -111,11 +113,18 @@ class ComputedTorquePidController(NominalPDController):
         self._integral[:] = 0.0
 
     def compute(self, q: F64, qd: F64, q_ref: F64, qd_ref: F64, qdd_ref: F64, dt_s: float) -> F64:
-        e = q_ref - q
-        z = self._integral
-        z += e * dt_s
-        np.clip(z, -self._i_clamp, self._i_clamp, out=z)
-        a = qdd_ref + self._kd * (qd_ref - qd) + self._kp * e + self._ki * z
+        # z += e dt, clip z; a = qdd_r + Kd (qd_r - qd) + Kp e + Ki z: the same operations
+        # in the same order as those expressions, into preallocated buffers
+        sub, mul, add = np.subtract, np.multiply, np.add
+        e, z, a, tmp = self._e, self._integral, self._a, self._tmp
+        sub(q_ref, q, e)
+        add(z, mul(e, dt_s, tmp), z)
+        z.clip(self._i_clamp_low, self._i_clamp, z)  # np.clip's own ufunc, without its wrapper
+        add(qdd_ref, mul(self._kd, sub(qd_ref, qd, a), a), a)
+        add(a, mul(self._kp, e, tmp), a)
+        add(a, mul(self._ki, z, tmp), a)
         tau: F64 = pin.rnea(self._model, self._data, q, qd, a)
+        if not self._friction_ff:
+            return tau
         friction = friction_feedforward(self._gains, qd_ref)
         return tau if friction is None else tau + friction

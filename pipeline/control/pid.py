@@ -113,6 +113,11 @@ class PidController:
         self._i_term: F64 = np.zeros(spec.dof)
         self._ki_dt: F64 = self._ki * 0.0
         self._dt_s = 0.0
+        # per-step work buffers (the command is returned in ``_tau``: the caller's
+        # until the next ``compute``, as the Controller protocol says)
+        self._e: F64 = np.zeros(spec.dof)
+        self._tmp: F64 = np.zeros(spec.dof)
+        self._tau: F64 = np.zeros(spec.dof)
 
     @property
     def name(self) -> str:
@@ -131,18 +136,26 @@ class PidController:
         return tau
 
     def _pid(self, q: F64, qd: F64, q_ref: F64, qd_ref: F64, dt_s: float) -> F64:
-        """control_toolbox::Pid's command for every joint (no feed-forward)."""
-        e = q_ref - q
-        i_term = self._i_term
+        """control_toolbox::Pid's command for every joint (no feed-forward).
+
+        ``kp e + kd (qd_ref - qd) + clamp(i)`` in that order, written into preallocated
+        buffers (positional ``out``: no allocation, the same operations as the plain
+        expression, so the same bits).
+        """
+        sub, mul, add = np.subtract, np.multiply, np.add
+        e = sub(q_ref, q, self._e)
+        i_term, tmp = self._i_term, self._tmp
         if dt_s != self._dt_s:  # the period is fixed in an episode: scale ki once
             self._ki_dt = self._ki * dt_s
             self._dt_s = dt_s
-        i_term += self._ki_dt * e
+        add(i_term, mul(self._ki_dt, e, tmp), i_term)
         if self._antiwindup:
             np.minimum(i_term, self._i_max, out=i_term)
             np.maximum(i_term, self._i_min, out=i_term)
             i_out = i_term
         else:
             i_out = np.maximum(np.minimum(i_term, self._i_max), self._i_min)
-        tau: F64 = self._kp * e + self._kd * (qd_ref - qd) + i_out
+        tau = mul(self._kp, e, self._tau)
+        add(tau, mul(self._kd, sub(qd_ref, qd, tmp), tmp), tau)
+        add(tau, i_out, tau)
         return tau

@@ -105,6 +105,7 @@ class Sensor:
         self.noise_qd = noise_qd
         self._q_prev: F64 | None = None
         self._v: F64 | None = None
+        self._raw: F64 = np.zeros(0)
 
     def measure(self, k: int, q_true: F64, qd_true: F64, q_out: F64, qd_out: F64) -> None:
         """Write row ``k``'s measured position and velocity into ``q_out``, ``qd_out``."""
@@ -124,10 +125,13 @@ class Sensor:
         if self._q_prev is None or self._v is None:
             self._q_prev = q_out.copy()
             self._v = np.zeros_like(q_out)
-        raw = (q_out - self._q_prev) / self.control_dt_s
-        self._v += self.alpha * (raw - self._v)
+            self._raw = np.zeros_like(q_out)
+        # v += alpha ((q - q_prev) / T - v), in that order, into a preallocated buffer
+        raw, v = self._raw, self._v
+        np.divide(np.subtract(q_out, self._q_prev, raw), self.control_dt_s, raw)
+        v += np.multiply(self.alpha, np.subtract(raw, v, raw), raw)
         self._q_prev[:] = q_out
-        qd_out[:] = self._v
+        qd_out[:] = v
 
 
 class Actuator:

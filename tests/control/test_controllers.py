@@ -343,3 +343,70 @@ def test_decentralized_pd_poles_spread_with_the_arms_coupling(ur5):
     assert poles.real.min() < -5 * DEFAULT_OMEGA_N_RAD_S
     assert poles.real.max() > -0.6 * DEFAULT_OMEGA_N_RAD_S
     assert (poles.real < 0).all()
+
+
+# --- per-step arithmetic: the buffered laws are their plain formulas, bit for bit --------
+
+
+def _plain_pid(g, state, e_int, dt):
+    """control_toolbox::Pid as the plain expressions (the law before its buffers)."""
+    q, qd, q_ref, qd_ref, _ = state
+    e = q_ref - q
+    e_int += g["ki"] * dt * e
+    if g["antiwindup"]:
+        np.minimum(e_int, g["i_clamp_max"], out=e_int)
+        np.maximum(e_int, g["i_clamp_min"], out=e_int)
+        i_out = e_int
+    else:
+        i_out = np.maximum(np.minimum(e_int, g["i_clamp_max"]), g["i_clamp_min"])
+    tau = g["kp"] * e + g["kd"] * (qd_ref - qd) + i_out
+    return tau + g["ff_velocity_scale"] * qd_ref if g["ff_velocity_scale"].any() else tau
+
+
+def _plain_ctc(spec, g, state, z, dt, *, integral):
+    """Eq. 18 (with ctc_pid's clamped integral) as the plain expressions, on Pinocchio."""
+    import pinocchio as pin
+
+    from pipeline.control.base import friction_feedforward
+    from pipeline.model.urdf import build_pinocchio_model
+
+    q, qd, q_ref, qd_ref, qdd_ref = state
+    model = build_pinocchio_model(spec)
+    if integral:
+        e = q_ref - q
+        z += e * dt
+        np.clip(z, -g["i_clamp"], g["i_clamp"], out=z)
+        a = qdd_ref + g["kd"] * (qd_ref - qd) + g["kp"] * e + g["ki"] * z
+    else:
+        a = qdd_ref + g["kd"] * (qd_ref - qd) + g["kp"] * (q_ref - q)
+    tau = pin.rnea(model, model.createData(), q, qd, a).copy()
+    friction = friction_feedforward(g, qd_ref) if g.get("friction_ff") else None
+    return tau if friction is None else tau + friction
+
+
+@pytest.mark.parametrize(
+    ("name", "gains"),
+    [
+        ("pid", None),
+        ("pid", {"antiwindup": False, "ff_velocity_scale": 0.3, "i_clamp_max": 0.5}),
+        ("ctc", None),
+        ("ctc", {"kp": 900.0, "kd": 60.0, "friction_ff": True, "friction_coulomb_nm": 2.0}),
+        ("ctc_pid", None),
+        ("ctc_pid", {"omega_n_rad_s": 30.0, "friction_ff": True, "friction_viscous_nm_s_rad": 1.0}),
+    ],
+)
+def test_each_law_is_its_plain_formula_bit_for_bit_step_after_step(ur5, name, gains):
+    # the laws write into preallocated buffers (the hot loop): the same operations in the
+    # same order as the plain expressions, so every recording keeps its bytes
+    ctl = make_controller(name, ur5, gains)
+    g = {k: np.asarray(v) if isinstance(v, list) else v for k, v in ctl.gains_in_effect().items()}
+    rng = np.random.default_rng(7)
+    z = np.zeros(6)
+    for _ in range(50):
+        state = tuple(rng.normal(0.0, s, 6) for s in (0.5, 1.0, 0.5, 1.0, 5.0))
+        tau = ctl.compute(*state, DT_S).copy()
+        if name == "pid":
+            expected = _plain_pid(g, state, z, DT_S)
+        else:
+            expected = _plain_ctc(ur5, g, state, z, DT_S, integral=name == "ctc_pid")
+        np.testing.assert_array_equal(tau, expected)

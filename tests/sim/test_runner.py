@@ -165,6 +165,32 @@ def test_absurd_gain_is_reported_as_diverged_not_raised(ur5, reference):
     assert np.isfinite(result.q_true).all()
 
 
+@pytest.mark.parametrize("elbow_limit_scale", [1.0, 50.0])
+def test_divergence_is_declared_at_the_first_row_a_joint_exceeds_the_speed_factor(
+    ur5, reference, elbow_limit_scale
+):
+    # the loop's cheap speed pre-test (|qd| against the slowest joint's limit) must never
+    # hide a joint over its own limit, also when the limits differ by far
+    joints = tuple(
+        dataclasses.replace(
+            j, limits=dataclasses.replace(j.limits, velocity=j.limits.velocity * elbow_limit_scale)
+        )
+        if j.name == "elbow_joint"
+        else j
+        for j in ur5.joints
+    )
+    spec = dataclasses.replace(ur5, joints=joints)
+    free = _run(spec, reference, divergence_speed_factor=1e6)
+    ratio = np.abs(free.qd_true) / spec.velocity_limits
+    factor = 0.5 * float(ratio.max())
+    k = int(np.argmax((ratio > factor).any(axis=1)))
+    result = _run(spec, reference, divergence_speed_factor=factor)
+    assert result.status == "diverged"
+    assert len(result.stamp_ns) == k
+    assert spec.joint_names[int(np.argmax(ratio[k]))] in result.reason
+    np.testing.assert_array_equal(result.q_true, free.q_true[:k])
+
+
 class _NanAfter:
     """A controller that breaks: NaN torque on one joint from ``t_s`` on."""
 
