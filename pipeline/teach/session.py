@@ -27,6 +27,7 @@ from pipeline.kinematics.check import (
 from pipeline.kinematics.jacobian import manipulability, min_singular_value
 from pipeline.kinematics.limits import check_joint_limits
 from pipeline.kinematics.registry import make_solver, solver_names
+from pipeline.kinematics.seeds import seed_table
 from pipeline.model.dh import forward_kinematics
 from pipeline.robots.spec import RobotSpec
 
@@ -120,12 +121,15 @@ def choose_solver(spec: RobotSpec, requested: str | None) -> tuple[IKSolver, str
     if name not in solver_names():
         make_solver(name, spec)  # raises with the list of names
     try:
-        return make_solver(name, spec), ""
+        solver, note = make_solver(name, spec), ""
     except KinematicsError as err:
         if name != "analytic":
             raise
         note = f"no closed form for this robot ({err}); using numeric (Levenberg-Marquardt)"
-        return make_solver("numeric", spec), note
+        solver = make_solver("numeric", spec)
+    if name != "analytic" or note:
+        seed_table(spec)  # built now (0.15-0.4 s), not on the first drag that needs a restart
+    return solver, note
 
 
 HOME_CANDIDATES = 64
