@@ -273,10 +273,11 @@ def check_trajectory_duration(
     """Check the recorded trajectory duration against the data (None: not contradicted).
 
     In order: the planned trajectory topic's last ``time_from_start`` (recorded with the
-    motion) must equal it within 1 ms (0.1 %); without that topic the reference must stop
-    moving by the motion end it implies (within two control periods and 1 %); and an
-    ``ok``, unsalvaged recording must not end before that motion end (the recorder records
-    past it).
+    motion) must be the end or the first sample after it (within its last sample step,
+    plus 1 ms or 0.1 %: the recorder samples the plan on a grid); without that topic the
+    reference must stop moving by the motion end it implies (within two control periods
+    and 1 %); and an ``ok``, unsalvaged recording must not end before that motion end (the
+    recorder records past it).
     """
     if settings is None:
         return None
@@ -285,7 +286,10 @@ def check_trajectory_duration(
     said = f"settings planner.trajectory_duration_s = {duration:g} s"
     if planned is not None and planned.times_s.size:
         planned_s = float(planned.times_s[-1])
-        if abs(duration - planned_s) <= max(1e-3, 1e-3 * planned_s):
+        # the recorder samples the plan on a grid up to the first instant >= its end
+        step_s = float(planned.times_s[-1] - planned.times_s[-2]) if planned.times_s.size > 1 else 0
+        tol_s = max(1e-3, 1e-3 * planned_s)
+        if duration - tol_s <= planned_s <= duration + step_s + tol_s:
             return None
         return DurationCheck(
             planned_s,

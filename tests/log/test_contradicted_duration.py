@@ -50,6 +50,25 @@ def test_a_duration_the_planned_trajectory_contradicts_is_taken_from_it(
     assert metrics(rec) == metrics(honest)
 
 
+@pytest.mark.parametrize("duration_s", [1.996, 1.75])
+def test_a_duration_between_the_plans_last_two_samples_is_not_contradicted(
+    tmp_path: Path, duration_s: float
+) -> None:
+    """The recorder samples the plan on a grid up to the first instant >= its end (0.886 s
+    -> a last point at 0.890 s on a 10 ms grid): that is no contradiction, and the motion
+    end stays the settings' (the factory's plan has a 0.5 s step ending at 2 s)."""
+    rec = recorded(tmp_path, "gridded", duration_s, WITH_PLAN)
+    assert not any("contradicted" in n for n in rec.notes)
+    assert rec.trajectory_duration_s == pytest.approx(duration_s)
+
+
+def test_a_plan_that_ends_before_the_duration_contradicts_it(tmp_path: Path) -> None:
+    rec = recorded(tmp_path, "short", 2.1, WITH_PLAN)
+    [note] = [n for n in rec.notes if "contradicted" in n]
+    assert "trajectory_duration_s = 2.1 s" in note
+    assert rec.trajectory_duration_s == pytest.approx(2.0)
+
+
 def test_a_duration_the_reference_contradicts_is_taken_from_its_stamps(tmp_path: Path) -> None:
     honest = recorded(tmp_path / "a", "honest", None, NO_PLAN)
     rec = recorded(tmp_path / "b", "zero", 0.0, NO_PLAN)
