@@ -173,6 +173,9 @@ def main() -> None:
     ap.add_argument("--profile", action="store_true", help="cProfile the largest size")
     ap.add_argument("--profile-out", default="", help="also write the cProfile stats here")
     ap.add_argument("--keep", action="store_true", help="keep the recordings and reports")
+    ap.add_argument(
+        "--recordings", default="", help="report on this recorded campaign (recorded before)"
+    )
     args = ap.parse_args()
     sizes = sorted({int(s) for s in args.sizes.split(",") if s} | {args.episodes})
     report_jobs: list[int | None] = [int(j) for j in args.report_jobs.split(",") if j] or [None]
@@ -188,7 +191,10 @@ def main() -> None:
     # recorded once at the largest size; a smaller size is the first N of its episodes
     # (hard links of the same files: real recordings, each its own episode)
     seeds = -(-max(sizes) // len(CONTROLLERS))
-    full, record_s = _record(work, seeds=seeds, jobs=args.jobs)
+    if args.recordings:  # a record run outside git would re-record: its commit differs
+        full, record_s = Path(args.recordings), 0.0
+    else:
+        full, record_s = _record(work, seeds=seeds, jobs=args.jobs)
     out["record_s"] = round(record_s, 1)
     out["record_jobs"] = args.jobs
     episodes = _episodes(full)

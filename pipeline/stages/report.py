@@ -12,11 +12,12 @@ Only files a previous report listed in its manifest are ever removed.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import polars as pl
@@ -56,22 +57,7 @@ from pipeline.log.reader import (
     find_recordings,
     read_recording,
 )
-from pipeline.report.campaigns import CampaignSection, campaign_section
-from pipeline.report.figures import (
-    MAX_FIGURE_SCENARIOS,
-    FigureFile,
-    scenario_figures,
-    scenario_slugs,
-)
 from pipeline.report.inputs import ReportData, Skipped, cs_times_s, cs_wide
-from pipeline.report.markdown import REPORT_FILE, render_report
-from pipeline.report.metrics_json import (
-    write_episode_csvs,
-    write_headline,
-    write_metrics,
-    write_series_csvs,
-)
-from pipeline.report.rerun_rrd import RRD_FILE, write_rrd
 from pipeline.stages.partials import (
     PARTIAL_FORMAT,
     Partial,
@@ -88,6 +74,10 @@ from pipeline.stages.report_commit import (
     staging_pattern,
 )
 from pipeline.stages.report_pool import default_jobs, measure_in_workers
+
+if TYPE_CHECKING:  # the writers load when a report is written (see _writers)
+    from pipeline.report.campaigns import CampaignSection
+    from pipeline.report.figures import FigureFile
 
 # the baseline when none is named; recordings of one other controller are fine with it
 DEFAULT_BASELINE = "pid"
@@ -173,7 +163,7 @@ def read_all(
             sources,
             jobs=jobs,
             options=options,
-            tool=measured.tool,
+            make=functools.partial(Measured, measured.tool),
             progress=lambda done: progress("reading recordings", done, len(sources)),
         ):
             if kind == "raise":
@@ -322,6 +312,18 @@ def _run_report_locked(
         task_space=measured.task_space,
     )
     data = measured.with_sample_frames(first, options)
+    # The writers (matplotlib, Rerun) load here, not with this module: a report worker
+    # imports this module to read and measure, and does not pay for them.
+    from pipeline.report.figures import MAX_FIGURE_SCENARIOS, scenario_figures, scenario_slugs
+    from pipeline.report.markdown import REPORT_FILE, render_report
+    from pipeline.report.metrics_json import (
+        write_episode_csvs,
+        write_headline,
+        write_metrics,
+        write_series_csvs,
+    )
+    from pipeline.report.rerun_rrd import RRD_FILE, write_rrd
+
     # The name is known before the folder exists, so an interrupt at any point (even
     # inside mkdir) leaves nothing behind: the finally below removes what exists.
     staging = staging_folder(out_dir)
@@ -656,6 +658,9 @@ def _campaigns(
     with a lazy scan: the summary is the table's numbers. A campaign some of whose
     episodes were measured from their partials (``bagless``) also lists which episodes
     have bags (``<stem>.bags.csv``)."""
+    from pipeline.report.campaigns import campaign_section
+    from pipeline.report.figures import MAX_FIGURE_SCENARIOS, scenario_slugs
+
     settings = {ep: view.settings for ep, view in data.protocol.items()}
     tables = campaign_tables(data.metrics, data.episodes, settings)
     (staging / TABLE_DIR).mkdir(exist_ok=True)

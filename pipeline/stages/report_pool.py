@@ -29,12 +29,11 @@ from collections.abc import Callable, Iterator, Sequence
 from multiprocessing import connection as mp_connection
 from multiprocessing.connection import Connection
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
 from pipeline.errors import ReportError
 
 if TYPE_CHECKING:
-    from pipeline.analysis.task_space import ToolOffset
     from pipeline.log.reader import ReadOptions
 
 # With ``jobs`` left to the default, a worker per this many recordings at least: starting a
@@ -105,17 +104,27 @@ def _sendable(err: BaseException) -> BaseException:
     return err
 
 
+class Measurer(Protocol):
+    """What measures recordings one by one (the report's
+    :class:`~pipeline.stages.report.Measured`)."""
+
+    def measure(self, source: Path, options: ReadOptions | None) -> Outcome:
+        """Read and measure ``source``; keep nothing of it."""
+        ...
+
+
 def _worker_main(
-    conn: Connection, parent_pid: int, options: ReadOptions | None, tool: ToolOffset
+    conn: Connection,
+    parent_pid: int,
+    options: ReadOptions | None,
+    make: Callable[[], Measurer],
 ) -> None:
     """A worker: measure the recordings the parent sends (a path) until it sends None."""
     _die_with_parent(parent_pid)
     # Ctrl-C reaches the whole process group, SIGTERM may too: the parent decides.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    from pipeline.stages.report import Measured
-
-    measured = Measured(tool)
+    measured = make()  # one per worker: its caches serve every recording it measures
     while True:
         try:
             source = conn.recv()
@@ -136,11 +145,12 @@ def measure_in_workers(
     *,
     jobs: int,
     options: ReadOptions | None,
-    tool: ToolOffset,
+    make: Callable[[], Measurer],
     progress: Callable[[int], None],
 ) -> Iterator[tuple[Path, Outcome]]:
-    """Measure ``sources`` on ``jobs`` worker processes; yields (source, outcome) in the
-    order of ``sources`` (``progress(done)`` as each one finishes, in any order).
+    """Measure ``sources`` on ``jobs`` worker processes, each with its own ``make()`` (a
+    picklable factory: it is sent to the workers); yields (source, outcome) in the order of
+    ``sources`` (``progress(done)`` as each one finishes, in any order).
 
     Every worker is killed when the iteration ends, however it ends (exhausted, an error,
     Ctrl-C or SIGTERM in the parent, the caller stopping early).
@@ -171,7 +181,7 @@ def measure_in_workers(
             here, there = ctx.Pipe()
             proc = ctx.Process(
                 target=_worker_main,
-                args=(there, os.getpid(), options, tool),
+                args=(there, os.getpid(), options, make),
                 name="pipeline-report-worker",
                 daemon=True,
             )
@@ -219,6 +229,7 @@ def _kill_all(workers: dict[Connection, tuple[Any, int | None]]) -> None:
 __all__ = [
     "MAX_DEFAULT_JOBS",
     "RECORDINGS_PER_WORKER",
+    "Measurer",
     "Outcome",
     "available_cpus",
     "default_jobs",

@@ -44,9 +44,9 @@ def _assert_same_report(a: Path, b: Path) -> None:
     assert sorted(fa) == sorted(fb)
     differ = [name for name in fa if name != "recording.rrd" and fa[name] != fb[name]]
     assert differ == []
+    rrds = [str(a / "recording.rrd"), str(b / "recording.rrd")]
     same = subprocess.run(
-        [str(RERUN), "rrd", "compare", "--unordered", str(a / "recording.rrd"),
-         str(b / "recording.rrd")],  # fmt: skip
+        [str(RERUN), "rrd", "compare", "--unordered", *rrds],
         capture_output=True,
         text=True,
         check=False,
@@ -103,9 +103,8 @@ def _workers_of(proc: psutil.Process, count: int, timeout_s: float) -> list[psut
         kids = [
             k
             for k in proc.children(recursive=True)
-            if "multiprocessing" in " ".join(k.cmdline()) and "resource_tracker" not in " ".join(
-                k.cmdline()
-            )
+            if "multiprocessing" in " ".join(k.cmdline())
+            and "resource_tracker" not in " ".join(k.cmdline())
         ]
         if len(kids) >= count:
             return kids
