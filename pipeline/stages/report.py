@@ -11,6 +11,7 @@ Only files a previous report listed in its manifest are ever removed.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import os
@@ -159,19 +160,21 @@ def read_all(
         jobs = default_jobs(len(sources))
     if measured is not None and jobs > 1 and len(sources) > 1:
         progress("reading recordings", 0, len(sources))
-        for source, (kind, value) in measure_in_workers(
+        outcomes = measure_in_workers(
             sources,
             jobs=jobs,
             options=options,
             make=functools.partial(Measured, measured.tool),
             progress=lambda done: progress("reading recordings", done, len(sources)),
-        ):
-            if kind == "raise":
-                raise value
-            if kind == "bad":
-                refused(source, RecordingError(value))
-            else:
-                good.append(measured.merge(value))
+        )
+        with contextlib.closing(outcomes):  # a refusal stops the workers at once
+            for source, (kind, value) in outcomes:
+                if kind == "raise":
+                    raise value
+                if kind == "bad":
+                    refused(source, RecordingError(value))
+                else:
+                    good.append(measured.merge(value))
     else:
         if measured is not None:
             measure, sink = measured.add, measured

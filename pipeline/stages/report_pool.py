@@ -25,7 +25,7 @@ import pickle
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterator, Sequence
 from multiprocessing import connection as mp_connection
 from multiprocessing.connection import Connection
 from pathlib import Path
@@ -147,7 +147,7 @@ def measure_in_workers(
     options: ReadOptions | None,
     make: Callable[[], Measurer],
     progress: Callable[[int], None],
-) -> Iterator[tuple[Path, Outcome]]:
+) -> Generator[tuple[Path, Outcome], None, None]:
     """Measure ``sources`` on ``jobs`` worker processes, each with its own ``make()`` (a
     picklable factory: it is sent to the workers); yields (source, outcome) in the order of
     ``sources`` (``progress(done)`` as each one finishes, in any order).

@@ -4,6 +4,7 @@ Ctrl-C, SIGTERM or the parent's death leave no worker behind."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -81,6 +82,7 @@ def test_bad_recording_is_refused_or_skipped_alike_with_workers(tmp_path: Path) 
         run_report(recordings_dir=recordings, out_dir=tmp_path / "r", jobs=2)
     assert "bad_one" in str(refused.value) and "--skip-bad" in str(refused.value)
     assert not (tmp_path / "r").exists()
+    assert _gone(_workers(psutil.Process()), timeout_s=5.0), "a refusal left workers running"
     skipped = [
         run_report(recordings_dir=recordings, out_dir=tmp_path / f"s{j}", jobs=j, skip_bad=True)
         for j in (1, 2)
@@ -96,16 +98,22 @@ def test_default_jobs_is_none_for_a_small_report_and_at_most_the_cpus() -> None:
     assert many == min(report_pool.available_cpus(), report_pool.MAX_DEFAULT_JOBS)
 
 
+def _workers(proc: psutil.Process) -> list[psutil.Process]:
+    """``proc``'s spawned report workers (not multiprocessing's resource tracker)."""
+    out = []
+    for kid in proc.children(recursive=True):
+        with contextlib.suppress(psutil.Error):
+            cmd = " ".join(kid.cmdline())
+            if "multiprocessing" in cmd and "resource_tracker" not in cmd:
+                out.append(kid)
+    return out
+
+
 def _workers_of(proc: psutil.Process, count: int, timeout_s: float) -> list[psutil.Process]:
     """Wait until ``proc`` has ``count`` report workers; return them."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        kids = [
-            k
-            for k in proc.children(recursive=True)
-            if "multiprocessing" in " ".join(k.cmdline())
-            and "resource_tracker" not in " ".join(k.cmdline())
-        ]
+        kids = _workers(proc)
         if len(kids) >= count:
             return kids
         time.sleep(0.05)
