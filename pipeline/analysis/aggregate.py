@@ -14,7 +14,6 @@ from collections.abc import Iterable, Sequence
 from typing import Any, NamedTuple
 
 import polars as pl
-from scipy import stats
 
 from pipeline.analysis.catalog import BY_NAME, COMPARED_METRICS
 from pipeline.analysis.episodes import comparable
@@ -78,6 +77,8 @@ def mean_ci(values: Iterable[Any], *, confidence: float = CONFIDENCE) -> MeanCI:
     mean = math.fsum(xs) / n
     if n < 2:
         return MeanCI(n, mean, None, None)
+    from scipy import stats  # SciPy loads when a statistic is asked for (~1 s)
+
     std = math.sqrt(math.fsum((x - mean) ** 2 for x in xs) / (n - 1))
     t = float(stats.t.ppf(1.0 - (1.0 - confidence) / 2.0, n - 1))
     return MeanCI(n, mean, std, t * std / math.sqrt(n))

@@ -96,6 +96,16 @@ def report_cmd(
             "x,y,z [m] or x,y,z,roll,pitch,yaw [m, rad] (default: the flange).",
         ),
     ] = None,
+    jobs: Annotated[
+        int | None,
+        typer.Option(
+            "--jobs",
+            "-j",
+            min=1,
+            help="Worker processes that read and measure the recordings (default: one per "
+            "CPU when there are many recordings, else none). The outputs do not depend on it.",
+        ),
+    ] = None,
     salvage: Annotated[
         bool,
         typer.Option(
@@ -173,6 +183,7 @@ def report_cmd(
                 labels=_labels(label or []),
             ),
             tool=tool,
+            jobs=jobs,
         )
     from rich import box
     from rich.markup import escape

@@ -11,11 +11,14 @@ Only files a previous report listed in its manifest are ever removed.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import functools
 import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import polars as pl
@@ -55,22 +58,7 @@ from pipeline.log.reader import (
     find_recordings,
     read_recording,
 )
-from pipeline.report.campaigns import CampaignSection, campaign_section
-from pipeline.report.figures import (
-    MAX_FIGURE_SCENARIOS,
-    FigureFile,
-    scenario_figures,
-    scenario_slugs,
-)
 from pipeline.report.inputs import ReportData, Skipped, cs_times_s, cs_wide
-from pipeline.report.markdown import REPORT_FILE, render_report
-from pipeline.report.metrics_json import (
-    write_episode_csvs,
-    write_headline,
-    write_metrics,
-    write_series_csvs,
-)
-from pipeline.report.rerun_rrd import RRD_FILE, write_rrd
 from pipeline.stages.partials import (
     PARTIAL_FORMAT,
     Partial,
@@ -86,6 +74,11 @@ from pipeline.stages.report_commit import (
     staging_folder,
     staging_pattern,
 )
+from pipeline.stages.report_pool import default_jobs, measure_in_workers
+
+if TYPE_CHECKING:  # the writers load when a report is written (see _writers)
+    from pipeline.report.campaigns import CampaignSection
+    from pipeline.report.figures import FigureFile
 
 # the baseline when none is named; recordings of one other controller are fine with it
 DEFAULT_BASELINE = "pid"
@@ -127,6 +120,8 @@ def read_all(
     options: ReadOptions | None = None,
     measure: Callable[[Recording], Recording] | None = None,
     sink: WindowSink | None = None,
+    measured: Measured | None = None,
+    jobs: int | None = 1,
 ) -> tuple[list[Recording], list[tuple[str, str]]]:
     """Read every recording under ``recordings_dir`` (with ``options`` for bags we did not
     write: remaps, salvage, labels).
@@ -135,6 +130,9 @@ def read_all(
     result kept instead (the report computes metrics there and lets go of the frames it no
     longer needs, so memory does not grow with the samples of every episode); ``sink``
     receives the windows of a long recording as it is read (:func:`read_recording`).
+    ``measured`` is both (its ``add`` and itself); with it, ``jobs`` > 1 reads and measures
+    on that many worker processes (:mod:`pipeline.stages.report_pool`), with the same
+    result (None: :func:`~pipeline.stages.report_pool.default_jobs`).
 
     Raises:
         ReportError: no such folder, or nothing in it; duplicate episode names.
@@ -152,16 +150,42 @@ def read_all(
         )
     good: list[Recording] = []
     bad: list[tuple[str, str]] = []
-    for k, source in enumerate(sources):
-        progress("reading recordings", k, len(sources))
-        try:
-            rec = read_recording(source, options, sink=sink)
-        except RecordingError as err:
-            if not skip_bad:
-                raise RecordingError(f"{err} (use --skip-bad to report without it)") from err
-            bad.append((str(source), str(err)))
-            continue
-        good.append(measure(rec) if measure is not None else rec)
+
+    def refused(source: Path, err: RecordingError) -> None:
+        if not skip_bad:
+            raise RecordingError(f"{err} (use --skip-bad to report without it)") from err
+        bad.append((str(source), str(err)))
+
+    if jobs is None:
+        jobs = default_jobs(len(sources))
+    if measured is not None and jobs > 1 and len(sources) > 1:
+        progress("reading recordings", 0, len(sources))
+        outcomes = measure_in_workers(
+            sources,
+            jobs=jobs,
+            options=options,
+            make=functools.partial(Measured, measured.tool),
+            progress=lambda done: progress("reading recordings", done, len(sources)),
+        )
+        with contextlib.closing(outcomes):  # a refusal stops the workers at once
+            for source, (kind, value) in outcomes:
+                if kind == "raise":
+                    raise value
+                if kind == "bad":
+                    refused(source, RecordingError(value))
+                else:
+                    good.append(measured.merge(value))
+    else:
+        if measured is not None:
+            measure, sink = measured.add, measured
+        for k, source in enumerate(sources):
+            progress("reading recordings", k, len(sources))
+            try:
+                rec = read_recording(source, options, sink=sink)
+            except RecordingError as err:
+                refused(source, err)
+                continue
+            good.append(measure(rec) if measure is not None else rec)
     progress("reading recordings", len(sources), len(sources))
     if not good:
         raise ReportError(
@@ -191,11 +215,14 @@ def run_report(
     progress: Progress = _noop,
     options: ReadOptions | None = None,
     tool: ToolOffset = FLANGE_TOOL,
+    jobs: int | None = None,
 ) -> ReportResult:
     """Read the recordings, compute metrics and write every report output.
 
     ``tool`` places the TCP of the task-space metrics in the flange frame (default: the
-    flange).
+    flange). ``jobs``: worker processes that read and measure the recordings (None: one
+    per CPU for a large report, none for a small one:
+    :func:`~pipeline.stages.report_pool.default_jobs`); the outputs do not depend on it.
 
     One run at a time writes a given ``out_dir`` (a second one refuses at once); staging
     folders that killed runs left beside it are removed first.
@@ -234,6 +261,7 @@ def run_report(
                 progress=progress,
                 options=options,
                 tool=tool,
+                jobs=jobs,
             )
             return dataclasses.replace(result, out_dir=shown)
     except PipelineError as err:
@@ -251,6 +279,7 @@ def _run_report_locked(
     progress: Progress,
     options: ReadOptions | None,
     tool: ToolOffset,
+    jobs: int | None,
 ) -> ReportResult:
     measured = Measured(tool)
     recordings, bad = read_all(
@@ -258,8 +287,8 @@ def _run_report_locked(
         skip_bad=skip_bad,
         progress=progress,
         options=options,
-        measure=measured.add,
-        sink=measured,
+        measured=measured,
+        jobs=jobs,
     )
     recordings = measured.with_partials(recordings, recordings_dir)
     recordings = merged_label_notes(recordings, options)
@@ -286,6 +315,18 @@ def _run_report_locked(
         task_space=measured.task_space,
     )
     data = measured.with_sample_frames(first, options)
+    # The writers (matplotlib, Rerun) load here, not with this module: a report worker
+    # imports this module to read and measure, and does not pay for them.
+    from pipeline.report.figures import MAX_FIGURE_SCENARIOS, scenario_figures, scenario_slugs
+    from pipeline.report.markdown import REPORT_FILE, render_report
+    from pipeline.report.metrics_json import (
+        write_episode_csvs,
+        write_headline,
+        write_metrics,
+        write_series_csvs,
+    )
+    from pipeline.report.rerun_rrd import RRD_FILE, write_rrd
+
     # The name is known before the folder exists, so an interrupt at any point (even
     # inside mkdir) leaves nothing behind: the finally below removes what exists.
     staging = staging_folder(out_dir)
@@ -401,6 +442,27 @@ class _Streamed:
         return view, finish_metrics(pl.concat(parts, how="vertical_relaxed"))
 
 
+@dataclass(frozen=True)
+class Measurement:
+    """What :class:`Measured` keeps of one recording (what a report worker sends back).
+
+    Attributes:
+        recording: the recording as kept (a campaign episode's frames let go).
+        view: its protocol view.
+        row: its row of the episode table.
+        metrics: its metric rows.
+        errors: the thinned error series of a campaign episode, else None.
+        task_space: episode -> its FK model (empty without a robot model).
+    """
+
+    recording: Recording
+    view: ProtocolView
+    row: pl.DataFrame
+    metrics: pl.DataFrame
+    errors: tuple[NDArray[np.float64], NDArray[np.float64]] | None
+    task_space: dict[str, TaskSpace]
+
+
 class Measured:
     """What the report keeps of each recording as it is read: its protocol view, episode
     row and metrics; a campaign episode's frames are let go (only a bounded sample of
@@ -501,6 +563,43 @@ class Measured:
         self.views[rec.episode] = view
         return rec
 
+    def measure(self, source: Path, options: ReadOptions | None) -> tuple[str, Any]:
+        """Read and measure one recording and hand its measurement over (this object
+        keeps nothing of it): ("ok", :class:`Measurement`), or ("bad", the text of the
+        :class:`RecordingError` that refused it). What a report worker does per recording.
+        """
+        try:
+            raw = read_recording(source, options, sink=self)
+        except RecordingError as err:
+            self.streamed = None
+            return ("bad", str(err))
+        episode = self.add(raw).episode
+        return (
+            "ok",
+            Measurement(
+                recording=self.views[episode].recording,
+                view=self.views.pop(episode),
+                row=self.rows.pop(episode),
+                metrics=self.metrics.pop(episode),
+                errors=self.errors.pop(episode, None),
+                task_space={episode: self.task_space.pop(episode)}
+                if episode in self.task_space
+                else {},
+            ),
+        )
+
+    def merge(self, m: Measurement) -> Recording:
+        """Keep ``m`` (measured elsewhere) as :meth:`add` would have kept it; returns its
+        recording."""
+        episode = m.recording.episode
+        self.task_space.update(m.task_space)
+        self.rows[episode] = m.row
+        self.metrics[episode] = m.metrics
+        if m.errors is not None:
+            self.errors[episode] = m.errors
+        self.views[episode] = m.view
+        return m.recording
+
     def with_sample_frames(self, data: ReportData, options: ReadOptions | None) -> ReportData:
         """``data`` with the frames of the sampled campaign episodes read back."""
         recordings = list(data.recordings)
@@ -579,6 +678,9 @@ def _campaigns(
     with a lazy scan: the summary is the table's numbers. A campaign some of whose
     episodes were measured from their partials (``bagless``) also lists which episodes
     have bags (``<stem>.bags.csv``)."""
+    from pipeline.report.campaigns import campaign_section
+    from pipeline.report.figures import MAX_FIGURE_SCENARIOS, scenario_slugs
+
     settings = {ep: view.settings for ep, view in data.protocol.items()}
     tables = campaign_tables(data.metrics, data.episodes, settings)
     (staging / TABLE_DIR).mkdir(exist_ok=True)

@@ -13,6 +13,7 @@ import pytest
 
 from pipeline.cli import main
 from pipeline.errors import ReportError
+from pipeline.report import rerun_rrd
 from pipeline.stages import report as report_stage
 from pipeline.stages import report_commit
 from tests.analysis.bagfactory import damage, paper_like, write_bag
@@ -160,7 +161,7 @@ def test_failure_while_writing_leaves_earlier_reports_and_no_temporary_files(
     def broken_rrd(*args: object, **kwargs: object) -> None:
         raise OSError("disk full")
 
-    monkeypatch.setattr(report_stage, "write_rrd", broken_rrd)
+    monkeypatch.setattr(rerun_rrd, "write_rrd", broken_rrd)  # loaded when a report is written
     with pytest.raises(ReportError, match=r"disk full.*earlier reports are untouched"):
         report_stage.run_report(
             recordings_dir=tmp_path / "recordings", out_dir=tmp_path / "reports"
