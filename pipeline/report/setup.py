@@ -123,6 +123,9 @@ def _armature_lines(robot: Any, plant: Mapping[str, Any], scenario: Mapping[str,
         if isinstance(joints, list):
             nominal = [j.get("armature") for j in joints if isinstance(j, Mapping)]
     source = _given(robot, "armature_source")
+    sources = robot.get("settings_sources")
+    if source is None and isinstance(sources, Mapping):  # a URDF/MJCF robot's sidecar facts
+        source = _given(sources, "armature")
     if nominal is None and source is None:
         return []
     stated = source if source is not None else "not stated in the robot file"

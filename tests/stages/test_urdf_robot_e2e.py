@@ -66,6 +66,8 @@ def test_panda_records_and_reports_with_its_own_urdf(tmp_path: Path, capsys) -> 
     assert "7 joints" in text and "from urdf" in text and "DH convention" not in text
     assert "Where the plant's joint friction comes from: damping: " in text
     assert "frictionloss: URDF <dynamics>" in text
+    # the sidecar's armature source, not "not stated in the robot file"
+    assert "0.1 (all joints); source: MuJoCo Menagerie" in text
 
 
 def test_a_bad_urdf_is_one_error_line_and_writes_nothing(tmp_path: Path, capsys) -> None:
