@@ -20,7 +20,9 @@ only), so the stages add up to the run:
 - ``recording in memory``: with ``--keep-every``, ``episode_recording`` (what the bag
   would read back as, made from the episode's arrays: a dropped episode writes no bag);
 - ``partial``: with ``--keep-every``, ``keep_partial`` (the report's measuring of that
-  recording, the Arrow IPC partial written);
+  recording, its ``metrics`` included, and the Arrow IPC partial written);
+- ``sample selection``: with ``--keep-every``, choosing the median and worst episodes
+  from the partials and planning their re-runs (``sample_without_bags``, ``plan_run``);
 - ``other``: what ``record()`` spends outside those (executor, outcomes, imports).
 
 The report side runs ``run_report`` on the recordings with the same timers:
@@ -81,6 +83,7 @@ RECORD_STAGES = (
     "write",
     "recording in memory",
     "partial",
+    "sample selection",
     "other",
 )
 REPORT_STAGES = ("read", "metrics", "partial read", "report outputs")
@@ -328,15 +331,20 @@ def main() -> None:
         floors = [physics_floor_s(run.pending[0], 4011) for _ in range(3)]
         t0, c0 = time.perf_counter(), time.process_time()
         outcomes = _record_run(record, params, run)
-        reruns = 0
+        reruns, rerun_s = 0, 0.0
         if run.sampled:  # as `pipeline record --campaign` does after a keep_bags campaign
-            keys = sample_without_bags(run)
-            reruns = len(keys)
+            with timers.stage("sample selection"):
+                keys = sample_without_bags(run)
+                rerun = plan_run(params, "profile", out=Path(tmp) / "rec", only=keys)
+            reruns, t1 = len(keys), time.perf_counter()
             if keys:
-                _record_run(record, params, plan_run(params, "profile", out=Path(tmp) / "rec",
-                                                     only=keys))  # fmt: skip
+                _record_run(record, params, rerun)
+            rerun_s = time.perf_counter() - t1
         record_s = time.perf_counter() - t0
         record_cpu_s = time.process_time() - c0
+        # a worker's partial is measured by the report's code: charge it to "partial"
+        for stage in REPORT_STAGES:
+            timers.total_s["partial"] += timers.total_s.pop(stage, 0.0)
         timed = sum(timers.total_s[s] for s in RECORD_STAGES)
         timers.total_s["other"] = record_s - timed
         control_dt_s = run.pending[0].sim.physics_dt_s * run.pending[0].sim.control_period_steps
@@ -362,6 +370,7 @@ def main() -> None:
             "keep_every": args.keep_every,
             "bags_kept": sum(1 for _ in run.out_dir.rglob("*.mcap")),
             "sample_reruns": reruns,
+            "sample_reruns_s": round(rerun_s, 2),
             "record_s": round(record_s, 2),
             "record_cpu_s": round(record_cpu_s, 2),
             "record": _table(timers, RECORD_STAGES, episodes, floor_s),
