@@ -17,13 +17,20 @@ only), so the stages add up to the run:
 - ``encode``: ``encode_episode`` (CDR of every topic, whole arrays);
 - ``compress``: zstd (``ZstdCompressor.compress``);
 - ``write``: MCAP framing (``write_mcap`` without zstd), the bag folder, fsync, rename;
+- ``recording in memory``: with ``--keep-every``, ``episode_recording`` (what the bag
+  would read back as, made from the episode's arrays: a dropped episode writes no bag);
+- ``partial``: with ``--keep-every``, ``keep_partial`` (the report's measuring of that
+  recording, its ``metrics`` included, and the Arrow IPC partial written);
+- ``sample selection``: with ``--keep-every``, choosing the median and worst episodes
+  from the partials and planning their re-runs (``sample_without_bags``, ``plan_run``);
 - ``other``: what ``record()`` spends outside those (executor, outcomes, imports).
 
 The report side runs ``run_report`` on the recordings with the same timers:
-``read`` (``read_recording``: MCAP scan, decompress, CDR decode into frames), ``metrics``
-(``_Measured.add``: protocol view, metrics, the kept error series) and ``report
-outputs`` (tables, figures, .rrd, Markdown: partly fixed per report, so its per-episode
-share shrinks with N).
+``read`` (``read_recording``: MCAP scan, decompress, CDR decode into frames),
+``metrics`` (``_Measured.add``: protocol view, metrics, the kept error series),
+``partial read`` (``read_partial``: a dropped episode's partial) and ``report outputs``
+(tables, figures, .rrd, Markdown: partly fixed per report, so its per-episode share
+shrinks with N).
 
 The floor, measured in the same run: per control step of the episode, ``mj_step`` for
 the control period's physics steps plus one Pinocchio RNEA, on the nominal plant with the
@@ -31,7 +38,14 @@ scenario's integrator and step (best of six, three before and three after the ru
 plant floor: the same loop on the first episode's drawn plant (Coulomb friction makes
 MuJoCo's constraint solver run every step), the least the control loop itself can cost.
 
-Usage: python benches/campaign_profile.py [--seeds 10] [--controllers pid,ctc] [--no-report]
+``--keep-every K`` profiles the sampled campaign (``keep_bags: {every: K}``) as
+``pipeline record --campaign`` runs it: the campaign, then the re-runs by key of the
+median and worst episodes whose bags were not kept (``sample re-runs``, inside the
+record figures), then the report on the bags and partials. Per episode end to end
+(record + write + the report's share), wall and CPU, against the floors.
+
+Usage: python benches/campaign_profile.py [--seeds 10] [--controllers pid,ctc]
+[--keep-every K] [--no-report]
 """
 
 from __future__ import annotations
@@ -67,9 +81,13 @@ RECORD_STAGES = (
     "encode",
     "compress",
     "write",
+    "recording in memory",
+    "partial",
+    "sample selection",
     "other",
 )
-REPORT_STAGES = ("read", "metrics", "report outputs")
+REPORT_STAGES = ("read", "metrics", "partial read", "report outputs")
+JOBS2_EFFICIENCY = 0.927  # `--jobs 2`, quiet machine (BENCHMARKS.md, Session 3, parallel)
 
 
 class Timers:
@@ -132,10 +150,12 @@ def instrument(timers: Timers) -> None:
     import pipeline.control as control
     import pipeline.identify.model_file as model_file
     import pipeline.log.bag as bag
+    import pipeline.log.direct as direct
     import pipeline.log.mcap as mcap
     import pipeline.log.rosbag2 as rosbag2
     import pipeline.sim.runner as runner
     import pipeline.sim.safety as safety
+    import pipeline.stages.campaign_run as campaign_run
     import pipeline.stages.episode as episode
     import pipeline.stages.plans as plans
     import pipeline.stages.report as report
@@ -156,9 +176,12 @@ def instrument(timers: Timers) -> None:
     timers.wrap(bag, "encode_episode", "encode")
     timers.wrap(bag, "write_mcap", "write")
     timers.wrap(rosbag2, "write_bag_dir", "write")
-    mcap.zstandard = _TimedZstd(timers, mcap.zstandard)  # type: ignore[assignment]
+    timers.wrap(direct, "episode_recording", "recording in memory")
+    timers.wrap(campaign_run, "keep_partial", "partial")
+    mcap.zstandard = _TimedZstd(timers, mcap.zstandard)  # type: ignore[attr-defined,assignment]
     timers.wrap(report, "read_recording", "read")
     timers.wrap(report._Measured, "add", "metrics")
+    timers.wrap(report, "read_partial", "partial read")
 
 
 def physics_floor_s(
@@ -207,11 +230,14 @@ def physics_floor_s(
     return time.perf_counter() - t0
 
 
-def _params(folder: Path, *, seeds: int, controllers: list[str]) -> Path:
+def _params(folder: Path, *, seeds: int, controllers: list[str], keep_every: int | None) -> Path:
     data = yaml.safe_load((REPO / "params.yaml").read_text())
-    data["campaigns"] = {
-        "profile": {"scenario": "paper-realistic", "controllers": controllers, "seeds": seeds}
-    }
+    campaign: dict[str, Any] = {
+        "scenario": "paper-realistic", "controllers": controllers, "seeds": seeds
+    }  # fmt: skip
+    if keep_every is not None:
+        campaign["keep_bags"] = {"every": keep_every}
+    data["campaigns"] = {"profile": campaign}
     path = folder / "params.yaml"
     path.write_text(yaml.safe_dump(data))
     return path
@@ -236,14 +262,48 @@ def _table(
     }
 
 
+def _record_run(record: Any, params: Any, run: Any) -> list[Any]:
+    """Record ``run``'s pending episodes in this process, as the campaign command does."""
+    from pipeline.stages.campaign_run import completion_marker
+
+    done = completion_marker(run, lambda *a: None)
+    outcomes: list[Any] = record(
+        params, run.pending, out_dir=run.out_dir, force=True, commit=run.commit, on_event=done
+    )
+    bad = [o for o in outcomes if o.status != "ok"]
+    if bad:
+        raise SystemExit(f"{bad[0].name}: {bad[0].status}: {bad[0].reason}")
+    return outcomes
+
+
+def _end_to_end(
+    *, wall_s: float, cpu_s: float, episodes: int, floor_s: float, plant_floor_s: float
+) -> dict[str, Any]:
+    """Per episode end to end (record, write, the report's share), wall and CPU, against
+    the floors; and 10,000 episodes extrapolated on 2 cores at ``JOBS2_EFFICIENCY``."""
+    per_s = wall_s / episodes
+    return {
+        "end_to_end_ms_per_episode": round(1e3 * per_s, 1),
+        "end_to_end_cpu_ms_per_episode": round(1e3 * cpu_s / episodes, 1),
+        "end_to_end_x_floor": round(per_s / floor_s, 2),
+        "end_to_end_cpu_x_floor": round(cpu_s / episodes / floor_s, 2),
+        "end_to_end_x_plant_floor": round(per_s / plant_floor_s, 2),
+        "extrapolated_10k_2cores_s": round(1e4 * per_s / (2 * JOBS2_EFFICIENCY)),
+        "floor_10k_2cores_s": round(1e4 * floor_s / 2),
+        "plant_floor_10k_2cores_s": round(1e4 * plant_floor_s / 2),
+    }
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--controllers", default="pid,ctc")
+    ap.add_argument("--keep-every", type=int, default=None, metavar="K",
+                    help="profile the sampled campaign: keep_bags: {every: K}")  # fmt: skip
     ap.add_argument("--no-report", action="store_true")
     args = ap.parse_args()
     from pipeline.params import load_params
-    from pipeline.stages.campaign_run import completion_marker, plan_run
+    from pipeline.stages.campaign_run import plan_run, sample_without_bags
     from pipeline.stages.record import record
     from pipeline.stages.report import run_report
 
@@ -260,20 +320,31 @@ def main() -> None:
         "python": platform.python_version(),
     }
     with tempfile.TemporaryDirectory() as tmp:
-        params = load_params(_params(Path(tmp), seeds=args.seeds, controllers=controllers))
+        params = load_params(
+            _params(
+                Path(tmp), seeds=args.seeds, controllers=controllers, keep_every=args.keep_every
+            )
+        )
         run = plan_run(params, "profile", out=Path(tmp) / "rec")
         episodes = len(run.pending)
         # the floor before and after the run (best of both): other load moves it
         floors = [physics_floor_s(run.pending[0], 4011) for _ in range(3)]
-        t0 = time.perf_counter()
-        done = completion_marker(run, lambda *a: None)
-        outcomes = record(
-            params, run.pending, out_dir=run.out_dir, force=True, commit=run.commit, on_event=done
-        )
+        t0, c0 = time.perf_counter(), time.process_time()
+        outcomes = _record_run(record, params, run)
+        reruns, rerun_s = 0, 0.0
+        if run.sampled:  # as `pipeline record --campaign` does after a keep_bags campaign
+            with timers.stage("sample selection"):
+                keys = sample_without_bags(run)
+                rerun = plan_run(params, "profile", out=Path(tmp) / "rec", only=keys)
+            reruns, t1 = len(keys), time.perf_counter()
+            if keys:
+                _record_run(record, params, rerun)
+            rerun_s = time.perf_counter() - t1
         record_s = time.perf_counter() - t0
-        bad = [o for o in outcomes if o.status != "ok"]
-        if bad:
-            raise SystemExit(f"{bad[0].name}: {bad[0].status}: {bad[0].reason}")
+        record_cpu_s = time.process_time() - c0
+        # a worker's partial is measured by the report's code: charge it to "partial"
+        for stage in REPORT_STAGES:
+            timers.total_s["partial"] += timers.total_s.pop(stage, 0.0)
         timed = sum(timers.total_s[s] for s in RECORD_STAGES)
         timers.total_s["other"] = record_s - timed
         control_dt_s = run.pending[0].sim.physics_dt_s * run.pending[0].sim.control_period_steps
@@ -296,24 +367,36 @@ def main() -> None:
             "control_loop_x_plant_floor": round(
                 timers.total_s["control loop"] / episodes / plant_floor_s, 2
             ),
+            "keep_every": args.keep_every,
+            "bags_kept": sum(1 for _ in run.out_dir.rglob("*.mcap")),
+            "sample_reruns": reruns,
+            "sample_reruns_s": round(rerun_s, 2),
             "record_s": round(record_s, 2),
+            "record_cpu_s": round(record_cpu_s, 2),
             "record": _table(timers, RECORD_STAGES, episodes, floor_s),
-            "bag_mb": round(
-                sum(p.stat().st_size for p in run.out_dir.rglob("*.mcap")) / episodes / 1e6, 3
+            "campaign_mb_per_episode": round(
+                sum(p.stat().st_size for p in run.out_dir.rglob("*") if p.is_file())
+                / episodes
+                / 1e6,
+                3,
             ),
         }
+        report_s = report_cpu_s = 0.0
         if not args.no_report:
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             run_report(recordings_dir=run.out_dir, out_dir=Path(tmp) / "report")
             report_s = time.perf_counter() - t0
+            report_cpu_s = time.process_time() - c0
             timers.total_s["report outputs"] = report_s - sum(
                 timers.total_s[s] for s in REPORT_STAGES[:2]
             )
             result["report_s"] = round(report_s, 2)
+            result["report_cpu_s"] = round(report_cpu_s, 2)
             result["report"] = _table(timers, REPORT_STAGES, episodes, floor_s)
-        end_to_end = record_s + result.get("report_s", 0.0)
-        result["end_to_end_ms_per_episode"] = round(1e3 * end_to_end / episodes, 1)
-        result["end_to_end_x_floor"] = round(end_to_end / episodes / floor_s, 2)
+        result |= _end_to_end(
+            wall_s=record_s + report_s, cpu_s=record_cpu_s + report_cpu_s,
+            episodes=episodes, floor_s=floor_s, plant_floor_s=plant_floor_s,
+        )  # fmt: skip
     result["uptime_after"] = subprocess.run(
         ["uptime"], capture_output=True, text=True
     ).stdout.strip()
