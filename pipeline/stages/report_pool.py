@@ -2,7 +2,7 @@
 
 Each recording is read and measured (:meth:`pipeline.stages.report.Measured.measure`:
 protocol view, episode row, metrics, the thinned error series) on one of ``jobs`` worker
-processes; what comes back is the :class:`~pipeline.stages.report.Measurement` the report
+processes; what comes back is the :class:`~pipeline.stages.partials.Measurement` the report
 keeps of it (a campaign episode without its frames). The parent merges the measurements in
 the order of the recordings, so the report is the same, byte for byte, whatever ``jobs``.
 
