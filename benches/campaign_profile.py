@@ -230,6 +230,25 @@ def physics_floor_s(
     return time.perf_counter() - t0
 
 
+def episode_wall_s(episode: Any, plan: Any) -> tuple[float, int]:
+    """Wall time [s] of one whole episode with its bag (``run_one``, as ``pipeline record``
+    runs it), and its control steps: the peer of :func:`physics_floor_s`.
+
+    Raises:
+        RuntimeError: the episode did not end ok.
+    """
+    from pipeline.stages.episode import run_one
+
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        outcome = run_one(episode, plan, out_dir=Path(tmp), force=False, commit="")
+        wall_s = time.perf_counter() - t0
+    if outcome.status != "ok":
+        raise RuntimeError(f"{episode.name}: {outcome.status}: {outcome.reason}")
+    control_dt_s = episode.sim.physics_dt_s * episode.sim.control_period_steps
+    return wall_s, round(outcome.duration_s / control_dt_s) + 1
+
+
 def _params(folder: Path, *, seeds: int, controllers: list[str], keep_every: int | None) -> Path:
     data = yaml.safe_load((REPO / "params.yaml").read_text())
     campaign: dict[str, Any] = {

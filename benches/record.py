@@ -48,11 +48,10 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "benches"))
 
-from campaign_profile import physics_floor_s  # noqa: E402
+from campaign_profile import episode_wall_s, physics_floor_s  # noqa: E402
 
 import pipeline.sim.runner as runner  # noqa: E402
 from pipeline.params import Episode, load_params  # noqa: E402
-from pipeline.stages.episode import run_one  # noqa: E402
 from pipeline.stages.plans import ScenarioPlan, plan_scenario  # noqa: E402
 
 REALISTIC_SEED = 1
@@ -122,18 +121,6 @@ def _episodes() -> list[tuple[str, Episode, ScenarioPlan]]:
     return out
 
 
-def _run(episode: Episode, plan: ScenarioPlan) -> tuple[float, int]:
-    """Wall time of ``run_one`` and the episode's control steps."""
-    with tempfile.TemporaryDirectory() as tmp:
-        t0 = time.perf_counter()
-        outcome = run_one(episode, plan, out_dir=Path(tmp), force=False, commit="")
-        wall_s = time.perf_counter() - t0
-    if outcome.status != "ok":
-        raise RuntimeError(f"{episode.name}: {outcome.reason}")
-    control_dt_s = episode.sim.physics_dt_s * episode.sim.control_period_steps
-    return wall_s, round(outcome.duration_s / control_dt_s) + 1
-
-
 def _floors(episode: Episode, steps: int) -> dict[str, float]:
     """Wall and CPU time of the nominal floor [s] for ``steps`` control steps."""
     c0 = time.thread_time()
@@ -153,7 +140,7 @@ def measure(repeat: int, *, marginal: bool) -> dict[str, Any]:
     steps = 0
     for _ in range(repeat):
         for name, episode, plan in cases:
-            whole_s, steps = _run(episode, plan)
+            whole_s, steps = episode_wall_s(episode, plan)
             got = {
                 "whole": whole_s,
                 "loop": probe.wall_s,
@@ -208,8 +195,8 @@ def _marginal(episode: Episode, repeat: int, floor_s_per_step: float) -> dict[st
     short_s = long_s = float("inf")
     short_steps = long_steps = 0
     for _ in range(repeat):
-        s, short_steps = _run(episode, plan)
-        x, long_steps = _run(long, plan)
+        s, short_steps = episode_wall_s(episode, plan)
+        x, long_steps = episode_wall_s(long, plan)
         short_s, long_s = min(short_s, s), min(long_s, x)
     marginal = (long_s - short_s) / (long_steps - short_steps)
     return {

@@ -26,7 +26,6 @@ import os
 import platform
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -35,13 +34,12 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "benches"))
 
-from campaign_profile import physics_floor_s  # noqa: E402
+from campaign_profile import episode_wall_s, physics_floor_s  # noqa: E402
 
 from pipeline.model import mjcf, urdf  # noqa: E402
 from pipeline.params import load_params  # noqa: E402
 from pipeline.robots import loaders  # noqa: E402
 from pipeline.stages.campaign import expand  # noqa: E402
-from pipeline.stages.episode import run_one  # noqa: E402
 from pipeline.stages.plans import plan_scenario  # noqa: E402
 
 CAMPAIGN = "panda-box"
@@ -50,18 +48,6 @@ TARGET_RATIO = 2.5  # issue 17: a Panda episode with full logging <= 2.5x its fl
 
 def _shell(*cmd: str) -> str:
     return subprocess.run(cmd, capture_output=True, text=True, cwd=REPO).stdout.strip()
-
-
-def _episode_s(episode: Any, plan: Any) -> tuple[float, int]:
-    """Wall time [s] of one whole episode with its bag, and its control steps."""
-    with tempfile.TemporaryDirectory() as tmp:
-        t0 = time.perf_counter()
-        outcome = run_one(episode, plan, out_dir=Path(tmp), force=False, commit="")
-        wall_s = time.perf_counter() - t0
-    if outcome.status != "ok":
-        raise SystemExit(f"{episode.name}: {outcome.status}: {outcome.reason}")
-    control_dt_s = episode.sim.physics_dt_s * episode.sim.control_period_steps
-    return wall_s, round(outcome.duration_s / control_dt_s) + 1
 
 
 def _caches() -> dict[str, dict[str, int]]:
@@ -97,7 +83,7 @@ def main() -> None:
     wanted = args.controllers.split(",")
     episodes = [e for e in expand(params, CAMPAIGN) if e.seed == 0 and e.controller_name in wanted]
     plan = plan_scenario(episodes[0].scenario_name, episodes[0].scenario, params.source)
-    cold_s, _ = _episode_s(episodes[0], plan)  # the first: compiles and caches
+    cold_s, _ = episode_wall_s(episodes[0], plan)  # the first: compiles and caches
     best: dict[str, dict[str, float]] = {
         e.controller_name: {"episode": float("inf"), "floor": float("inf"),
                             "plant_floor": float("inf")}
@@ -107,7 +93,7 @@ def main() -> None:
     for _ in range(args.repeat):
         for e in episodes:
             b = best[e.controller_name]
-            wall_s, n = _episode_s(e, plan)
+            wall_s, n = episode_wall_s(e, plan)
             steps[e.controller_name] = n
             b["episode"] = min(b["episode"], wall_s)
             b["floor"] = min(b["floor"], physics_floor_s(e, n))

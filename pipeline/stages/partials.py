@@ -88,32 +88,51 @@ def partial_fingerprint(fingerprint: str, measure_code: str) -> str:
 
 
 @dataclass(frozen=True)
-class Partial:
-    """What the report keeps of one campaign episode, measured from its recording.
+class Measurement:
+    """What the report keeps of one recording once it is measured (what a report worker
+    sends back, and what a partial holds).
 
     Attributes:
-        format: :data:`PARTIAL_FORMAT` of the writer.
-        measure_code: :func:`measure_commit` of the writer.
-        bag: the bag's folder name (the episode key) it was measured as.
-        tool: the TCP the task-space metrics were measured with.
-        recording: the recording with its frames let go (settings, notes, counts).
+        recording: the recording as kept (a campaign episode's frames let go: settings,
+            notes, counts).
         view: its protocol view (``view.recording`` is ``recording``).
         row: its row of :func:`pipeline.analysis.episodes.episode_table`.
         metrics: its rows of :func:`pipeline.analysis.metrics.joint_metrics`.
-        errors: the thinned error series (times [s], errors [rad]) for the .rrd's bands.
+        errors: the thinned error series (times [s], errors [rad]) of a campaign episode,
+            for the .rrd's bands; else None.
         task_space: episode -> its FK model (empty when the bag has no robot model).
     """
 
-    format: int
-    measure_code: str
-    bag: str
-    tool: ToolOffset
     recording: Recording
     view: ProtocolView
     row: pl.DataFrame
     metrics: pl.DataFrame
     errors: tuple[NDArray[np.float64], NDArray[np.float64]] | None
     task_space: dict[str, TaskSpace]
+
+
+@dataclass(frozen=True)
+class Partial(Measurement):
+    """What the report keeps of one campaign episode, measured from its recording: its
+    :class:`Measurement` and what it was measured by.
+
+    Attributes:
+        format: :data:`PARTIAL_FORMAT` of the writer.
+        measure_code: :func:`measure_commit` of the writer.
+        bag: the bag's folder name (the episode key) it was measured as.
+        tool: the TCP the task-space metrics were measured with.
+    """
+
+    format: int
+    measure_code: str
+    bag: str
+    tool: ToolOffset
+
+    @classmethod
+    def of(cls, m: Measurement, *, measure_code: str, bag: str, tool: ToolOffset) -> Partial:
+        """``m`` as the partial of bag ``bag`` in this writer's format."""
+        kept = {f.name: getattr(m, f.name) for f in fields(Measurement)}
+        return cls(**kept, format=PARTIAL_FORMAT, measure_code=measure_code, bag=bag, tool=tool)
 
 
 def partial_path(campaign_dir: Path, key: str) -> Path:

@@ -52,6 +52,7 @@ RECORD_CODE = (
     "stages/plans.py",
     "stages/provenance.py",
     "stages/record.py",
+    "stages/workers.py",
 )
 
 

@@ -60,7 +60,7 @@ from pipeline.log.reader import (
 )
 from pipeline.report.inputs import ReportData, Skipped, cs_times_s, cs_wide
 from pipeline.stages.partials import (
-    PARTIAL_FORMAT,
+    Measurement,
     Partial,
     bags_listed,
     find_partials,
@@ -442,27 +442,6 @@ class _Streamed:
         return view, finish_metrics(pl.concat(parts, how="vertical_relaxed"))
 
 
-@dataclass(frozen=True)
-class Measurement:
-    """What :class:`Measured` keeps of one recording (what a report worker sends back).
-
-    Attributes:
-        recording: the recording as kept (a campaign episode's frames let go).
-        view: its protocol view.
-        row: its row of the episode table.
-        metrics: its metric rows.
-        errors: the thinned error series of a campaign episode, else None.
-        task_space: episode -> its FK model (empty without a robot model).
-    """
-
-    recording: Recording
-    view: ProtocolView
-    row: pl.DataFrame
-    metrics: pl.DataFrame
-    errors: tuple[NDArray[np.float64], NDArray[np.float64]] | None
-    task_space: dict[str, TaskSpace]
-
-
 class Measured:
     """What the report keeps of each recording as it is read: its protocol view, episode
     row and metrics; a campaign episode's frames are let go (only a bounded sample of
@@ -512,13 +491,7 @@ class Measured:
                 )
             have.add(episode)
             self.bagless.add(episode)
-            self.task_space.update(p.task_space)
-            self.views[episode] = p.view
-            self.rows[episode] = p.row
-            self.metrics[episode] = p.metrics
-            if p.errors is not None:
-                self.errors[episode] = p.errors
-            out.append(p.recording)
+            out.append(self.merge(p))
         return sorted(out, key=lambda r: r.episode)
 
     def begin(self, header: Recording) -> None:
@@ -573,24 +546,25 @@ class Measured:
         except RecordingError as err:
             self.streamed = None
             return ("bad", str(err))
-        episode = self.add(raw).episode
-        return (
-            "ok",
-            Measurement(
-                recording=self.views[episode].recording,
-                view=self.views.pop(episode),
-                row=self.rows.pop(episode),
-                metrics=self.metrics.pop(episode),
-                errors=self.errors.pop(episode, None),
-                task_space={episode: self.task_space.pop(episode)}
-                if episode in self.task_space
-                else {},
-            ),
+        return ("ok", self.take(self.add(raw).episode))
+
+    def take(self, episode: str) -> Measurement:
+        """Hand over what this object keeps of ``episode`` (measured by :meth:`add`); it
+        keeps nothing of it after."""
+        view = self.views.pop(episode)
+        task_space = self.task_space.pop(episode, None)
+        return Measurement(
+            recording=view.recording,
+            view=view,
+            row=self.rows.pop(episode),
+            metrics=self.metrics.pop(episode),
+            errors=self.errors.pop(episode, None),
+            task_space={} if task_space is None else {episode: task_space},
         )
 
     def merge(self, m: Measurement) -> Recording:
-        """Keep ``m`` (measured elsewhere) as :meth:`add` would have kept it; returns its
-        recording."""
+        """Keep ``m`` (measured elsewhere, or a partial read back) as :meth:`add` would
+        have kept it; returns its recording."""
         episode = m.recording.episode
         self.task_space.update(m.task_space)
         self.rows[episode] = m.row
@@ -656,18 +630,11 @@ def measure_recording(
 def _partial(
     measured: Measured, rec: Recording, bag: str, tool: ToolOffset, measure_code: str | None
 ) -> Partial:
-    episode = rec.episode
-    return Partial(
-        format=PARTIAL_FORMAT,
+    return Partial.of(
+        measured.take(rec.episode),
         measure_code=measure_commit() if measure_code is None else measure_code,
         bag=bag,
         tool=tool,
-        recording=rec,
-        view=measured.views[episode],
-        row=measured.rows[episode],
-        metrics=measured.metrics[episode],
-        errors=measured.errors.get(episode),
-        task_space={k: v for k, v in measured.task_space.items() if k == episode},
     )
 
 

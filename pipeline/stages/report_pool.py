@@ -2,7 +2,7 @@
 
 Each recording is read and measured (:meth:`pipeline.stages.report.Measured.measure`:
 protocol view, episode row, metrics, the thinned error series) on one of ``jobs`` worker
-processes; what comes back is the :class:`~pipeline.stages.report.Measurement` the report
+processes; what comes back is the :class:`~pipeline.stages.partials.Measurement` the report
 keeps of it (a campaign episode without its frames). The parent merges the measurements in
 the order of the recordings, so the report is the same, byte for byte, whatever ``jobs``.
 
@@ -10,28 +10,24 @@ Workers are spawned, not forked: a process that used Polars' thread pool cannot 
 safely (a forked child can hang on a lock the pool held). Each worker imports the
 measuring code once and keeps its caches (the robot's FK chain) for every recording it
 measures. One pipe per worker, one recording in flight per worker (memory: ``jobs``
-recordings being measured, plus the parent's kept measurements). A worker ignores Ctrl-C
-and SIGTERM, and the kernel kills it when the parent dies (``PR_SET_PDEATHSIG``); on
-Ctrl-C, SIGTERM or any error the parent kills every worker before it raises.
+recordings being measured, plus the parent's kept measurements). The pool's mechanics are
+:mod:`pipeline.stages.workers`' (the record executor's too): a worker ignores Ctrl-C and
+SIGTERM and dies with the parent; on Ctrl-C, SIGTERM or any error the parent kills every
+worker before it raises.
 """
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
 import multiprocessing as mp
 import os
 import pickle
-import signal
-import sys
-import threading
-from collections.abc import Callable, Generator, Iterator, Sequence
-from multiprocessing import connection as mp_connection
+from collections.abc import Callable, Generator, Sequence
 from multiprocessing.connection import Connection
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol, cast
+from typing import TYPE_CHECKING, Any, Protocol
 
 from pipeline.errors import ReportError
+from pipeline.stages.workers import WorkerPool, become_worker, ready, tasks
 
 if TYPE_CHECKING:
     from pipeline.log.reader import ReadOptions
@@ -41,8 +37,6 @@ if TYPE_CHECKING:
 RECORDINGS_PER_WORKER = 16
 # The default never starts more workers than this (memory: a few hundred MB each).
 MAX_DEFAULT_JOBS = 8
-
-_PR_SET_PDEATHSIG = 1
 
 # What measuring a recording gave: ("ok", its Measurement), ("bad", the text of the
 # RecordingError that refused it) or ("raise", any other exception, raised by the parent).
@@ -62,37 +56,6 @@ def default_jobs(recordings: int) -> int:
     :data:`MAX_DEFAULT_JOBS`), and none (1: in this process) for a report too small to
     repay starting them (:data:`RECORDINGS_PER_WORKER`)."""
     return max(1, min(available_cpus(), MAX_DEFAULT_JOBS, recordings // RECORDINGS_PER_WORKER))
-
-
-def _die_with_parent(parent_pid: int) -> None:
-    """Ask the kernel to kill this worker when its parent dies (Linux); exit now if the
-    parent is already gone."""
-    if sys.platform.startswith("linux"):
-        with contextlib.suppress(OSError, AttributeError):
-            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    if os.getppid() != parent_pid:
-        os._exit(1)
-
-
-@contextlib.contextmanager
-def _born_ignoring_interrupts() -> Iterator[None]:
-    """Start a process that ignores Ctrl-C and SIGTERM from its first instruction (a
-    disposition to ignore survives ``exec``, and Python then installs no Ctrl-C handler),
-    not only once its imports are done. The parent's own signals are held meanwhile and
-    delivered after."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    held = {signal.SIGINT, signal.SIGTERM}
-    signal.pthread_sigmask(signal.SIG_BLOCK, held)
-    previous = {s: signal.signal(s, signal.SIG_IGN) for s in held}
-    try:
-        yield
-    finally:
-        for s, handler in previous.items():
-            if handler is not None:  # None: set outside Python, cannot be put back
-                signal.signal(s, handler)
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, held)
 
 
 def _sendable(err: BaseException) -> BaseException:
@@ -120,18 +83,9 @@ def _worker_main(
     make: Callable[[], Measurer],
 ) -> None:
     """A worker: measure the recordings the parent sends (a path) until it sends None."""
-    _die_with_parent(parent_pid)
-    # Ctrl-C reaches the whole process group, SIGTERM may too: the parent decides.
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    become_worker(parent_pid)
     measured = make()  # one per worker: its caches serve every recording it measures
-    while True:
-        try:
-            source = conn.recv()
-        except (EOFError, OSError):
-            return
-        if source is None:
-            return
+    for source in tasks(conn):
         outcome: Outcome
         try:
             outcome = measured.measure(Path(source), options)
@@ -158,72 +112,35 @@ def measure_in_workers(
     Raises:
         ReportError: a worker died (out of memory, a crash in a library).
     """
-    ctx = mp.get_context("spawn")
-    queued = list(enumerate(sources))
-    workers: dict[Connection, tuple[Any, int | None]] = {}  # conn -> (process, task index)
+    queued = [(k, str(source)) for k, source in enumerate(sources)]
     done: dict[int, Outcome] = {}
     finished = 0
     next_out = 0
-
-    def feed(conn: Connection) -> None:
-        proc, _ = workers[conn]
-        if queued:
-            k, source = queued.pop(0)
-            conn.send(str(source))
-            workers[conn] = (proc, k)
-        else:
-            with contextlib.suppress(OSError):
-                conn.send(None)
-            workers[conn] = (proc, None)
-
-    try:
+    with WorkerPool[int](
+        mp.get_context("spawn"), _worker_main, (options, make), name="pipeline-report-worker"
+    ) as pool:
         for _ in range(min(jobs, len(queued))):
-            here, there = ctx.Pipe()
-            proc = ctx.Process(
-                target=_worker_main,
-                args=(there, os.getpid(), options, make),
-                name="pipeline-report-worker",
-                daemon=True,
-            )
-            with _born_ignoring_interrupts():
-                proc.start()
-            there.close()
-            workers[here] = (proc, None)
-            feed(here)
+            pool.feed(pool.start(), queued)
         while next_out < len(sources):
             while next_out in done:
                 yield sources[next_out], done.pop(next_out)
                 next_out += 1
             if next_out >= len(sources):
                 break
-            busy = [c for c, (_, k) in workers.items() if k is not None]
-            for item in mp_connection.wait(busy):
-                conn = cast(Connection, item)
-                proc, k = workers[conn]
+            for conn in ready(pool.busy()):
+                k = pool.task(conn)
                 assert k is not None
                 try:
                     outcome = conn.recv()
                 except (EOFError, OSError):
-                    proc.join(timeout=5)
                     raise ReportError(
                         f"{sources[k]}: the report worker measuring it died "
-                        f"(exit code {proc.exitcode}; out of memory?); try fewer --jobs"
+                        f"(exit code {pool.drop(conn)}; out of memory?); try fewer --jobs"
                     ) from None
                 done[k] = outcome
                 finished += 1
                 progress(finished)
-                feed(conn)
-    finally:
-        _kill_all(workers)
-
-
-def _kill_all(workers: dict[Connection, tuple[Any, int | None]]) -> None:
-    for conn, (proc, _) in list(workers.items()):
-        if proc.is_alive():
-            proc.kill()
-        proc.join(timeout=5)
-        conn.close()
-    workers.clear()
+                pool.feed(conn, queued)
 
 
 __all__ = [

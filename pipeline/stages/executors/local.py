@@ -1,32 +1,28 @@
 """Episodes on this machine: in this process, or on a pool of forked worker processes.
 
-The pool has one pipe per worker and no manager process. Each worker asks the kernel
-to kill it when the parent dies (``prctl(PR_SET_PDEATHSIG)`` on Linux, a watcher
-thread elsewhere), ignores Ctrl-C and SIGTERM (the parent decides what it cancels),
-and never publishes a recording for a run that is gone.
+The pool has one pipe per worker and no manager process (:mod:`pipeline.stages.workers`,
+shared with the report's pool). Each worker dies with the parent (``PR_SET_PDEATHSIG`` on
+Linux, a watcher thread elsewhere), ignores Ctrl-C and SIGTERM (the parent decides what it
+cancels), and never publishes a recording for a run that is gone.
 """
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
 import multiprocessing as mp
 import os
 import signal
-import sys
-import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from multiprocessing import connection as mp_connection
 from multiprocessing.connection import Connection
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 from pipeline.params import Episode
 from pipeline.stages.episode import EpisodeOutcome, remove_work_folders, run_one
 from pipeline.stages.executors.base import Emit, interrupted
 from pipeline.stages.plans import ScenarioPlan
+from pipeline.stages.workers import WorkerPool, become_worker, ready, tasks
 
 CANCEL_GRACE_S = 3.0  # a worker writing its bag when Ctrl-C (SIGTERM) comes may finish it
 
@@ -81,47 +77,15 @@ def _episode_progress(emit: Emit, name: str) -> Callable[[float], None]:
     return lambda fraction: emit("episode", name, fraction)
 
 
-_PR_SET_PDEATHSIG = 1
-
-
-def _die_with_parent(parent_pid: int) -> None:
-    """Make this (worker) process end when ``parent_pid`` does, however it ends.
-
-    Linux: the kernel sends SIGKILL at the parent's death (``PR_SET_PDEATHSIG``). Elsewhere
-    a daemon thread polls ``getppid``. Either way a worker never outlives its parent.
-    """
-    armed = False
-    if sys.platform.startswith("linux"):
-        try:
-            libc = ctypes.CDLL(None, use_errno=True)
-            armed = libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0
-        except (OSError, AttributeError):
-            armed = False
-    if os.getppid() != parent_pid:  # the parent died before the signal was armed
-        os._exit(1)
-    if not armed:
-
-        def watch() -> None:
-            while os.getppid() == parent_pid:
-                time.sleep(0.2)
-            os._exit(1)
-
-        threading.Thread(target=watch, name="parent-watch", daemon=True).start()
-
-
 class _Cancelled(BaseException):
     """Raised inside a worker's episode once the parent cancelled the run (not an error)."""
 
 
 def _worker_main(
-    conn: Connection, cancel: Any, parent_pid: int, out_dir: str, force: bool, commit: str
+    conn: Connection, parent_pid: int, cancel: Any, out_dir: str, force: bool, commit: str
 ) -> None:
     """A pool worker: run the episodes the parent sends until it sends None."""
-    _die_with_parent(parent_pid)
-    # Ctrl-C reaches the whole process group, and so does SIGTERM from `timeout`, systemd
-    # or a CI runner; the parent decides what it cancels (and kills the workers).
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    become_worker(parent_pid)
 
     def before_write() -> None:
         if os.getppid() != parent_pid:
@@ -129,14 +93,7 @@ def _worker_main(
         if cancel.is_set():
             raise _Cancelled
 
-    while True:
-        try:
-            task = conn.recv()
-        except (EOFError, OSError):
-            return
-        if task is None:
-            return
-        episode, plan = task
+    for episode, plan in tasks(conn):
 
         def progress(fraction: float, name: str = episode.name) -> None:
             if cancel.is_set():
@@ -175,90 +132,59 @@ def _run_pool(
     """
     ctx = _mp_context()
     cancel = ctx.Event()
-    queued = list(episodes)
+    queued = [(e.name, (e, plans[e.name])) for e in episodes]
     outcomes: dict[str, EpisodeOutcome] = {}
-    workers: dict[Connection, tuple[Any, str | None]] = {}  # conn -> (process, episode)
-
-    def start_worker() -> None:
-        here, there = ctx.Pipe()
-        proc = ctx.Process(  # type: ignore[attr-defined]
-            target=_worker_main,
-            args=(there, cancel, os.getpid(), str(out_dir), force, commit),
-            name="pipeline-record-worker",
-            daemon=True,
-        )
-        proc.start()
-        there.close()
-        workers[here] = (proc, None)
-
-    def feed(conn: Connection) -> None:
-        proc, _ = workers[conn]
-        if queued:
-            episode = queued.pop(0)
-            conn.send((episode, plans[episode.name]))
-            workers[conn] = (proc, episode.name)
-        else:
-            with contextlib.suppress(OSError):
-                conn.send(None)
-            workers[conn] = (proc, None)
-
+    pool = WorkerPool[str](
+        ctx, _worker_main, (cancel, str(out_dir), force, commit), name="pipeline-record-worker"
+    )
     try:
         for _ in range(min(jobs, len(queued))):
-            start_worker()
-        for conn in list(workers):
-            feed(conn)
+            pool.start()
+        for conn in list(pool.workers):
+            pool.feed(conn, queued)
         while len(outcomes) < len(episodes):
-            ready = mp_connection.wait(list(workers), timeout=0.5)
-            for item in ready:
-                conn = cast(Connection, item)
-                proc, current = workers[conn]
+            for conn in ready(list(pool.workers), timeout_s=0.5):
+                current = pool.task(conn)
                 try:
                     kind, name, value = conn.recv()
                 except (EOFError, OSError):
-                    proc.join(timeout=5)
+                    exitcode = pool.drop(conn)
                     if current is not None and current not in outcomes:
-                        outcomes[current] = _worker_died(current, proc.exitcode)
+                        outcomes[current] = _worker_died(current, exitcode)
                         emit("done", current, 1.0)
-                    del workers[conn]
-                    conn.close()
                     if queued:
-                        start_worker()
-                        feed(list(workers)[-1])
+                        pool.feed(pool.start(), queued)
                     continue
                 if kind == "progress":
                     emit("episode", name, value)
                 else:
                     outcomes[name] = value
                     emit("done", name, 1.0)
-                    feed(conn)
-            if not workers and len(outcomes) < len(episodes):  # pragma: no cover - defensive
-                for e in queued:
-                    outcomes[e.name] = _worker_died(e.name, None)
+                    pool.feed(conn, queued)
+            if not pool.workers and len(outcomes) < len(episodes):  # pragma: no cover - defensive
+                for name, _ in queued:
+                    outcomes[name] = _worker_died(name, None)
                 queued.clear()
     except KeyboardInterrupt as err:
         cancel.set()
-        _collect_until_idle(workers, outcomes, timeout_s=CANCEL_GRACE_S)
-        _kill_all(workers)
+        _collect_until_idle(pool, outcomes, timeout_s=CANCEL_GRACE_S)
+        pool.kill_all()
         remove_work_folders(out_dir)
         raise interrupted(episodes, outcomes, out_dir, started_s=started_s, cause=err) from None
     finally:
-        _kill_all(workers)
+        pool.kill_all()
         remove_work_folders(out_dir, mine=False)  # what a worker that died mid-write left
     return outcomes
 
 
 def _collect_until_idle(
-    workers: dict[Connection, tuple[Any, str | None]],
-    outcomes: dict[str, EpisodeOutcome],
-    *,
-    timeout_s: float,
+    pool: WorkerPool[str], outcomes: dict[str, EpisodeOutcome], *, timeout_s: float
 ) -> None:
     """After a cancel: take the outcomes busy workers still send, until none is busy."""
-    busy = [conn for conn, (_, current) in workers.items() if current is not None]
+    busy = pool.busy()
     deadline = time.monotonic() + timeout_s
     while busy and time.monotonic() < deadline:
-        for item in mp_connection.wait(busy, timeout=max(0.0, deadline - time.monotonic())):
-            conn = cast(Connection, item)
+        for conn in ready(busy, timeout_s=max(0.0, deadline - time.monotonic())):
             try:
                 kind, name, value = conn.recv()
             except (EOFError, OSError):
@@ -278,12 +204,3 @@ def _worker_died(name: str, exitcode: int | None) -> EpisodeOutcome:
         name, "failed", f"its worker process died ({how}){hint}", "", float("nan"),
         float("nan"), 0.0, 0.0,
     )  # fmt: skip
-
-
-def _kill_all(workers: dict[Connection, tuple[Any, str | None]]) -> None:
-    for conn, (proc, _) in list(workers.items()):
-        if proc.is_alive():
-            proc.kill()
-        proc.join(timeout=5)
-        conn.close()
-    workers.clear()
