@@ -35,6 +35,7 @@ LOADERS: dict[str, str] = {
     ".yaml": "pipeline.robots.dh_yaml:load_dh_yaml",
     ".yml": "pipeline.robots.dh_yaml:load_dh_yaml",
     ".urdf": "pipeline.robots.urdf_loader:load_urdf",
+    ".urdf.xml": "pipeline.robots.urdf_loader:load_urdf",
     ".xml": "pipeline.robots.mjcf_loader:load_mjcf",
     ".armlab.yaml": "pipeline.robots.urdf_loader:load_sidecar",
 }

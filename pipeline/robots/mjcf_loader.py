@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from xml.etree import ElementTree
 
 import mujoco
 import numpy as np
@@ -101,6 +102,13 @@ def _check_supported(model: mujoco.MjModel, source: str) -> None:
                 f"{source}: joint '{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j, 'joint')}' is "
                 f"{what}: only fixed-base arms of hinge and slide joints"
             )
+        ref = float(model.qpos0[model.jnt_qposadr[j]])
+        if ref != 0.0:
+            raise SpecError(
+                f"{source}: joint '{_name(model, mujoco.mjtObj.mjOBJ_JOINT, j, 'joint')}' has "
+                f"ref {ref:g}: only joints whose reference is 0 load (turn the body's pose by "
+                "ref instead)"
+            )
     for b in range(1, model.nbody):
         if model.body_jntnum[b] > 1:
             raise SpecError(
@@ -111,16 +119,26 @@ def _check_supported(model: mujoco.MjModel, source: str) -> None:
 
 def _effort(model: mujoco.MjModel, j: int, where: str) -> float:
     """A joint's effort limit: its ``actuatorfrcrange``, else its actuators' ``forcerange``
-    times the gear [N m or N]."""
+    (or a motor's ``ctrlrange`` x gain) times the gear [N m or N]."""
     if model.jnt_actfrclimited[j]:
         return float(np.abs(model.jnt_actfrcrange[j]).max())
-    found = [
-        abs(float(model.actuator_gear[a, 0])) * float(np.abs(model.actuator_forcerange[a]).max())
-        for a in range(model.nu)
-        if int(model.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT)
-        and model.actuator_trnid[a, 0] == j
-        and model.actuator_forcelimited[a]
-    ]
+    found = []
+    for a in range(model.nu):
+        if not (
+            int(model.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT)
+            and model.actuator_trnid[a, 0] == j
+        ):
+            continue
+        gear = abs(float(model.actuator_gear[a, 0]))
+        if model.actuator_forcelimited[a]:
+            found.append(gear * float(np.abs(model.actuator_forcerange[a]).max()))
+        elif (  # a motor: force = gain x ctrl, limited by its ctrlrange
+            model.actuator_ctrllimited[a]
+            and int(model.actuator_gaintype[a]) == int(mujoco.mjtGain.mjGAIN_FIXED)
+            and int(model.actuator_biastype[a]) == int(mujoco.mjtBias.mjBIAS_NONE)
+        ):
+            gain = abs(float(model.actuator_gainprm[a, 0]))
+            found.append(gear * gain * float(np.abs(model.actuator_ctrlrange[a]).max()))
     if not found or max(found) <= 0:
         raise SpecError(
             f"{where}: no effort limit: give the joint actuatorfrcrange (or its actuator "
@@ -154,6 +172,20 @@ def _choose_tip(
     return ends[0]
 
 
+def _check_root(path: Path) -> None:
+    """Refuse an ``.xml`` that is not MJCF (a URDF saved as ``.xml`` would be imported by
+    MuJoCo's own URDF parser, silently unlike our URDF loader)."""
+    try:
+        _, first = next(ElementTree.iterparse(path, events=("start",)))
+    except (ElementTree.ParseError, StopIteration):
+        return  # MuJoCo's parser names the fault
+    except OSError as err:
+        raise SpecError(f"{path}: cannot read it ({err.strerror or err})") from err
+    if first.tag != "mujoco":
+        hint = " (a URDF: name it .urdf)" if first.tag == "robot" else ""
+        raise SpecError(f"{path}: root element <{first.tag}>, expected <mujoco> (MJCF){hint}")
+
+
 def load_mjcf(path: Path, *, package_path: tuple[str, ...] = ()) -> RobotSpec:
     """Load a serial arm from an MJCF file (with its sidecar ``<stem>.armlab.yaml`` if any).
 
@@ -168,6 +200,7 @@ def load_mjcf(path: Path, *, package_path: tuple[str, ...] = ()) -> RobotSpec:
     has_sidecar = sidecar_path.is_file()
     sidecar = str(sidecar_path) if has_sidecar else "defaults"
     opts = validate_sidecar(read_sidecar(sidecar_path) if has_sidecar else {}, sidecar)
+    _check_root(path)
     try:
         model = mujoco.MjModel.from_xml_path(source)
     except ValueError as err:

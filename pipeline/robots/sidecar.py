@@ -9,7 +9,7 @@ source, which the recording keeps (:attr:`pipeline.robots.spec.RobotSpec.setting
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 from pydantic import Field, ValidationError
 
@@ -33,6 +33,10 @@ DEFAULT_RADIUS_M = 0.04
 NOT_STATED = "not stated (0)"
 
 
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+
+
 class Sidecar(StrictModel):
     """A sidecar's content (every key optional)."""
 
@@ -41,12 +45,12 @@ class Sidecar(StrictModel):
     tip: str | None = None
     flange: str | None = None
     locked: dict[str, float] = Field(default_factory=dict)
-    acceleration: float | list[float] = Field(default=DEFAULT_ACCELERATION)
-    velocity: float | list[float] | None = None  # over the file's (MJCF states none)
-    armature: float | list[float] = 0.0
+    acceleration: Positive | list[Positive] = Field(default=DEFAULT_ACCELERATION)
+    velocity: Positive | list[Positive] | None = None  # over the file's (MJCF states none)
+    armature: NonNegative | list[NonNegative] = 0.0
     armature_source: str | None = None
-    damping: float | list[float] = 0.0
-    frictionloss: float | list[float] = 0.0
+    damping: NonNegative | list[NonNegative] = 0.0
+    frictionloss: NonNegative | list[NonNegative] = 0.0
     collision_radius: float = Field(default=DEFAULT_RADIUS_M, gt=0, le=1.0)
 
 

@@ -12,6 +12,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from pipeline.errors import SpecError
 from pipeline.model.dh import forward_kinematics
 from pipeline.model.mjcf import build_mujoco_model
 from pipeline.model.urdf import build_pinocchio_model
@@ -199,6 +200,7 @@ def test_a_small_mjcf_arm_loads_and_its_sidecar_wins(tmp_path):
          '<joint name="j2b" range="-1 1" actuatorfrcrange="-1 1"/><joint name="j2"',
          "body 'l2' has 2 joints"),
         ("<worldbody>", "<worldbody><bogus/>", "MuJoCo cannot load it"),
+        ('<joint name="j1"', '<joint name="j1" ref="0.5"', "joint 'j1' has ref 0.0087"),
     ],
 )  # fmt: skip
 def test_bad_mjcf_is_one_line_naming_the_file_and_element(tmp_path, old, new, says):
@@ -295,3 +297,32 @@ def test_an_mjcf_robot_records_and_reports(panda_xml, tmp_path, capsys):
     assert code == 0, err
     text = (tmp_path / "rep" / "report.md").read_text(encoding="utf-8")
     assert "from mjcf" in text and "damping: MJCF <joint damping>" in text
+
+
+def test_a_motors_ctrlrange_times_gain_and_gear_is_its_effort_limit(tmp_path):
+    """<motor gear="100" ctrlrange="-1 1"/> without forcerange: 100 N m (not refused)."""
+    text = ONE_HINGE.replace(' actuatorfrcrange="-10 10"', "", 1).replace(
+        "</worldbody>",
+        '</worldbody><actuator><motor joint="j1" gear="100" ctrlrange="-1 1"/></actuator>',
+    )
+    (tmp_path / "motor.xml").write_text(text)
+    assert load_spec(tmp_path / "motor.xml").effort_limits.tolist() == [100.0, 10.0]
+
+
+def test_a_urdf_named_dot_xml_is_not_read_as_mjcf(tmp_path):
+    """``arm.urdf.xml`` goes to the URDF loader; a URDF named ``arm.xml`` is refused in one
+    line (MuJoCo would import it with its own URDF parser, unlike ours)."""
+    from tests.robots.test_urdf_loader import THREE_JOINT
+
+    (tmp_path / "arm.urdf.xml").write_text(THREE_JOINT)
+    assert load_spec(tmp_path / "arm.urdf.xml").format == "urdf"
+    assert "root element <robot>, expected <mujoco>" in _bad(tmp_path, THREE_JOINT, name="arm.xml")
+
+
+@pytest.mark.parametrize("fact", ["velocity: -1.0", "acceleration: 0", "damping: [-1, 0]"])
+def test_a_sidecar_with_a_non_physical_limit_is_one_line(tmp_path, fact):
+    (tmp_path / "arm.xml").write_text(ONE_HINGE)
+    (tmp_path / "arm.armlab.yaml").write_text(fact + "\n")
+    with pytest.raises(SpecError) as err:
+        load_spec(tmp_path / "arm.xml")
+    assert "\n" not in str(err.value) and "arm.armlab.yaml" in str(err.value)
