@@ -228,7 +228,7 @@ def _write_outputs(
         with contextlib.suppress(PipelineError):
             keep_partial(out_dir, episode.name, measure_code=episode.partial_code)
             if episode.drop_bag:
-                shutil.rmtree(bag_dir)
+                _remove(bag_dir)
         return
     if not episode.drop_bag:
         write()
@@ -239,12 +239,20 @@ def _write_outputs(
             measure_code=episode.partial_code,
             recording=episode_recording(bag_dir, **recorded),
         )
-    except PipelineError:
+    except Exception:  # the bag is the data: whatever failed, keep it
         if episode.drop_bag:
-            write()
+            write()  # the report measures it from the file
         return
     if episode.drop_bag and os.path.lexists(bag_dir):
-        shutil.rmtree(bag_dir)  # a stale bag of an earlier run: the partial stands for it
+        _remove(bag_dir)  # a stale bag of an earlier run: the partial stands for it
+
+
+def _remove(path: Path) -> None:
+    """Remove a bag folder (or a symlink standing for one, not what it points to)."""
+    if path.is_symlink():
+        path.unlink()
+    else:
+        shutil.rmtree(path)
 
 
 def final_window(t_s: np.ndarray, *, motion_end_s: float) -> np.ndarray:

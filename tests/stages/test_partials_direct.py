@@ -190,3 +190,20 @@ def test_a_dropped_bag_is_never_written_and_bad_partials_are_refused(tmp_path, m
         part.write_bytes(part.read_bytes() + b" ")
     with pytest.raises(ReportError, match=f"^{path}: its shared part .* does not match"):
         read_partial(path)
+
+
+@pytest.mark.slow
+def test_a_dropped_episode_whose_measuring_fails_keeps_its_bag(tmp_path, monkeypatch):
+    """Measuring in memory failing for any reason (here a ValueError) writes the bag the
+    partial was to replace, so the report measures it from the file: nothing is lost."""
+    params = load_params(_params(tmp_path))
+    run = plan_run(params, "c", out=tmp_path)
+    kept, dropped = (e.name for e in run.pending)
+
+    def broken(*args: Any, **kwargs: Any) -> Any:
+        raise ValueError("a bug in the measuring code")
+
+    monkeypatch.setattr(campaign_run, "keep_partial", broken)
+    record(params, run.pending, out_dir=run.out_dir, force=True, commit=run.commit)
+    assert (run.out_dir / dropped).is_dir() and (run.out_dir / kept).is_dir()
+    assert not partial_path(run.out_dir, dropped).exists()
