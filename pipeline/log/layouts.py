@@ -30,7 +30,7 @@ import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
+from xml.sax.saxutils import escape, quoteattr
 
 from pipeline.constants import (
     TOPIC_CONTROLLER_STATE,
@@ -361,9 +361,10 @@ def _pj_snippets(joints: tuple[str, ...]) -> list[str]:
             lines.append(f"  <snippet name={quoteattr(f'{d.name}/{joint}')}>")
             lines.append("   <global></global>")
             lines.append("   <function>return value - v1</function>")
-            lines.append(f"   <linked_source>{_pj_series(d.minuend, j, joint)}</linked_source>")
+            minuend = escape(_pj_series(d.minuend, j, joint))
+            lines.append(f"   <linked_source>{minuend}</linked_source>")
             lines.append("   <additional_sources>")
-            lines.append(f"    <v1>{_pj_series(d.subtrahend, j, joint)}</v1>")
+            lines.append(f"    <v1>{escape(_pj_series(d.subtrahend, j, joint))}</v1>")
             lines.append("   </additional_sources>")
             lines.append("  </snippet>")
     lines.append(" </customMathEquations>")

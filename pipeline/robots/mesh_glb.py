@@ -47,9 +47,12 @@ def mesh_glb(path: str, scale: tuple[float, ...] = UNIT_SCALE) -> bytes:
         raise SpecError(f"{path}: cannot read the mesh ({err})") from err
     if not out.geometry:
         raise SpecError(f"{path}: cannot read the mesh (no triangles in it)")
-    if tuple(scale) != UNIT_SCALE:
-        out.apply_transform(np.diag([*scale, 1.0]))
-    return bytes(out.export(file_type="glb", include_normals=True))
+    try:
+        if tuple(scale) != UNIT_SCALE:
+            out.apply_transform(np.diag([*scale, 1.0]))
+        return bytes(out.export(file_type="glb", include_normals=True))
+    except Exception as err:  # a degenerate scale or part trimesh cannot export
+        raise SpecError(f"{path}: cannot convert the mesh to glTF ({err})") from err
 
 
 def _colour(part: Any) -> Any:

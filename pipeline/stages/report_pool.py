@@ -91,7 +91,11 @@ def _worker_main(
             outcome = measured.measure(Path(source), options)
         except Exception as err:
             outcome = ("raise", _sendable(err))
-        conn.send(outcome)
+        try:
+            conn.send(outcome)
+        except (pickle.PicklingError, TypeError, AttributeError) as err:  # not a lost worker
+            why = ReportError(f"{source}: cannot pass its measurement back ({err})")
+            conn.send(("raise", why))
 
 
 def measure_in_workers(
