@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from pipeline.errors import SpecError
 from pipeline.robots.spec import RobotSpec, pose_matrix
-from pipeline.robots.urdf_loader import resolve_uri, xml_floats, xml_origin
+from pipeline.robots.urdf_loader import urdf_geometry, xml_floats, xml_origin
 
 __all__ = ["RERUN_MESH_SUFFIXES", "GeometryKind", "LinkGeometry", "link_geometry", "rerun_geometry"]
 
@@ -95,28 +95,12 @@ def link_geometry(
             geometry = el.find("geometry")
             if geometry is None or len(geometry) == 0:
                 continue
-            g = geometry[0]
             pose = owner_T_link @ xml_origin(el.find("origin"), where)
             rgba = _colour(el, where)
-            if g.tag == "mesh":
-                uri = g.get("filename") or ""
-                path = resolve_uri(uri, base=base, where=where, package_path=package_path)
-                if not path.is_file():
-                    raise SpecError(f"{where}: missing mesh {uri!r} ({path})")
-                scale = xml_floats(g.get("scale"), 3, f"{where}.mesh.scale", "1 1 1")
-                out.append(
-                    LinkGeometry(name, owner, pose, "mesh", scale, str(path.resolve()), rgba)
-                )
-            elif g.tag == "box":
-                size = xml_floats(g.get("size"), 3, f"{where}.box.size", "")
-                out.append(LinkGeometry(name, owner, pose, "box", size, rgba=rgba))
-            elif g.tag == "sphere":
-                radius = xml_floats(g.get("radius"), 1, f"{where}.sphere.radius", "")
-                out.append(LinkGeometry(name, owner, pose, "sphere", radius, rgba=rgba))
-            elif g.tag == "cylinder":
-                r = xml_floats(g.get("radius"), 1, f"{where}.cylinder.radius", "")[0]
-                length = xml_floats(g.get("length"), 1, f"{where}.cylinder.length", "")[0]
-                out.append(LinkGeometry(name, owner, pose, "cylinder", (r, length), rgba=rgba))
+            parsed = urdf_geometry(geometry[0], where, base=base, package_path=package_path)
+            if parsed is not None:
+                kind_of, size, mesh = parsed
+                out.append(LinkGeometry(name, owner, pose, kind_of, size, mesh, rgba))
     return tuple(out)
 
 

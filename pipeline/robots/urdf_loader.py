@@ -50,6 +50,7 @@ __all__ = [
     "load_sidecar",
     "load_urdf",
     "resolve_uri",
+    "urdf_geometry",
     "xml_floats",
     "xml_origin",
 ]
@@ -188,31 +189,52 @@ def _parse_links(
     return links
 
 
-def _shape(
-    el: ElementTree.Element, where: str, base: Path, package_path: tuple[str, ...]
-) -> tuple[str, F64, tuple[float, ...], str] | None:
-    geometry = el.find("geometry")
-    pose = xml_origin(el.find("origin"), where)
-    if geometry is None or len(geometry) == 0:
-        raise SpecError(f"{where}: no <geometry>")
-    g = geometry[0]
+def urdf_geometry(
+    g: ElementTree.Element, where: str, *, base: Path, package_path: tuple[str, ...]
+) -> tuple[str, tuple[float, ...], str] | None:
+    """A ``<geometry>``'s shape element in URDF's own terms: ``(kind, size, mesh path)``
+    with size = mesh scale, box full extents, sphere ``(radius,)`` or cylinder
+    ``(radius, length)`` [m]; the mesh's absolute path ("" for a primitive). None for an
+    element URDF does not define.
+
+    Raises:
+        SpecError: an unresolved ``package://``, a missing mesh or a bad number (one line).
+    """
     if g.tag == "mesh":
         uri = g.get("filename") or ""
         path = resolve_uri(uri, base=base, where=where, package_path=package_path)
         if not path.is_file():
             raise SpecError(f"{where}: missing mesh {uri!r} ({path})")
         scale = xml_floats(g.get("scale"), 3, f"{where}.mesh.scale", "1 1 1")
-        return ("mesh", pose, scale, str(path.resolve()))
+        return ("mesh", scale, str(path.resolve()))
     if g.tag == "box":
-        size = xml_floats(g.get("size"), 3, f"{where}.box.size", "")
-        return ("box", pose, tuple(0.5 * s for s in size), "")
+        return ("box", xml_floats(g.get("size"), 3, f"{where}.box.size", ""), "")
     if g.tag == "sphere":
-        return ("sphere", pose, xml_floats(g.get("radius"), 1, f"{where}.sphere.radius", ""), "")
+        return ("sphere", xml_floats(g.get("radius"), 1, f"{where}.sphere.radius", ""), "")
     if g.tag == "cylinder":
         r = xml_floats(g.get("radius"), 1, f"{where}.cylinder.radius", "")[0]
         length = xml_floats(g.get("length"), 1, f"{where}.cylinder.length", "")[0]
-        return ("cylinder", pose, (r, 0.5 * length), "")
-    raise SpecError(f"{where}: unknown geometry <{g.tag}>")
+        return ("cylinder", (r, length), "")
+    return None
+
+
+def _shape(
+    el: ElementTree.Element, where: str, base: Path, package_path: tuple[str, ...]
+) -> tuple[str, F64, tuple[float, ...], str] | None:
+    """A collision element as the model builders take it: box and cylinder by half sizes."""
+    geometry = el.find("geometry")
+    pose = xml_origin(el.find("origin"), where)
+    if geometry is None or len(geometry) == 0:
+        raise SpecError(f"{where}: no <geometry>")
+    parsed = urdf_geometry(geometry[0], where, base=base, package_path=package_path)
+    if parsed is None:
+        raise SpecError(f"{where}: unknown geometry <{geometry[0].tag}>")
+    kind, size, mesh = parsed
+    if kind == "box":
+        size = tuple(0.5 * s for s in size)
+    elif kind == "cylinder":
+        size = (size[0], 0.5 * size[1])
+    return (kind, pose, size, mesh)
 
 
 def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link]) -> list[_Joint]:
