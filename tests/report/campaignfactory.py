@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
+import polars as pl
+
+from pipeline.analysis import catalog
 from pipeline.settings import CampaignInfo
 from tests.analysis.bagfactory import Episode, paper_like, write_bag
 
@@ -50,3 +54,29 @@ def write_campaign(root: Path, episodes: list[Episode]) -> Path:
         folder.mkdir(parents=True, exist_ok=True)
         write_bag(folder, ep)
     return root
+
+
+def table_row(
+    cond: str, controller: str, seed: int, joint: str, max_abs_error: float
+) -> dict[str, Any]:
+    """One row of a campaign table (episode x joint) of ``campaign`` c: the max error given,
+    RMS half of it, final a tenth, every other metric empty."""
+    row: dict[str, Any] = dict.fromkeys(catalog.METRIC_COLUMNS)
+    row.update(
+        max_abs_error=max_abs_error, rms_error=max_abs_error / 2, final_error=max_abs_error / 10
+    )
+    return {
+        "episode": f"{cond}-{controller}-{seed}",
+        "campaign": "c",
+        "condition": cond,
+        "controller": controller,
+        "seed": seed,
+        "status": "ok",
+        "joint": joint,
+        **row,
+    }
+
+
+def table_frame(rows: list[dict[str, Any]]) -> pl.DataFrame:
+    """Rows of :func:`table_row` as the campaign table (metrics as Float64)."""
+    return pl.DataFrame(rows, schema_overrides={m: pl.Float64 for m in catalog.METRIC_COLUMNS})

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import polars as pl
 
-from pipeline.analysis import catalog
 from pipeline.analysis.campaign import condition_values, verdict_flips, win_loss
 from pipeline.report.campaigns import campaign_section
+from tests.report.campaignfactory import table_frame, table_row
 
 JOINTS = ("j1", "j2")
 
@@ -23,21 +23,8 @@ def _table(ratios: dict[tuple[str, str], float], *, pairs: int) -> pl.DataFrame:
         for seed in range(pairs):
             for controller, scale in (("pid", 1.0), ("ctc", ratio)):
                 value = 1e-3 * scale * (1 + 0.02 * rng.standard_normal())
-                row = dict.fromkeys(catalog.METRIC_COLUMNS)
-                row.update(max_abs_error=value, rms_error=value / 2, final_error=value / 10)
-                rows.append(
-                    {
-                        "episode": f"{cond}-{controller}-{seed}",
-                        "campaign": "c",
-                        "condition": cond,
-                        "controller": controller,
-                        "seed": seed,
-                        "status": "ok",
-                        "joint": joint,
-                        **row,
-                    }
-                )
-    return pl.DataFrame(rows, schema_overrides={m: pl.Float64 for m in catalog.METRIC_COLUMNS})
+                rows.append(table_row(cond, controller, seed, joint, value))
+    return table_frame(rows)
 
 
 # j1: CTC wins at armature_scale 4 and loses at 0.25 (with either payload); j2: always wins

@@ -13,6 +13,7 @@ import pytest
 from pipeline.analysis import catalog
 from pipeline.analysis.campaign import TOO_FEW, holm, smallest_p, win_loss
 from pipeline.report.campaigns import campaign_section
+from tests.report.campaignfactory import table_frame, table_row
 
 JOINTS = ("j1", "j2", "j3")
 CONDITIONS = ("a", "b")
@@ -26,22 +27,8 @@ def _table(pairs: int, *, ratio: float = 1.3) -> pl.DataFrame:
             for controller, scale in (("pid", 1.0), ("ctc", ratio)):
                 for joint in JOINTS:
                     value = 1e-3 * scale * (1 + 0.05 * rng.standard_normal())
-                    row = dict.fromkeys(catalog.METRIC_COLUMNS)
-                    row.update(max_abs_error=value, rms_error=value / 2, final_error=value / 10)
-                    rows.append(
-                        {
-                            "episode": f"{cond}-{controller}-{seed}",
-                            "campaign": "c",
-                            "condition": cond,
-                            "controller": controller,
-                            "seed": seed,
-                            "status": "ok",
-                            "joint": joint,
-                            **row,
-                        }
-                    )
-    schema = {m: pl.Float64 for m in catalog.METRIC_COLUMNS}
-    return pl.DataFrame(rows, schema_overrides=schema)
+                    rows.append(table_row(cond, controller, seed, joint, value))
+    return table_frame(rows)
 
 
 def _section(tmp_path: Path, table: pl.DataFrame) -> str:
