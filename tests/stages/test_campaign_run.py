@@ -15,6 +15,7 @@ import yaml
 
 from pipeline.params import load_params
 from pipeline.stages.campaign_run import DONE_DIR, bag_is_whole, completion_marker, plan_run
+from pipeline.stages.executors.ray import start_ray
 from pipeline.stages.record import record
 
 REPO = Path(__file__).parents[2]
@@ -63,7 +64,7 @@ def test_same_campaign_same_bytes_with_one_two_jobs_and_ray(tmp_path):
     params = _params(tmp_path)
     one = _run(params, tmp_path / "j1", jobs=1)
     two = _run(params, tmp_path / "j2", jobs=2)
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    start_ray(address=None, num_cpus=2)  # waits for readiness (retries a start-up timeout)
     try:
         on_ray = _run(params, tmp_path / "ray", executor="ray")
     finally:

@@ -33,6 +33,46 @@ def _episode_task(
     return run_one(episode, plan, out_dir=Path(out_dir), force=force, commit=commit)
 
 
+#: Attempts at starting a local Ray instance. Ray gives its raylet a fixed 30 s to register
+#: (``ray/_private/node.py``); on a loaded machine (load 8+ on 2 cores) it may not, and a
+#: second attempt after a clean shutdown usually does. A remote ``address`` gets one try.
+LOCAL_START_ATTEMPTS = 3
+
+
+def start_ray(*, address: str | None, num_cpus: int | None = None) -> None:
+    """Join ``address`` or start a local Ray instance, waiting for it to be ready.
+
+    A local start that times out is shut down and retried, up to
+    :data:`LOCAL_START_ATTEMPTS` times in all.
+
+    Raises:
+        PipelineError: Ray cannot be started or joined (one line, Ray's first line kept).
+    """
+    import ray
+
+    attempts = 1 if address else LOCAL_START_ATTEMPTS
+    for attempt in range(1, attempts + 1):
+        try:
+            ray.init(
+                address=address, num_cpus=num_cpus, include_dashboard=False,
+                log_to_driver=False, configure_logging=False,
+            )  # fmt: skip
+            return
+        except Exception as err:  # Ray raises a bare Exception on a
+            # start-up timeout (a loaded machine, a support process that died)
+            with contextlib.suppress(Exception):
+                ray.shutdown()
+            if attempt < attempts:
+                continue
+            where = address or "a local instance"
+            lines = str(err).strip().splitlines()
+            tried = f" after {attempts} attempts" if attempts > 1 else ""
+            raise PipelineError(
+                f"--executor ray: cannot start or join {where}{tried} "
+                f"({lines[0] if lines else type(err).__name__})"
+            ) from err
+
+
 @dataclass(frozen=True)
 class RayExecutor:
     """Episodes as Ray tasks, on the Ray instance this process joined or at ``address``.
@@ -72,18 +112,7 @@ class RayExecutor:
             # run, and the exit code would be 15); keep ours, which takes Ctrl-C's path
             on_sigterm = signal.getsignal(signal.SIGTERM)
             try:
-                ray.init(
-                    address=self.address, include_dashboard=False, log_to_driver=False,
-                    configure_logging=False,
-                )  # fmt: skip
-            except Exception as err:  # Ray raises a bare Exception on a
-                # start-up timeout (a loaded machine, a support process that died)
-                where = self.address or "a local instance"
-                lines = str(err).strip().splitlines()
-                raise PipelineError(
-                    f"--executor ray: cannot start or join {where} "
-                    f"({lines[0] if lines else type(err).__name__})"
-                ) from err
+                start_ray(address=self.address)
             finally:
                 if threading.current_thread() is threading.main_thread() and on_sigterm is not None:
                     signal.signal(signal.SIGTERM, on_sigterm)
