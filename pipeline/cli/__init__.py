@@ -60,11 +60,33 @@ def _stop(err: BaseException) -> NoReturn:
 _DISK_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS, errno.EFBIG})
 
 
+def hoist_root_options(args: list[str]) -> list[str]:
+    """``args`` with the root command's options moved before the command.
+
+    ``--debug`` and ``--package-path DIR`` (or ``--package-path=DIR``) are accepted anywhere
+    on the line (``pipeline fk arm.urdf 0 0 --package-path ~/ws/src``), as users of
+    ``ros2`` and ``colcon`` type them; a value that is itself an option is left alone.
+    """
+    front: list[str] = []
+    rest: list[str] = []
+    i = 0
+    while i < len(args):
+        arg = args[i]
+        if arg == "--debug" or arg.startswith("--package-path="):
+            front.append(arg)
+        elif arg == "--package-path" and i + 1 < len(args) and not args[i + 1].startswith("-"):
+            front += [arg, args[i + 1]]
+            i += 1
+        else:
+            rest.append(arg)
+        i += 1
+    return [*front, *rest]
+
+
 def main() -> None:
     """Console-script entry point."""
+    sys.argv = [sys.argv[0], *hoist_root_options(sys.argv[1:])]
     debug = "--debug" in sys.argv[1:]
-    if debug:  # accepted anywhere on the line, not only before the command
-        sys.argv = [sys.argv[0], "--debug", *(a for a in sys.argv[1:] if a != "--debug")]
     # A job started in the background by a non-interactive shell inherits SIGINT ignored;
     # `kill -INT` must still stop a run (and say what it finished).
     if threading.current_thread() is threading.main_thread():

@@ -97,7 +97,10 @@ def fk_cmd(
     ],
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
-    """Forward kinematics: the flange pose (frame tool0) in the robot's base frame.
+    """Forward kinematics: the flange pose in the robot's base frame.
+
+    The flange is the frame after the last controlled joint: a DH robot's ``tool0``, a URDF or
+    MJCF robot's tip link (or its sidecar's ``flange:``). Visual meshes are not needed.
 
     Any number of joints. Prints position \\[m], quaternion (w, x, y, z) and
     roll/pitch/yaw \\[rad] with R = Rz(yaw) Ry(pitch) Rx(roll).

@@ -93,7 +93,7 @@ def report_cmd(
         typer.Option(
             "--tool-offset",
             help="The tool centre point of the task-space metrics in the flange frame: "
-            "x,y,z [m] or x,y,z,roll,pitch,yaw [m, rad] (default: the flange).",
+            "x,y,z \\[m] or x,y,z,roll,pitch,yaw \\[m, rad] (default: the flange).",
         ),
     ] = None,
     jobs: Annotated[

@@ -14,8 +14,9 @@ app = typer.Typer(
     help=(
         "armlab pipeline: plan a motion for a robot arm (OMPL), run it in MuJoCo under "
         "PID and computed-torque control, record ROS 2 bags (MCAP) and report tracking "
-        "error. Robots are YAML files (DH parameters + inertias): built-in ones are "
-        "listed by `pipeline robots`; any command taking ROBOT also accepts a path."
+        "error. A robot is a DH YAML, URDF (+ SRDF) or MJCF file, with any number of "
+        "joints: built-in ones are listed by `pipeline robots`; any command taking ROBOT "
+        "also accepts a path."
     ),
     no_args_is_help=True,
     pretty_exceptions_enable=False,

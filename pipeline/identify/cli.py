@@ -67,7 +67,7 @@ def fit_cmd(
     ] = DEFAULT_CUTOFF_HZ,
     min_speed: Annotated[
         float,
-        typer.Option("--min-speed", help="Leave out joint samples slower than this [rad/s]."),
+        typer.Option("--min-speed", help="Leave out joint samples slower than this \\[rad/s]."),
     ] = DEFAULT_MIN_SPEED_RAD_S,
     max_condition: Annotated[
         float,
@@ -152,17 +152,17 @@ def excite_cmd(
     ] = 0.1,
     periods: Annotated[int, typer.Option("--periods", help="Periods recorded.")] = 2,
     span_rad: Annotated[
-        float, typer.Option("--span-rad", help="Largest excursion from the mid posture [rad].")
+        float, typer.Option("--span-rad", help="Largest excursion from the mid posture \\[rad].")
     ] = 1.0,
     budget_s: Annotated[
-        float, typer.Option("--budget-s", help="Wall-clock budget of the design [s].")
+        float, typer.Option("--budget-s", help="Wall-clock budget of the design \\[s].")
     ] = 30.0,
     force: Annotated[bool, typer.Option("--force", help="Overwrite the recording.")] = False,
     mid: Annotated[
         str | None,
         typer.Option(
             "--mid",
-            help="Mid posture, comma-separated [rad] (default: the scenario's start); "
+            help="Mid posture, comma-separated \\[rad] (default: the scenario's start); "
             "a bent arm excites better than a stretched one.",
         ),
     ] = None,

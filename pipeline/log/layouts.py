@@ -381,6 +381,22 @@ def write_layouts(folder: Path) -> list[Path]:
     return [fox, pj]
 
 
-if __name__ == "__main__":  # pragma: no cover - python -m pipeline.log.layouts [FOLDER]
-    for written in write_layouts(Path(sys.argv[1] if len(sys.argv) > 1 else DEFAULT_FOLDER)):
+def main(argv: list[str] | None = None) -> None:
+    """``python -m pipeline.log.layouts [FOLDER]``: write the UR5's layouts (what ships)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(
+        prog="python -m pipeline.log.layouts",
+        description="Write the Foxglove and PlotJuggler layouts for the UR5's bags "
+        f"({FOXGLOVE_FILE}, {PLOTJUGGLER_FILE}).",
+    )
+    parser.add_argument(
+        "folder", nargs="?", default=DEFAULT_FOLDER, help=f"where (default: {DEFAULT_FOLDER}/)"
+    )
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
+    for written in write_layouts(Path(args.folder)):
         print(written)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

@@ -180,11 +180,13 @@ def _parse_links(
             check_physical(mass, tensor, where)
             rot = frame[:3, :3]
             link.mass, link.com, link.inertia = mass, frame[:3, 3].copy(), rot @ tensor @ rot.T
-        for kind in ("visual", "collision"):
-            for k, geo in enumerate(el.findall(kind)):
-                shape = _shape(geo, f"{where}.{kind}[{k}]", base, package_path)
-                if kind == "collision" and shape is not None:
-                    link.shapes.append(shape)
+        # visuals are not read here: kinematics, dynamics and planning never need them, and
+        # the views that draw them (.rrd, teach) resolve them on their own, falling back to
+        # the collision shapes (link_geometry), so a missing visual mesh stops nothing
+        for k, geo in enumerate(el.findall("collision")):
+            shape = _shape(geo, f"{where}.collision[{k}]", base, package_path)
+            if shape is not None:
+                link.shapes.append(shape)
         links[name] = link
     return links
 
