@@ -8,6 +8,7 @@ paths in errors match the YAML (``params.yaml: scenarios.paper.hold_s: ...``).
 from __future__ import annotations
 
 import math
+import os
 import re
 from collections import Counter
 from collections.abc import Mapping
@@ -557,4 +558,46 @@ def load_params(path: str | Path) -> Params:
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as err:
         raise ParamsError(f"{p}: cannot read params file ({err})") from err
-    return parse_params(parse_yaml(text, source=str(p), error=ParamsError), source=str(p))
+    data = parse_yaml(text, source=str(p), error=ParamsError)
+    return parse_params(_paths_from(data, folder=p.parent, source=str(p)), source=str(p))
+
+
+def _paths_from(data: Any, *, folder: Path, source: str) -> Any:
+    """``data`` with each scenario's relative ``robot`` and ``nominal`` file paths read from
+    the params file's ``folder`` (as written relative to the working directory, so a params
+    file run from its own folder records the same text as before).
+
+    Raises:
+        ParamsError: a ``robot`` path names no file (the field, the path as given and the
+            folder it was read from).
+    """
+    from pipeline.robots.loaders import loader_suffix
+
+    scenarios = data.get("scenarios") if isinstance(data, dict) else None
+    if not isinstance(scenarios, dict):
+        return data
+    here = Path.cwd().resolve()
+    moved: dict[Any, Any] = {}
+    for name, scenario in scenarios.items():
+        if not isinstance(scenario, dict):
+            moved[name] = scenario
+            continue
+        scenario = dict(scenario)  # a YAML alias shares its mapping with the anchor
+        for key in ("robot", "nominal"):
+            value = scenario.get(key)
+            if not isinstance(value, str) or not value:
+                continue
+            path = Path(value).expanduser()
+            is_path = "/" in value or "\\" in value or loader_suffix(path) is not None
+            if not is_path:
+                continue  # a built-in robot's name
+            if not path.is_absolute() and folder.resolve() != here:
+                path = Path(os.path.relpath(folder.resolve() / path, here))
+                scenario[key] = str(path)
+            if key == "robot" and not path.is_file():
+                raise ParamsError(
+                    f"{source}: scenarios.{name}.robot: no such robot file {value!r} "
+                    f"(a relative path is read from the params file's folder, {folder})"
+                )
+        moved[name] = scenario
+    return {**data, "scenarios": moved}

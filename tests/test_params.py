@@ -213,3 +213,29 @@ def test_the_default_integrator_is_the_plant_s():
     from pipeline.params import SimParams
 
     assert SimParams().integrator == PLANT_INTEGRATOR
+
+
+def test_a_relative_robot_path_is_read_from_the_params_files_folder(tmp_path, monkeypatch):
+    """As a user keeps arm.urdf beside params.yaml and runs from anywhere."""
+    folder = tmp_path / "cell"
+    folder.mkdir()
+    (folder / "arm.yaml").write_text((REPO / "pipeline" / "robots" / "ur5.yaml").read_text())
+    data = _default()
+    data["scenarios"]["paper"]["robot"] = "arm.yaml"
+    path = _write(folder, data)
+    monkeypatch.chdir(tmp_path)
+    params = load_params(path)
+    robot = params.scenarios["paper"].robot
+    assert Path(robot).resolve() == (folder / "arm.yaml").resolve()
+    monkeypatch.chdir(folder)  # run from its own folder: the text as written
+    assert load_params(path).scenarios["paper"].robot == "arm.yaml"
+
+
+def test_a_missing_robot_file_names_the_field_and_the_folder(tmp_path):
+    data = _default()
+    data["scenarios"]["paper"]["robot"] = "arms/nope.urdf"
+    with pytest.raises(ParamsError) as err:
+        load_params(_write(tmp_path, data))
+    message = str(err.value)
+    assert "scenarios.paper.robot: no such robot file 'arms/nope.urdf'" in message
+    assert str(tmp_path) in message and "\n" not in message
