@@ -209,4 +209,34 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
             for (ctrl, shown), members in grouped.items()
         ]
     lines.append(md.table(["episode", "controller", "gains and settings", "seed", "status"], rows))
+    lines += _origin_lines(recs)
     return lines
+
+
+def _origin_lines(recs: Sequence[Any]) -> list[str]:
+    """Where each plug-in controller's code came from, as its bags record it (built-ins are
+    this package's own code and get no line)."""
+    seen: dict[str, str] = {}
+    for rec in recs:
+        ctrl = rec.settings.controller if rec.settings is not None else None
+        origin = dict(ctrl.origin) if ctrl is not None else {}
+        kind = origin.get("kind", "builtin")
+        if kind == "builtin" or ctrl is None:
+            continue
+        if kind == "entry_point":
+            text = (
+                f"entry point `{origin.get('name', '?')} = {origin.get('value', '?')}` of "
+                f"`{origin.get('group', '?')}`, distribution {origin.get('distribution', '?')} "
+                f"{origin.get('version', '?')}"
+            )
+        else:
+            text = (
+                f"`{origin.get('object', ctrl.type)}` from {origin.get('path', '?')} "
+                f"(SHA-256 {str(origin.get('sha256', '?'))[:16]}…)"
+            )
+        seen.setdefault(f"`{ctrl.type}`", text)
+    if not seen:
+        return []
+    return ["", "Plug-in controllers (their code as recorded in each bag):", ""] + [
+        f"- {name}: {text}." for name, text in seen.items()
+    ]

@@ -96,6 +96,18 @@ def test_example_and_module_object_controllers_run_in_a_pool_campaign(site, tmp_
     proc = _record(site, _params(tmp_path), tmp_path / "out", "--jobs", "2")
     assert proc.returncode == 0, proc.stderr
     _check(tmp_path / "out")
+    # the report names each plug-in's code as its bags recorded it
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), str(REPO)])}
+    report = subprocess.run(
+        [sys.executable, "-m", "pipeline", "report", "--recordings", str(tmp_path / "out" / "c"),
+         "--out", str(tmp_path / "rep")],
+        capture_output=True, text=True, timeout=900, cwd=REPO, env=env,
+    )  # fmt: skip
+    assert report.returncode == 0, report.stderr
+    text = (tmp_path / "rep" / "report.md").read_text()
+    sha = hashlib.sha256((REPO / "tests" / "control" / "test_testkit.py").read_bytes()).hexdigest()
+    assert "distribution armlab-example-controller 0.1.0" in text
+    assert f"SHA-256 {sha[:16]}" in text and "test_testkit.py" in text
 
 
 @pytest.mark.slow
