@@ -7,7 +7,7 @@ encoding, compressing, writing or reading it: the arrays each topic carries
 (:func:`pipeline.log.bag.encode_episode` says which) go through the reader's own second
 half (:func:`pipeline.log.whole.assemble`: pairing, labels, notes, duration check, tidy
 frames). Only the file's identity is missing: ``sha256`` is "" and ``size_bytes`` 0.
-``tests/log/test_direct.py`` checks the rest against the bag, value for value.
+``tests/stages/test_partials_direct.py`` checks the rest against the bag, value for value.
 
 A bag read in windows (larger than :data:`~pipeline.log.recording.STREAM_ABOVE_BYTES`)
 reads back as decimated frames: :func:`reads_whole` says which results surely do not.

@@ -4,8 +4,11 @@ reader (:mod:`pipeline.log.collect`).
 A row names the topic, its ROS type and the QoS its publisher offered (what the writer
 records), and the role the reader finds it by. A role takes the topic named by a remap
 (``topics={"controller_state": "/arm_controller/controller_state"}``), else our topic
-name, else (``by_type``) the one topic of its type. Adding a topic is one row here plus
-the code that fills it (:func:`pipeline.log.bag.encode_episode`).
+name, else (``by_type``) the one topic of its type. Adding a topic today takes its name in
+:mod:`pipeline.constants`, one row here, the code that fills it
+(:func:`pipeline.log.bag.encode_episode`) and its in-memory twin in :mod:`pipeline.log.direct`
+(tested equal by ``tests/stages/test_partials_direct.py``); a topic the report reads also
+needs its decode in :mod:`pipeline.log.collect`.
 """
 
 from __future__ import annotations
