@@ -7,6 +7,7 @@ published transform from the /joint_states positions of the same stamp.
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -356,3 +357,20 @@ episodes:
     assert not (out / "a-any").exists()
     assert read_recording(out / "b-ur5").joint_names == load_spec("ur5").joint_names
     assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["b-ur5"]
+
+
+def test_the_fk_command_agrees_with_yourdfpy_for_every_axis(
+    any_axis_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    spec = load_spec(any_axis_path)
+    q = random_configurations(spec, 1, seed=3)[0]
+    code, out, err = run_cli_out(
+        ["fk", str(any_axis_path), *(repr(float(v)) for v in q), "--json"], capsys
+    )
+    assert code == 0, err
+    answer = json.loads(out)
+    pose = np.eye(4)
+    pose[:3, :3] = tf.quat_to_matrix(np.array(answer["quaternion_wxyz"]))
+    pose[:3, 3] = answer["position"]
+    expected = reference_pose(reference(any_axis_path), spec, q, FLANGE, spec.base_link)
+    assert_same_pose(pose, expected, "pipeline fk")
