@@ -3,9 +3,10 @@
 The tool centre point (TCP) is the robot's flange (``tool0``) moved by a tool offset
 (:class:`ToolOffset`, default none: the flange). Its pose is the forward kinematics (FK) of
 the Pinocchio model the recording's robot builds (:func:`pipeline.model.urdf.pinocchio_model`),
-evaluated for a whole time slice at once: every joint of our models is a revolute joint
-about its own z axis, so ``world_T_joint = world_T_parent @ placement @ Rz(q)`` is one
-batched matrix product per joint over all samples of the slice.
+evaluated for a whole time slice at once: ``world_T_joint = world_T_parent @ placement @
+motion(q)``, the motion a rotation about or a translation along the joint's axis
+(:func:`pipeline.model.chain.joint_motions`), is one batched matrix product per joint over
+all samples of the slice.
 
 The TCP errors compare the FK of the reference joint positions with the FK of the position
 the joint metrics use (true where recorded, else measured: the protocol's
@@ -33,9 +34,9 @@ from pipeline.analysis.episodes import robot_spec
 from pipeline.errors import ReportError
 from pipeline.log.reader import Recording
 from pipeline.model import transforms as tf
-from pipeline.model.chain import FLANGE
+from pipeline.model.chain import FLANGE, joint_motions
 from pipeline.model.urdf import pinocchio_model
-from pipeline.robots.spec import RobotSpec
+from pipeline.robots.spec import JointSpec, RobotSpec
 
 # The pseudo-joint the task-space rows of a metrics frame carry in their ``joint`` column.
 TCP = TCP_JOINT
@@ -93,13 +94,14 @@ FLANGE_TOOL = ToolOffset()
 
 @dataclass(frozen=True)
 class _Chain:
-    """The batched-FK data of one Pinocchio model: per joint its parent, placement and q
-    index; the flange frame's parent joint and placement."""
+    """The batched-FK data of one Pinocchio model: per joint its parent, placement, q index
+    and the robot's joint (axis, kind); the flange frame's parent joint and placement."""
 
     parents: tuple[int, ...]
     placements: tuple[Array, ...]
     q_index: tuple[int, ...]
     joint_names: tuple[str, ...]
+    joints: tuple[JointSpec | None, ...]
     flange_joint: int
     flange_placement: Array
 
@@ -107,14 +109,15 @@ class _Chain:
 @functools.lru_cache(maxsize=64)
 def _chain(spec: RobotSpec) -> _Chain:
     model = pinocchio_model(spec)
-    names: list[str] = []
-    for k in range(1, model.njoints):
-        if model.joints[k].shortname() != "JointModelRZ":
-            raise ReportError(
-                f"{spec.source}: joint '{model.names[k]}' is a "
-                f"{model.joints[k].shortname()}; task-space FK handles revolute z joints only"
-            )
-        names.append(str(model.names[k]))
+    by_name = {j.name: j for j in spec.joints}
+    names = [str(model.names[k]) for k in range(1, model.njoints)]
+    if sorted(names) != sorted(by_name) or any(
+        model.joints[k].nq != 1 for k in range(1, model.njoints)
+    ):
+        raise ReportError(
+            f"{spec.source}: the Pinocchio model's joints ({', '.join(names)}) are not the "
+            f"robot's one-variable joints ({', '.join(by_name)})"
+        )
     frame = model.frames[model.getFrameId(FLANGE)]
     return _Chain(
         parents=tuple(int(model.parents[k]) for k in range(model.njoints)),
@@ -123,6 +126,7 @@ def _chain(spec: RobotSpec) -> _Chain:
         ),
         q_index=tuple(int(model.joints[k].idx_q) for k in range(model.njoints)),
         joint_names=tuple(names),
+        joints=(None, *(by_name[name] for name in names)),
         flange_joint=int(frame.parentJoint),
         flange_placement=np.array(frame.placement.homogeneous),
     )
@@ -154,12 +158,21 @@ class TaskSpace:
         pos: list[Array] = [np.zeros((n, 3))]
         for k in range(1, len(ch.parents)):
             r, p = _then(rot[ch.parents[k]], pos[ch.parents[k]], ch.placements[k])
-            # @ Rz(q): only the first two columns turn
-            c, s_ = np.cos(q[:, ch.q_index[k]])[:, None], np.sin(q[:, ch.q_index[k]])[:, None]
-            turned = np.empty_like(r)
-            turned[:, :, 0] = c * r[:, :, 0] + s_ * r[:, :, 1]
-            turned[:, :, 1] = c * r[:, :, 1] - s_ * r[:, :, 0]
-            turned[:, :, 2] = r[:, :, 2]
+            joint = ch.joints[k]
+            assert joint is not None  # the universe (k = 0) has none
+            qk = q[:, ch.q_index[k]]
+            if joint.kind == "prismatic":
+                _, along = joint_motions(joint, qk)
+                turned, p = r, p + np.einsum("nij,nj->ni", r, along)
+            elif joint.axis == (0.0, 0.0, 1.0):
+                # @ Rz(q): only the first two columns turn
+                c, s_ = np.cos(qk)[:, None], np.sin(qk)[:, None]
+                turned = np.empty_like(r)
+                turned[:, :, 0] = c * r[:, :, 0] + s_ * r[:, :, 1]
+                turned[:, :, 1] = c * r[:, :, 1] - s_ * r[:, :, 0]
+                turned[:, :, 2] = r[:, :, 2]
+            else:
+                turned = r @ joint_motions(joint, qk)[0]
             rot.append(turned)
             pos.append(p)
         r, p = _then(

@@ -50,6 +50,7 @@ from pipeline.log.schemas import (
 )
 from pipeline.log.topics import TOPICS
 from pipeline.model import transforms
+from pipeline.model.chain import then_joint_motions
 from pipeline.model.frames import tf_edges
 from pipeline.robots.spec import RobotSpec
 from pipeline.sim.result import EpisodeResult, TrajectorySamples
@@ -364,10 +365,9 @@ def tf_poses(
 ) -> tuple[list[tuple[str, str]], NDArray[np.float64], NDArray[np.float64]]:
     """URDF link transforms for M joint configurations, vectorized.
 
-    Every revolute edge of :func:`pipeline.model.frames.tf_edges` is a constant transform
-    followed by Rz(q_i) (the flange edge is constant), so the translation is constant and the
-    rotation quaternion is the constant one times (cos(q/2), 0, 0, sin(q/2)). The factorization
-    is checked against ``tf_edges`` at a probe configuration.
+    Every joint edge of :func:`pipeline.model.frames.tf_edges` is its transform at q = 0
+    followed by the joint's motion (a rotation about, or a translation along, its axis:
+    :func:`pipeline.model.chain.then_joint_motions`); the flange edge is constant.
 
     Returns:
         (parent, child) frame pairs; (M, E, 3) translations [m]; (M, E, 4) quaternions
@@ -375,25 +375,18 @@ def tf_poses(
     """
     dof = spec.dof
     base = tf_edges(spec, np.zeros(dof))
-    probe_q = np.linspace(0.3, 1.3, dof)
-    for i, (edge0, edge) in enumerate(zip(base, tf_edges(spec, probe_q), strict=True)):
-        joint = transforms.rot_z(probe_q[i]) if i < dof else np.eye(4)
-        if not np.allclose(edge0.parent_T_child @ joint, edge.parent_T_child, atol=1e-12):
-            raise AssertionError("tf_edges is no longer constant @ Rz(q_i); update tf_poses")
     frames = [(e.parent, e.child) for e in base]
     m, edges = q.shape[0], len(base)
     translation = np.empty((m, edges, 3))
     quat_wxyz = np.empty((m, edges, 4))
     for i, edge in enumerate(base):
-        translation[:, i, :] = edge.parent_T_child[:3, 3]
-        w1, x1, y1, z1 = transforms.quat_wxyz(edge.parent_T_child[:3, :3])
         if i < dof:
-            c, s = np.cos(0.5 * q[:, i]), np.sin(0.5 * q[:, i])
-            quat_wxyz[:, i] = np.stack(
-                [w1 * c - z1 * s, x1 * c + y1 * s, y1 * c - x1 * s, z1 * c + w1 * s], axis=1
+            translation[:, i], quat_wxyz[:, i] = then_joint_motions(
+                edge.parent_T_child, spec.joints[i], q[:, i]
             )
         else:
-            quat_wxyz[:, i] = (w1, x1, y1, z1)
+            translation[:, i, :] = edge.parent_T_child[:3, 3]
+            quat_wxyz[:, i] = transforms.quat_wxyz(edge.parent_T_child[:3, :3])
     quat_wxyz *= np.where(quat_wxyz[..., :1] < 0, -1.0, 1.0)
     return frames, translation, quat_wxyz[..., [1, 2, 3, 0]]
 

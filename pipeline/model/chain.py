@@ -18,7 +18,17 @@ from numpy.typing import NDArray
 from pipeline.model import transforms as tf
 from pipeline.robots.spec import IDENTITY, JointSpec, RobotSpec, Segment, pose_matrix
 
-__all__ = ["BASE_LINK", "FLANGE", "ChainLink", "Segment", "chain", "joint_motion", "link_name"]
+__all__ = [
+    "BASE_LINK",
+    "FLANGE",
+    "ChainLink",
+    "Segment",
+    "chain",
+    "joint_motion",
+    "joint_motions",
+    "link_name",
+    "then_joint_motions",
+]
 
 
 @dataclass(frozen=True)
@@ -65,12 +75,60 @@ def chain_arrays(
 
 def joint_motion(joint: JointSpec, q: float) -> NDArray[np.float64]:
     """The joint's motion at ``q``: a rotation about (revolute, continuous) or a translation
-    along (prismatic) its axis [rad or m]."""
+    along (prismatic) its axis [rad or m]. :func:`joint_motions` is the same for many ``q``."""
+    return tf.motion(joint.kind, joint.axis, q)
+
+
+def joint_motions(
+    joint: JointSpec, q: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`joint_motion` at each of the N values ``q`` [rad or m]: rotations (N, 3, 3) and
+    translations (N, 3) (identity and zero for the part the joint's kind does not move)."""
+    qs = np.asarray(q, dtype=float).reshape(-1)
+    n = qs.shape[0]
+    axis = np.array(joint.axis, dtype=float)
     if joint.kind == "prismatic":
-        return tf.trans(*(q * np.array(joint.axis)))
+        return np.broadcast_to(np.eye(3), (n, 3, 3)).copy(), qs[:, None] * axis
+    c, s = np.cos(qs)[:, None, None], np.sin(qs)[:, None, None]
     if joint.axis == (0.0, 0.0, 1.0):
-        return tf.rot_z(q)
-    return tf.rot_axis(np.array(joint.axis), q)
+        rot = np.zeros((n, 3, 3))
+        rot[:, 0, 0], rot[:, 0, 1] = c[:, 0, 0], -s[:, 0, 0]
+        rot[:, 1, 0], rot[:, 1, 1] = s[:, 0, 0], c[:, 0, 0]
+        rot[:, 2, 2] = 1.0
+        return rot, np.zeros((n, 3))
+    x, y, z = joint.axis
+    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    return np.eye(3) + s * k + (1.0 - c) * (k @ k), np.zeros((n, 3))
+
+
+def then_joint_motions(
+    fixed: NDArray[np.float64], joint: JointSpec, q: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``fixed @ joint_motion(joint, q_k)`` for each of the N values ``q`` as translations
+    (N, 3) [m] and unit quaternions (N, 4) (w, x, y, z): the quaternion of a rotation by
+    ``q`` about the unit axis ``u`` is (cos(q/2), u sin(q/2)), composed with ``fixed``'s
+    (Hamilton product); a prismatic joint moves the translation along ``fixed``'s
+    rotation of its axis."""
+    qs = np.asarray(q, dtype=float).reshape(-1)
+    n = qs.shape[0]
+    w1, x1, y1, z1 = tf.quat_wxyz(fixed[:3, :3])
+    quat = np.empty((n, 4))
+    translation = np.broadcast_to(fixed[:3, 3], (n, 3)).copy()
+    if joint.kind == "prismatic":
+        translation += qs[:, None] * (fixed[:3, :3] @ np.array(joint.axis, dtype=float))
+        quat[:] = (w1, x1, y1, z1)
+        return translation, quat
+    c, s = np.cos(0.5 * qs), np.sin(0.5 * qs)
+    if joint.axis == (0.0, 0.0, 1.0):  # the common case, in fewer operations
+        quat[:, 0], quat[:, 1] = w1 * c - z1 * s, x1 * c + y1 * s
+        quat[:, 2], quat[:, 3] = y1 * c - x1 * s, z1 * c + w1 * s
+        return translation, quat
+    a, b, d = (u * s for u in joint.axis)
+    quat[:, 0] = w1 * c - x1 * a - y1 * b - z1 * d
+    quat[:, 1] = w1 * a + x1 * c + y1 * d - z1 * b
+    quat[:, 2] = w1 * b - x1 * d + y1 * c + z1 * a
+    quat[:, 3] = w1 * d + x1 * b - y1 * a + z1 * c
+    return translation, quat
 
 
 def is_identity(pose: object) -> bool:

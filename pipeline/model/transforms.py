@@ -30,6 +30,17 @@ def rot_axis(axis: Mat, angle: float) -> Mat:
     return out
 
 
+def motion(kind: str, axis: tuple[float, float, float], q: float) -> Mat:
+    """The motion of a joint of ``kind`` (revolute, continuous, prismatic) about / along the
+    unit ``axis`` (joint frame) at ``q`` [rad or m], as a 4x4. Every frame computation composes
+    joints through it, or through its batched forms in :mod:`pipeline.model.chain`."""
+    if kind == "prismatic":
+        return trans(*(q * np.array(axis, dtype=float)))
+    if tuple(axis) == (0.0, 0.0, 1.0):
+        return rot_z(q)
+    return rot_axis(np.array(axis, dtype=float), q)
+
+
 def trans(x: float, y: float, z: float) -> Mat:
     out = np.eye(4)
     out[:3, 3] = (x, y, z)

@@ -374,12 +374,6 @@ def _choose_tip(
 URDF_DYNAMICS = "URDF <dynamics>"
 
 
-def _motion(joint: _Joint, q: float) -> F64:
-    if joint.kind == "prismatic":
-        return tf.trans(*(q * np.array(joint.axis)))
-    return tf.rot_axis(np.array(joint.axis), q)
-
-
 def load_urdf(
     path: Path, *, package_path: tuple[str, ...] = (), settings: dict[str, Any] | None = None,
     settings_source: str | None = None,
@@ -452,7 +446,7 @@ def load_urdf(
                 chain_origin[j.name] = own_T @ j.origin
                 owner[j.child] = (j.child, np.eye(4))
             else:
-                motion = _motion(j, locked_q(j)) if j.kind in MOVABLE else np.eye(4)
+                motion = tf.motion(j.kind, j.axis, locked_q(j)) if j.kind in MOVABLE else np.eye(4)
                 owner[j.child] = (own, own_T @ j.origin @ motion)
             stack.append(j.child)
 

@@ -11,6 +11,7 @@ import os
 import re
 import shutil
 import time
+import traceback
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -53,6 +54,14 @@ def failed_outcome(name: str, reason: str, wall_s: float = 0.0) -> EpisodeOutcom
     return EpisodeOutcome(name, "failed", reason, "", float("nan"), float("nan"), 0.0, wall_s)
 
 
+def internal_error(err: BaseException) -> str:
+    """The one-line reason of an episode stopped by an error that is no
+    :class:`~pipeline.errors.PipelineError` (a bug), with where it was raised."""
+    frames = traceback.extract_tb(err.__traceback__)
+    where = f" at {Path(frames[-1].filename).name}:{frames[-1].lineno}" if frames else ""
+    return f"internal error{where}: {type(err).__name__}: {err} (a bug: please report it)"
+
+
 def run_one(
     episode: Episode,
     plan: ScenarioPlan,
@@ -63,7 +72,8 @@ def run_one(
     progress: Callable[[float], None] | None = None,
     before_write: Callable[[], None] | None = None,
 ) -> EpisodeOutcome:
-    """Run one episode and write its bag. Errors become a failed outcome, not a raise.
+    """Run one episode and write its bag. Errors become a failed outcome, not a raise (an
+    unexpected one too, so at ``-j 1`` the run's other episodes still run and keep theirs).
 
     ``before_write`` runs after the simulation, right before the bag is written and
     published (a pool worker exits there if its parent is gone).
@@ -91,6 +101,8 @@ def run_one(
         else:
             reason = str(err)
         return failed_outcome(episode.name, reason, time.perf_counter() - wall0)
+    except Exception as err:  # a bug: this episode fails alone, the run's others go on
+        return failed_outcome(episode.name, internal_error(err), time.perf_counter() - wall0)
     return EpisodeOutcome(**{**asdict(outcome), "wall_s": time.perf_counter() - wall0})
 
 
