@@ -33,11 +33,15 @@ def _descendants(pid: int) -> list[object]:
         return []
 
 
+def _recorded(out: Path) -> bool:
+    return any(p.is_dir() and not p.name.startswith(".") for p in out.glob("c/*"))
+
+
 @pytest.mark.slow
 def test_killing_rays_dashboard_agent_ends_the_run_in_one_line(tmp_path: Path) -> None:
     pytest.importorskip("ray")
     psutil = pytest.importorskip("psutil")
-    params = _params(tmp_path, {"scenario": "paper", "controllers": ["pid", "ctc"], "seeds": 20})
+    params = _params(tmp_path, {"scenario": "paper", "controllers": ["pid", "ctc"], "seeds": 150})
     out = tmp_path / "rec"
     proc = subprocess.Popen(
         [*PIPELINE, "record", "--params", str(params), "--out", str(out), "--campaign", "c",
@@ -57,7 +61,11 @@ def test_killing_rays_dashboard_agent_ends_the_run_in_one_line(tmp_path: Path) -
                     continue
             time.sleep(0.2)
         assert agent is not None, "no Ray dashboard agent appeared"
-        time.sleep(2.0)  # let the run get going
+        # let the run get going: its first episode recorded (on a loaded machine Ray may take a
+        # minute to start); 300 episodes cannot all finish before Ray notices the agent's death
+        while time.monotonic() < deadline and proc.poll() is None and not _recorded(out):
+            time.sleep(0.2)
+        assert proc.poll() is None, "the run ended before the agent was killed"
         agent.kill()
         _, stderr = proc.communicate(timeout=120)
     finally:
