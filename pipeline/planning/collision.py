@@ -389,9 +389,27 @@ class CollisionChecker:
         if pairs:
             shown = "; ".join(f"{a} touches {b}" for a, b in pairs)
             raise PlanningError(
-                f"{what} is in collision ({shown}); expected a collision-free configuration"
+                f"{what} is in collision ({shown}); expected a collision-free configuration "
+                f"({self.pairs_note(pairs[0])})"
             )
         return arr
+
+    def pairs_note(self, pair: tuple[str, str]) -> str:
+        """Why ``pair`` is checked at all: the SRDF used (which file) or that there is none."""
+        if not all(name in self.spec_bodies for name in pair):
+            return f"{pair[0]}-{pair[1]} is a robot-world pair"
+        source = self.spec.collision_pairs_source
+        if source.startswith("SRDF "):
+            return f"the pair {pair[0]}-{pair[1]} is not disabled by {source}"
+        return (
+            f"the pair {pair[0]}-{pair[1]} is checked; {source} (`pipeline robots "
+            "collision-matrix` writes one)"
+        )
+
+    @functools.cached_property
+    def spec_bodies(self) -> frozenset[str]:
+        """The robot's body names (base and joint links)."""
+        return frozenset((self.spec.base_link, *(j.link_name for j in self.spec.joints)))
 
     def planning_padding_m(self, start: F64, goal: F64) -> float:
         """Padding [m] for planning between ``start`` and ``goal`` (both collision-free).
@@ -413,7 +431,8 @@ class CollisionChecker:
                     assert pair is not None
                     raise PlanningError(
                         f"{what}: {pair[0]} is {dist * 1e3:.2f} mm from {pair[1]}; expected at "
-                        f"least {2e3 * MIN_PADDING_M:.0f} mm clearance for planning"
+                        f"least {2e3 * MIN_PADDING_M:.0f} mm clearance for planning "
+                        f"({self.pairs_note(pair)})"
                     )
                 padding = min(padding, dist / 2.0)
         finally:
