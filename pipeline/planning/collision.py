@@ -126,6 +126,10 @@ def _coarse_prefix(n_steps: int, count: int) -> tuple[int, ...]:
     return tuple(order)
 
 
+def _parenthesised(note: str) -> str:
+    return f" ({note})" if note else ""
+
+
 _PROBES = 6  # states a motion checks one by one before generating all of them
 
 
@@ -389,15 +393,15 @@ class CollisionChecker:
         if pairs:
             shown = "; ".join(f"{a} touches {b}" for a, b in pairs)
             raise PlanningError(
-                f"{what} is in collision ({shown}); expected a collision-free configuration "
-                f"({self.pairs_note(pairs[0])})"
+                f"{what} is in collision ({shown}); expected a collision-free configuration"
+                + _parenthesised(self.pairs_note(pairs[0]))
             )
         return arr
 
     def pairs_note(self, pair: tuple[str, str]) -> str:
         """Why ``pair`` is checked at all: the SRDF used (which file) or that there is none."""
         if not all(name in self.spec_bodies for name in pair):
-            return f"{pair[0]}-{pair[1]} is a robot-world pair"
+            return ""  # the ground, the pedestal or an obstacle: no SRDF disables it
         source = self.spec.collision_pairs_source
         if source.startswith("SRDF "):
             return f"the pair {pair[0]}-{pair[1]} is not disabled by {source}"
@@ -431,8 +435,8 @@ class CollisionChecker:
                     assert pair is not None
                     raise PlanningError(
                         f"{what}: {pair[0]} is {dist * 1e3:.2f} mm from {pair[1]}; expected at "
-                        f"least {2e3 * MIN_PADDING_M:.0f} mm clearance for planning "
-                        f"({self.pairs_note(pair)})"
+                        f"least {2e3 * MIN_PADDING_M:.0f} mm clearance for planning"
+                        + _parenthesised(self.pairs_note(pair))
                     )
                 padding = min(padding, dist / 2.0)
         finally:
