@@ -161,18 +161,21 @@ def test_the_matrix_disables_every_pair_the_shipped_srdf_marks_adjacent(panda_ma
     assert agree >= 0.8 * len(shipped)
 
 
-def _fcl_collisions(spec, configurations):
-    """Colliding link pairs per configuration, from Pinocchio + FCL on the URDF's real
-    collision meshes (every pair, nothing disabled): independent of MuJoCo."""
+def _fcl_collisions(spec, configurations, pairs):
+    """The link ``pairs`` colliding in any of the configurations, from Pinocchio + FCL on
+    the URDF's real collision meshes (nothing disabled): independent of MuJoCo."""
     import pinocchio as pin
 
     assert ERD is not None
     model, geoms = pin.buildModelsFromUrdf(
         spec.source, package_dirs=[str(ERD.parent)], geometry_types=pin.GeometryType.COLLISION
     )  # type: ignore[misc]
-    geoms.addAllCollisionPairs()
-    data, gdata = model.createData(), pin.GeometryData(geoms)
     link_of = [model.frames[g.parentFrame].name for g in geoms.geometryObjects]
+    for i in range(len(link_of)):
+        for j in range(i + 1, len(link_of)):
+            if (min(link_of[i], link_of[j]), max(link_of[i], link_of[j])) in pairs:
+                geoms.addCollisionPair(pin.CollisionPair(i, j))
+    data, gdata = model.createData(), pin.GeometryData(geoms)
     arm = [model.getJointId(name) for name in spec.joint_names]
     found = set()
     for q_arm in configurations:
@@ -197,9 +200,9 @@ def test_the_matrix_disables_no_pair_seen_in_collision(panda_matrix, tmp_path):
     counts = dict(matrix.collision_counts)
     assert all(counts[pair] == 0 for pair in never)
     # an independent query on the matrix's own samples and on fresh ones
-    own = sample_configurations(spec, 10_000, 3)[:300]
-    fresh = sample_configurations(spec, 300, 12345)
-    seen = _fcl_collisions(spec, np.vstack([own, fresh]))
+    own = sample_configurations(spec, 10_000, 3)[:150]
+    fresh = sample_configurations(spec, 250, 12345)
+    seen = _fcl_collisions(spec, np.vstack([own, fresh]), never | set(matrix.checked))
     assert seen, "the samples must hit some self-collisions"
     assert not seen & never
     assert seen & set(matrix.checked)  # the pairs MuJoCo saw colliding stay checked
@@ -228,3 +231,24 @@ def test_write_srdf_refuses_an_existing_file_without_force(tmp_path):
 def test_a_robot_without_collision_geometry_has_no_matrix():
     with pytest.raises(SpecError, match="no collision geometry"):
         collision_matrix(load_spec("ur5"), samples=10)
+
+
+@needs_erd
+def test_the_command_writes_an_srdf_the_loader_reads(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from pipeline.cli import app
+
+    urdf = _panda_without_srdf(tmp_path)
+    out = tmp_path / "panda.srdf"
+    argv = ["robots", "collision-matrix", str(urdf), "--out", str(out), "--samples", "300"]
+    result = CliRunner().invoke(app, [*argv, "--json"])
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout)
+    assert summary["disabled"]["Adjacent"] == 10 and summary["samples"] == 300
+    assert set(_srdf_pairs(out).values()) <= {"Adjacent", "Default", "Always", "Never"}
+    assert load_urdf(urdf).collision_pairs_source == f"SRDF {out}"
+    again = CliRunner().invoke(app, argv)
+    assert again.exit_code != 0 and "pass --force" in str(again.exception)
