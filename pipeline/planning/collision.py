@@ -406,8 +406,8 @@ class CollisionChecker:
         if source.startswith("SRDF "):
             return f"the pair {pair[0]}-{pair[1]} is not disabled by {source}"
         return (
-            f"the pair {pair[0]}-{pair[1]} is checked; {source} (`pipeline robots "
-            "collision-matrix` writes one)"
+            f"the pair {pair[0]}-{pair[1]} is checked; {source}; `pipeline robots "
+            "collision-matrix` writes an SRDF"
         )
 
     @functools.cached_property

@@ -73,9 +73,9 @@ def test_a_panda_urdf_without_its_srdf_plans(tmp_path):
         assert base not in bodies or model.body("panda_link1").id not in bodies
 
 
-def _box_link(name: str, z: float, half: float = 0.05) -> str:
+def _box_link(name: str, z: float, half: float = 0.05, x: float = 0.0) -> str:
     return (
-        f'<link name="{name}"><collision><origin xyz="0 0 {z}"/><geometry>'
+        f'<link name="{name}"><collision><origin xyz="{x} 0 {z}"/><geometry>'
         f'<box size="{2 * half} {2 * half} {2 * half}"/></geometry></collision>'
         '<inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" '
         'ixz="0" iyz="0"/></inertial></link>'
@@ -90,16 +90,16 @@ def _revolute(name: str, parent: str, child: str, z: float) -> str:
     )
 
 
-def _plate_robot(tmp_path: Path, *, link2_z: float) -> Path:
+def _plate_robot(tmp_path: Path, *, link2_z: float, x: float = 0.0) -> Path:
     """base -(fixed)- plate -(revolute)- link1 -(revolute)- link2, each link a box touching
     the next: the plate merges into the base body, and link1 is its joint's child."""
     urdf = tmp_path / "plate.urdf"
     urdf.write_text(
         '<robot name="plate">'
-        + _box_link("base", 0.05)
+        + _box_link("base", 0.05, x=x)
         + _box_link("plate", 0.0, half=0.06)
         + _box_link("link1", 0.05)
-        + _box_link("link2", link2_z)
+        + _box_link("link2", link2_z, x=x)
         + '<joint name="mount" type="fixed"><parent link="base"/><child link="plate"/>'
         '<origin xyz="0 0 0.15"/></joint>'
         + _revolute("j1", "plate", "link1", 0.06)
@@ -129,6 +129,20 @@ def test_a_clearance_error_names_the_pair_and_says_no_srdf_was_used(tmp_path):
     message = str(err.value)
     assert "base touches link2" in message and "no SRDF" in message
     assert "\n" not in message
+
+
+def test_a_start_too_near_names_the_pair_and_says_no_srdf_was_used(tmp_path):
+    # beside the stack, link2's box ends 1 mm above the base's (link2's frame is 0.31 m up)
+    spec = load_spec(str(_plate_robot(tmp_path, link2_z=-0.159, x=0.2)))
+    q = np.zeros(2)
+    assert CollisionChecker(spec).contacts(q) == []
+    with pytest.raises(PlanningError) as err:
+        plan_path(spec, start=q, goal=np.array([0.0, 1.0]), seed=0)
+    assert str(err.value) == (
+        "start: base is 1.00 mm from link2; expected at least 2 mm clearance for planning "
+        "(the pair base-link2 is checked; no SRDF: adjacent links and links touching at "
+        "q = 0 are not checked; `pipeline robots collision-matrix` writes an SRDF)"
+    )
 
 
 @needs_erd
