@@ -71,13 +71,22 @@ class PoseGoal(_Strict):
 
 
 class Goal(_Strict):
+    """Joint positions, a flange pose, or the name of one of the robot's SRDF named states
+    (``goal: ready`` is short for ``goal: {state: ready}``)."""
+
     joints: list[float] | None = None
     pose: PoseGoal | None = None
+    state: str | None = Field(default=None, min_length=1)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _named(cls, data: Any) -> Any:
+        return {"state": data} if isinstance(data, str) else data
 
     @model_validator(mode="after")
     def _one_kind(self) -> Goal:
-        if (self.joints is None) == (self.pose is None):
-            raise ValueError("give exactly one of joints or pose")
+        if sum(v is not None for v in (self.joints, self.pose, self.state)) != 1:
+            raise ValueError("give exactly one of joints or pose, or a named state (goal: ready)")
         return self
 
 
@@ -150,7 +159,7 @@ class LoopParams(_Strict):
 
 class ScenarioParams(_Strict):
     robot: str = Field(min_length=1)
-    start: list[float]
+    start: list[float] | Annotated[str, Field(min_length=1)]  # joints, or a named state
     goal: Goal
     obstacles: list[BoxParams] = []
     planner: PlannerParams = PlannerParams()

@@ -108,6 +108,21 @@ PARAMS_CASES: list[tuple[str, Callable[[dict[str, Any]], None], str]] = [
     ("start-nan", _set("scenarios.paper.start", [float("nan")] * 6), "scenarios.paper.start"),
     ("start-len", _set("scenarios.paper.start", [0.0] * 5), "expected 6 values"),
     ("start-limits", _set("scenarios.paper.start", [7.0] + [0.0] * 5), "outside"),
+    (
+        "start-named-unknown",
+        _set("scenarios.paper.start", "ready"),
+        "scenarios.paper.start: robot ur5 (no SRDF) defines no state 'ready'; defined: none",
+    ),
+    (
+        "goal-named-unknown",
+        _set("scenarios.paper.goal", "ready"),
+        "scenarios.paper.goal: robot ur5 (no SRDF) defines no state 'ready'",
+    ),
+    (
+        "goal-named-and-joints",
+        _set("scenarios.paper.goal", {"state": "a", "joints": [0.0] * 6}),
+        "exactly one of joints or pose, or a named state",
+    ),
     ("start-strings", _set("scenarios.paper.start", ["a"] * 6), "scenarios.paper.start"),
     ("goal-inf", _set("scenarios.paper.goal", {"joints": [float("inf")] * 6}), "goal"),
     (
@@ -354,6 +369,17 @@ def test_ik_check_refuses_a_bad_out_before_working(tmp_path, capsys):
     assert_one_line(code, err, "--out is a file")
     code, err = run_cli(["ik-check", "ur5", "--samples", "5", "--out", "/proc/no/such"], capsys)
     assert_one_line(code, err, "cannot create the --out directory")
+
+
+def test_a_collision_matrix_without_collision_geometry_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "ur5.srdf"
+    code, err = run_cli(["robots", "collision-matrix", "ur5", "--out", str(out)], capsys)
+    assert_one_line(code, err, "robot 'ur5' has no collision geometry")
+    assert list(tmp_path.iterdir()) == []
+    out.write_text("mine")
+    code, err = run_cli(["robots", "collision-matrix", "ur5", "--out", str(out)], capsys)
+    assert_one_line(code, err, "the file exists; pass --force")
+    assert out.read_text() == "mine"
 
 
 def test_ik_normalises_a_huge_quaternion_without_overflow(capsys):

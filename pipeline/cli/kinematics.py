@@ -15,11 +15,24 @@ from pipeline.errors import PipelineError
 MAX_IK_CHECK_SAMPLES = 1_000_000
 
 
-@app.command("robots")
+robots_app = typer.Typer(
+    invoke_without_command=True, no_args_is_help=False, pretty_exceptions_enable=False
+)
+app.add_typer(robots_app, name="robots")
+
+
+@robots_app.callback()
 def robots_cmd(
+    ctx: typer.Context,
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
-    """List the built-in robots: name, DOF, format (DH convention or URDF), dynamics given."""
+    """List the built-in robots: name, DOF, format (DH convention or URDF), dynamics given.
+
+    `pipeline robots collision-matrix ARM.urdf --out ARM.srdf` writes a robot's
+    disabled-collision pairs as an SRDF.
+    """
+    if ctx.invoked_subcommand is not None:
+        return
     from pipeline.errors import SpecError
     from pipeline.robots import RobotSpec, builtin_robot_names, load_spec
 
@@ -54,6 +67,85 @@ def robots_cmd(
     console.print(table)
     for n, why in missing.items():
         console.print(f"{n}: unavailable: {why}", markup=False)
+
+
+@robots_app.command("collision-matrix")
+def collision_matrix_cmd(
+    robot: Annotated[str, typer.Argument(help=ROBOT_HELP, show_default=False)],
+    out: Annotated[
+        str,
+        typer.Option(
+            "--out",
+            "-o",
+            help="SRDF file to write (refused if it exists, unless --force).",
+            show_default=False,
+        ),
+    ],
+    samples: Annotated[
+        int,
+        typer.Option(
+            "--samples",
+            min=1,
+            max=10_000_000,
+            help="Configurations sampled, uniform within the joint limits (MoveIt Setup "
+            "Assistant's default density).",
+        ),
+    ] = 10_000,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of the samples.")] = 0,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite --out.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Disabled-collision matrix as MoveIt's Setup Assistant computes it, written as SRDF.
+
+    Among the links with collision geometry, a pair is disabled as Adjacent (a joint's
+    parent and child; a link without geometry joins its neighbours), Default (in collision
+    at the default pose: 0, or mid-range where 0 is outside the limits), Always (in
+    collision in >= 95 % of the samples) or Never (in none). Collisions are MuJoCo's,
+    meshes as convex hulls. Save it as ARM.srdf beside ARM.urdf and the URDF loader uses it.
+    """
+    from pathlib import Path
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+    from pipeline.planning.collision_matrix import check_out_path, collision_matrix, write_srdf
+    from pipeline.robots import load_spec
+
+    out_path = Path(out)
+    check_out_path(out_path, force=force)  # before the work
+    spec = load_spec(robot)
+    with Progress(
+        TextColumn("collision-matrix {task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        console=Console(stderr=True),
+        transient=True,
+        disable=as_json,
+    ) as bars:
+        task = bars.add_task(spec.name, total=samples)
+        matrix = collision_matrix(
+            spec, samples=samples, seed=seed, progress=lambda n: bars.advance(task, n)
+        )
+    write_srdf(matrix, out_path, force=force)
+    counts = {r: matrix.count(r) for r in ("Adjacent", "Default", "Always", "Never")}
+    if as_json:
+        print_json(
+            {
+                "robot": matrix.robot,
+                "srdf": str(out_path),
+                "links": len(matrix.links),
+                "samples": matrix.samples,
+                "seed": matrix.seed,
+                "disabled": counts,
+                "checked_pairs": [list(p) for p in matrix.checked],
+            }
+        )
+        return
+    shown = ", ".join(f"{n} {r}" for r, n in counts.items())
+    console.print(
+        f"{matrix.robot}: {len(matrix.links)} links with geometry, {len(matrix.disabled)} "
+        f"pairs disabled ({shown}), {len(matrix.checked)} checked; wrote {out_path}",
+        markup=False,
+    )
 
 
 def _joint_list(text: str, option: str) -> list[float]:

@@ -2,7 +2,8 @@
 
 Body i sits at DH frame i, so link inertias from the YAML go in unchanged and
 the ``tool0`` site is the DH flange frame. Collision filtering by bit masks:
-robot links collide with each other (MuJoCo already skips parent/child pairs),
+robot links collide with each other except a joint's parent and child (excluded
+explicitly: MuJoCo's own parent/child filter skips the base, welded to the world),
 links 2..n with the ground, and every link with obstacles.
 """
 
@@ -105,13 +106,16 @@ def build_mjcf(
     excluded_pairs: Sequence[tuple[str, str]] | None = None,
     obstacle_bounds: bool = False,
     integrator: str = PLANT_INTEGRATOR,
+    exclude_adjacent: bool = True,
 ) -> str:
     """MJCF text for the robot on a pedestal, floor at ``FLOOR_Z_M``.
 
-    Link pairs that touch in the zero pose (e.g. the two links either side of
-    a spherical wrist) are excluded from collision, as MoveIt Setup
-    Assistant disables "default" collisions; pass ``excluded_pairs`` to
-    override.
+    The parent and child of every joint (:attr:`RobotSpec.adjacent_pairs`, the base and
+    the first link included) are always excluded from collision. Beyond them: the SRDF's
+    disabled pairs, else the link pairs that touch in the zero pose (e.g. the two links
+    either side of a spherical wrist), as MoveIt Setup Assistant disables "default"
+    collisions; pass ``excluded_pairs`` to override those (and ``exclude_adjacent=False``
+    for no exclusion at all: the collision matrix's model).
 
     With ``obstacle_bounds`` (collision checking, not the plant) each box leaves
     MuJoCo's collision pipeline (contype = conaffinity = 0; it stays in the model
@@ -242,11 +246,15 @@ def build_mjcf(
             for (file, scale), name in meshes.items()
         ] + ["  </asset>"]
     if excluded_pairs is not None:
-        pairs = excluded_pairs
+        chosen: Sequence[tuple[str, str]] = excluded_pairs
     elif spec.disabled_pairs is not None:
-        pairs = spec.disabled_pairs
+        chosen = spec.disabled_pairs
     else:
-        pairs = default_collision_pairs(spec)
+        chosen = default_collision_pairs(spec)
+    # a joint's parent and child never collide: MuJoCo skips them itself (filterparent)
+    # except where the parent is welded to the world, as the base is
+    adjacent = spec.adjacent_pairs if exclude_adjacent else ()
+    pairs = sorted({*(tuple(sorted(p)) for p in chosen), *adjacent})
     if pairs:
         out.append("  <contact>")
         out.extend(f"    <exclude body1={quoteattr(a)} body2={quoteattr(b)}/>" for a, b in pairs)

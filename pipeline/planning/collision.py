@@ -126,6 +126,10 @@ def _coarse_prefix(n_steps: int, count: int) -> tuple[int, ...]:
     return tuple(order)
 
 
+def _parenthesised(note: str) -> str:
+    return f" ({note})" if note else ""
+
+
 _PROBES = 6  # states a motion checks one by one before generating all of them
 
 
@@ -390,8 +394,26 @@ class CollisionChecker:
             shown = "; ".join(f"{a} touches {b}" for a, b in pairs)
             raise PlanningError(
                 f"{what} is in collision ({shown}); expected a collision-free configuration"
+                + _parenthesised(self.pairs_note(pairs[0]))
             )
         return arr
+
+    def pairs_note(self, pair: tuple[str, str]) -> str:
+        """Why ``pair`` is checked at all: the SRDF used (which file) or that there is none."""
+        if not all(name in self.spec_bodies for name in pair):
+            return ""  # the ground, the pedestal or an obstacle: no SRDF disables it
+        source = self.spec.collision_pairs_source
+        if source.startswith("SRDF "):
+            return f"the pair {pair[0]}-{pair[1]} is not disabled by {source}"
+        return (
+            f"the pair {pair[0]}-{pair[1]} is checked; {source}; `pipeline robots "
+            "collision-matrix` writes an SRDF"
+        )
+
+    @functools.cached_property
+    def spec_bodies(self) -> frozenset[str]:
+        """The robot's body names (base and joint links)."""
+        return frozenset((self.spec.base_link, *(j.link_name for j in self.spec.joints)))
 
     def planning_padding_m(self, start: F64, goal: F64) -> float:
         """Padding [m] for planning between ``start`` and ``goal`` (both collision-free).
@@ -414,6 +436,7 @@ class CollisionChecker:
                     raise PlanningError(
                         f"{what}: {pair[0]} is {dist * 1e3:.2f} mm from {pair[1]}; expected at "
                         f"least {2e3 * MIN_PADDING_M:.0f} mm clearance for planning"
+                        + _parenthesised(self.pairs_note(pair))
                     )
                 padding = min(padding, dist / 2.0)
         finally:

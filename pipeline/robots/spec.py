@@ -10,6 +10,7 @@ metres, kilograms and newton-metres.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import re
 from dataclasses import dataclass
 from typing import Annotated, Any, Literal
@@ -138,6 +139,9 @@ class Shape:
     pose: Pose
     size: tuple[float, ...]
     mesh: str = ""
+    link: str = ""
+    """The description's link the shape belongs to (a URDF link merged into this body
+    keeps its own name here); empty: the body's own."""
 
 
 @dataclass(frozen=True)
@@ -300,6 +304,24 @@ class RobotSpec:
         """The DH rows of a robot given as DH (provenance), None for any other robot."""
         rows = tuple(j.dh for j in self.joints if j.dh is not None)
         return rows if self.convention is not None and len(rows) == self.dof else None
+
+    @property
+    def adjacent_pairs(self) -> tuple[tuple[str, str], ...]:
+        """The parent and child body of every joint (the base and the first link included),
+        sorted: never a collision pair, with or without an SRDF (a link merged into its
+        parent through a fixed or locked joint is that body, so its own joints join it
+        or its neighbours)."""
+        bodies = [self.base_link, *(j.link_name for j in self.joints)]
+        return tuple((min(a, b), max(a, b)) for a, b in itertools.pairwise(bodies) if a != b)
+
+    @property
+    def collision_pairs_source(self) -> str:
+        """Which link pairs collision checks skip, and from where (an SRDF, or the rule
+        used without one)."""
+        return dict(self.settings_sources).get(
+            "collision_pairs",
+            "no SRDF: adjacent links and links touching at q = 0 are not checked",
+        )
 
     def reach_m(self, first: int = 0) -> float:
         """The summed link lengths (:attr:`JointSpec.length_m`) of joints ``first`` onwards

@@ -466,7 +466,13 @@ def load_urdf(
             if kind == "mesh" and Path(mesh).suffix.lower() not in MESH_SUFFIXES:
                 continue  # MuJoCo cannot read it: the link keeps its capsules
             shapes.setdefault(own, []).append(
-                Shape(kind=kind, pose=as_pose(own_T @ pose), size=size, mesh=mesh)  # type: ignore[arg-type]
+                Shape(
+                    kind=kind,  # type: ignore[arg-type]
+                    pose=as_pose(own_T @ pose),
+                    size=size,
+                    mesh=mesh,
+                    link=link_name,
+                )
             )
         if own != link_name:
             frames.append(Frame(name=link_name, link=own, pose=as_pose(own_T)))

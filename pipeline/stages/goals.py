@@ -32,11 +32,35 @@ def _joint_vector(
     return q
 
 
+def _named(spec: RobotSpec, name: str, *, source: str, path: str) -> list[float]:
+    """An SRDF named state's joint positions [rad]; one line listing the defined ones."""
+    states = dict(spec.named_states)
+    if name not in states:
+        known = ", ".join(sorted(states)) or "none"
+        pairs = spec.collision_pairs_source
+        srdf = pairs if pairs.startswith("SRDF ") else "no SRDF"
+        raise _field(
+            source, path, f"robot {spec.name} ({srdf}) defines no state {name!r}; defined: {known}"
+        )
+    return list(states[name])
+
+
 def resolve_goal(
     spec: RobotSpec, scenario: ScenarioParams, *, name: str, source: str
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Start and goal joint vectors; a Cartesian goal is solved by IK, nearest the start."""
-    start = _joint_vector(scenario.start, spec, source=source, path=f"scenarios.{name}.start")
+    """Start and goal joint vectors; a named state (``start: ready``) comes from the robot's
+    SRDF, a Cartesian goal is solved by IK, nearest the start."""
+    start_path = f"scenarios.{name}.start"
+    start_q = (
+        _named(spec, scenario.start, source=source, path=start_path)
+        if isinstance(scenario.start, str)
+        else scenario.start
+    )
+    start = _joint_vector(start_q, spec, source=source, path=start_path)
+    if scenario.goal.state is not None:
+        goal_path = f"scenarios.{name}.goal"
+        goal_q = _named(spec, scenario.goal.state, source=source, path=goal_path)
+        return start, _joint_vector(goal_q, spec, source=source, path=goal_path)
     if scenario.goal.joints is not None:
         goal = _joint_vector(
             scenario.goal.joints, spec, source=source, path=f"scenarios.{name}.goal.joints"
