@@ -307,3 +307,72 @@ def check_grid(
         CheckCell(c, j, tuple(fs), tuple(sorted(missing)), n)
         for (c, j), (fs, missing, n) in cells.items()
     )
+
+
+@dataclass(frozen=True)
+class CheckAlert:
+    """A failed physical check that qualifies the comparison: for the report's first screen.
+
+    One alert per check and set of joints; the controllers failing it with those joints.
+
+    Attributes:
+        check: :data:`CONTACTS`, :data:`SATURATION`, :data:`GOAL` or :data:`DEAD_BAND`.
+        controllers: the controllers that fail it (first-seen order).
+        joints: the joints ((), for contacts: the whole arm).
+        worst: the worst value: dead band width [rad], goal miss [rad], share of samples
+            saturated [0-1], deepest contact [m].
+        episodes: in how many of those controllers' episodes it happened.
+        of: how many episodes those controllers have.
+        every_controller: every controller of the report fails it on these joints: there
+            the comparison measures the setup (friction, limits, obstacles), not the laws.
+    """
+
+    check: str
+    controllers: tuple[str, ...]
+    joints: tuple[str, ...]
+    worst: float
+    episodes: int
+    of: int
+    every_controller: bool
+
+
+def _worst(fs: Sequence[Finding]) -> float:
+    values = [
+        f.width_rad if isinstance(f, DeadBandFinding)
+        else f.final_error_rad if isinstance(f, GoalMissFinding)
+        else f.fraction if isinstance(f, SaturationFinding)
+        else f.max_depth_m
+        for f in fs
+    ]  # fmt: skip
+    return max(values)
+
+
+def check_alerts(grid: Sequence[CheckCell]) -> tuple[CheckAlert, ...]:
+    """The failed checks of :func:`check_grid`, grouped by check and joints: dead bands
+    first (they make a joint's error meaningless), then goal misses, saturation, contacts."""
+    kinds = (
+        (DEAD_BAND, DeadBandFinding), (GOAL, GoalMissFinding),
+        (SATURATION, SaturationFinding), (CONTACTS, ContactFinding),
+    )  # fmt: skip
+    controllers = list(dict.fromkeys(c.controller for c in grid))
+    runs = {c.controller: c.episodes for c in grid if c.joint == ""}
+    out: list[CheckAlert] = []
+    for check, kind in kinds:
+        per: dict[str, tuple[list[str], list[Finding]]] = {}
+        for cell in grid:
+            fs = [f for f in cell.findings if isinstance(f, kind)]
+            if fs:
+                joints, found = per.setdefault(cell.controller, ([], []))
+                if cell.joint:
+                    joints.append(cell.joint)
+                found += fs
+        groups: dict[tuple[str, ...], list[str]] = {}
+        for controller, (joint_list, _) in per.items():
+            groups.setdefault(tuple(joint_list), []).append(controller)
+        for key, names in groups.items():
+            fs = [f for c in names for f in per[c][1]]
+            every = len(controllers) > 1 and len(names) == len(controllers)
+            episodes = len({f.episode for f in fs})
+            total = sum(runs.get(c, 0) for c in names)
+            out.append(CheckAlert(check, tuple(names), key, _worst(fs), episodes, total, every))
+    return tuple(out)
