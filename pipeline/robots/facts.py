@@ -125,7 +125,7 @@ def missing_facts(spec: RobotSpec) -> tuple[MissingFact, ...]:
         if armature_unstated and j.armature == 0.0:
             add("armature", "0 kg m^2", "no rotor inertia in the plant or the nominal model: "
                 "inertia-scaled gains rest on the link inertia alone")  # fmt: skip
-        if accel.startswith(("derived", "default")):
+        if accel == NOT_STATED or accel.startswith(("derived", "default")):
             add("acceleration limit", f"{j.limits.acceleration:.3g} rad/s^2 ({accel})", planner)
         if velocity.startswith("default"):
             add("velocity limit", f"{j.limits.velocity:.3g} rad/s ({velocity})", planner)

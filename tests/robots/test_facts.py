@@ -97,3 +97,11 @@ def test_record_warns_about_each_missing_fact_before_running(tmp_path, capsys):
     warnings = [line for line in err.splitlines() if line.startswith("warning: robot 'three'")]
     assert len(warnings) == 2, err
     assert "no armature" in err and "no acceleration limit" in err
+    code, err = run_cli(
+        ["report", "--recordings", str(tmp_path / "rec"), "--out", str(tmp_path / "rep")], capsys
+    )
+    assert code == 0, err
+    text = (tmp_path / "rep" / "report.md").read_text(encoding="utf-8")
+    limits = load_spec(tmp_path / "three.urdf").acceleration_limits
+    shown = ", ".join(f"{a:.3g}" for a in limits)
+    assert f"- Acceleration limits [rad/s²]: [{shown}]; source: {ACCELERATION_RULE}." in text
