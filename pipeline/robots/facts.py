@@ -7,12 +7,16 @@ run on such a robot works, but what stood in for the missing value shapes its nu
 Acceleration limits are not a made-up constant: where the robot's files state none, each
 joint gets :func:`derived_acceleration_limits`,
 
-    a_max_j = ACCELERATION_EFFORT_FRACTION x effort_limit_j / max_q M_jj(q)
+    a_max_j = min(ACCELERATION_EFFORT_FRACTION x effort_limit_j / max_q M_jj(q),
+                  velocity_limit_j / VELOCITY_RISE_S)
 
 with ``M`` the nominal joint-space inertia (link inertials + armature) and the maximum
 over the zero pose (clipped into the limits), the middle of the joint limits and every
 named state: half the joint's torque accelerates the joint's own worst-case inertia,
-the other half is left to gravity, coupling and feedback.
+the other half is left to gravity, coupling and feedback. The second term bounds a wrist
+whose inertia without armature is tiny (example-robot-data's xArm7: 7e4 rad/s^2 from the
+first term alone): no joint reaches its velocity limit in less than 0.1 s, four time
+constants of the controllers' default 40 rad/s loop, so the reference stays trackable.
 """
 
 from __future__ import annotations
@@ -28,9 +32,11 @@ from pipeline.robots.spec import RobotSpec
 
 ACCELERATION_EFFORT_FRACTION = 0.5
 """Share of a joint's effort limit the derived acceleration limit spends on its inertia."""
+VELOCITY_RISE_S = 0.1
+"""The shortest time a derived acceleration limit takes a joint to its velocity limit [s]."""
 ACCELERATION_RULE = (
-    f"derived: {ACCELERATION_EFFORT_FRACTION:g} x effort limit / max M_jj "
-    "(nominal inertia at zero, mid-range and named poses)"
+    f"derived: min({ACCELERATION_EFFORT_FRACTION:g} x effort limit / max M_jj, velocity "
+    f"limit / {VELOCITY_RISE_S:g} s), M_jj the nominal inertia at zero, mid-range and named poses"
 )
 """The ``settings_sources`` entry of acceleration limits derived by the rule."""
 UNSTATED = frozenset({"", "defaults", NOT_STATED})
@@ -72,7 +78,8 @@ def _poses(spec: RobotSpec) -> list[NDArray[np.float64]]:
 
 
 def derived_acceleration_limits(spec: RobotSpec) -> NDArray[np.float64]:
-    """``0.5 x effort_j / max_q M_jj(q)`` per joint [rad/s^2] (see the module docstring).
+    """``min(0.5 x effort_j / max_q M_jj(q), velocity_j / 0.1 s)`` per joint [rad/s^2] (see
+    the module docstring).
 
     A robot without link inertias keeps :data:`DEFAULT_ACCELERATION` per joint.
     """
@@ -85,7 +92,8 @@ def derived_acceleration_limits(spec: RobotSpec) -> NDArray[np.float64]:
     model = build_pinocchio_model(spec)
     data = model.createData()
     m_max = np.max([np.diag(pin.crba(model, data, q)) for q in _poses(spec)], axis=0)
-    out: NDArray[np.float64] = ACCELERATION_EFFORT_FRACTION * spec.effort_limits / m_max
+    by_effort = ACCELERATION_EFFORT_FRACTION * spec.effort_limits / m_max
+    out: NDArray[np.float64] = np.minimum(by_effort, spec.velocity_limits / VELOCITY_RISE_S)
     return out
 
 

@@ -14,6 +14,7 @@ from pipeline.robots import load_spec
 from pipeline.robots.facts import (
     ACCELERATION_EFFORT_FRACTION,
     ACCELERATION_RULE,
+    VELOCITY_RISE_S,
     fact_warnings,
     missing_facts,
 )
@@ -48,8 +49,9 @@ def _three(tmp_path: Path, sidecar: str | None = None) -> Path:
     return path
 
 
-def test_unstated_acceleration_limits_are_half_the_effort_over_the_largest_inertia(tmp_path):
-    spec = load_spec(_three(tmp_path))
+def test_unstated_acceleration_limits_are_derived_from_effort_inertia_and_velocity(tmp_path):
+    # a sidecar that states velocities but no acceleration: the rule still applies
+    spec = load_spec(_three(tmp_path, "velocity: [50.0, 2.0, 50.0]\n"))
     assert dict(spec.settings_sources)["acceleration"] == ACCELERATION_RULE
     # independent: M_jj by finite differences of RNEA (unit accelerations), not CRBA
     model = build_pinocchio_model(spec)
@@ -61,8 +63,10 @@ def test_unstated_acceleration_limits_are_half_the_effort_over_the_largest_inert
         for j in range(3):
             column = pin.rnea(model, data, q, np.zeros(3), np.eye(3)[j]) - bias
             m_max[j] = max(m_max[j], column[j])
-    expected = ACCELERATION_EFFORT_FRACTION * np.array([50.0, 30.0, 10.0]) / m_max
-    np.testing.assert_allclose(spec.acceleration_limits, expected, rtol=1e-9)
+    by_effort = ACCELERATION_EFFORT_FRACTION * np.array([50.0, 30.0, 10.0]) / m_max
+    by_velocity = np.array([50.0, 2.0, 50.0]) / VELOCITY_RISE_S
+    assert by_effort[0] < by_velocity[0] and by_effort[1] > by_velocity[1]  # both terms bind
+    np.testing.assert_allclose(spec.acceleration_limits, np.minimum(by_effort, by_velocity))
 
 
 def test_stated_acceleration_limits_are_kept_and_nothing_is_reported(tmp_path):
