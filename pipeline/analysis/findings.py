@@ -348,8 +348,10 @@ def _worst(fs: Sequence[Finding]) -> float:
 
 
 def check_alerts(grid: Sequence[CheckCell]) -> tuple[CheckAlert, ...]:
-    """The failed checks of :func:`check_grid`, grouped by check and joints: dead bands
-    first (they make a joint's error meaningless), then goal misses, saturation, contacts."""
+    """The failed checks of :func:`check_grid`, one alert per check and set of controllers
+    failing it on the same joints (joints in recorded order): dead bands first (they make a
+    joint's error meaningless), then goal misses, saturation, contacts; within a check,
+    the alerts every controller shares first."""
     kinds = (
         (DEAD_BAND, DeadBandFinding), (GOAL, GoalMissFinding),
         (SATURATION, SaturationFinding), (CONTACTS, ContactFinding),
@@ -358,21 +360,23 @@ def check_alerts(grid: Sequence[CheckCell]) -> tuple[CheckAlert, ...]:
     runs = {c.controller: c.episodes for c in grid if c.joint == ""}
     out: list[CheckAlert] = []
     for check, kind in kinds:
-        per: dict[str, tuple[list[str], list[Finding]]] = {}
+        # joint -> the controllers failing the check there, and their findings
+        by_joint: dict[str, dict[str, list[Finding]]] = {}
         for cell in grid:
             fs = [f for f in cell.findings if isinstance(f, kind)]
             if fs:
-                joints, found = per.setdefault(cell.controller, ([], []))
-                if cell.joint:
-                    joints.append(cell.joint)
-                found += fs
+                by_joint.setdefault(cell.joint, {}).setdefault(cell.controller, []).extend(fs)
         groups: dict[tuple[str, ...], list[str]] = {}
-        for controller, (joint_list, _) in per.items():
-            groups.setdefault(tuple(joint_list), []).append(controller)
-        for key, names in groups.items():
-            fs = [f for c in names for f in per[c][1]]
+        for joint, failing in by_joint.items():
+            names = tuple(c for c in controllers if c in failing)
+            groups.setdefault(names, []).append(joint)
+        alerts = []
+        for names, joints in groups.items():
+            fs = [f for j in joints for c in names for f in by_joint[j][c]]
             every = len(controllers) > 1 and len(names) == len(controllers)
             episodes = len({f.episode for f in fs})
             total = sum(runs.get(c, 0) for c in names)
-            out.append(CheckAlert(check, tuple(names), key, _worst(fs), episodes, total, every))
+            shown = tuple(j for j in joints if j)
+            alerts.append(CheckAlert(check, names, shown, _worst(fs), episodes, total, every))
+        out += sorted(alerts, key=lambda a: (not a.every_controller, -len(a.controllers)))
     return tuple(out)

@@ -115,6 +115,16 @@ _EVERY = (
 )
 
 
+def _joints(names: tuple[str, ...], order: list[str]) -> str:
+    """``joint 7 `j7``` for one joint, ``joints 1, 3 and 7`` for several (by number)."""
+    if not names:
+        return "the whole arm"
+    nums = [str(order.index(j) + 1) if j in order else f"`{j}`" for j in names]
+    if len(names) == 1:
+        return f"joint {nums[0]} `{names[0]}`" if names[0] in order else f"joint {nums[0]}"
+    return f"joints {', '.join(nums[:-1])} and {nums[-1]}"
+
+
 def check_banner(alerts: tuple[CheckAlert, ...], joints: list[str]) -> list[str]:
     """The first screen's banner: each failed physical check, which controller, which
     joint, and what it means for the comparison (empty when every check passes)."""
@@ -127,13 +137,7 @@ def check_banner(alerts: tuple[CheckAlert, ...], joints: list[str]) -> list[str]
             + ", ".join(f"**{c}**" for c in a.controllers)
             + (")" if a.every_controller else "")
         )
-        where = (
-            ", ".join(
-                f"joint {joints.index(j) + 1} `{j}`" if j in joints else f"`{j}`" for j in a.joints
-            )
-            if a.joints
-            else "the whole arm"
-        )
+        where = _joints(a.joints, joints)
         share = f" in {a.episodes}/{a.of} episodes" if a.of > 1 else ""
         means = _EVERY.format(where=where) if a.every_controller else _MEANS[a.check]
         lines.append(f"> - {who}, {where}: {_WHAT[a.check](a)}{share}; {means}.")
