@@ -307,3 +307,76 @@ def check_grid(
         CheckCell(c, j, tuple(fs), tuple(sorted(missing)), n)
         for (c, j), (fs, missing, n) in cells.items()
     )
+
+
+@dataclass(frozen=True)
+class CheckAlert:
+    """A failed physical check that qualifies the comparison: for the report's first screen.
+
+    One alert per check and set of joints; the controllers failing it with those joints.
+
+    Attributes:
+        check: :data:`CONTACTS`, :data:`SATURATION`, :data:`GOAL` or :data:`DEAD_BAND`.
+        controllers: the controllers that fail it (first-seen order).
+        joints: the joints ((), for contacts: the whole arm).
+        worst: the worst value: dead band width [rad], goal miss [rad], share of samples
+            saturated [0-1], deepest contact [m].
+        episodes: in how many of those controllers' episodes it happened.
+        of: how many episodes those controllers have.
+        every_controller: every controller of the report fails it on these joints: there
+            the comparison measures the setup (friction, limits, obstacles), not the laws.
+    """
+
+    check: str
+    controllers: tuple[str, ...]
+    joints: tuple[str, ...]
+    worst: float
+    episodes: int
+    of: int
+    every_controller: bool
+
+
+def _worst(fs: Sequence[Finding]) -> float:
+    values = [
+        f.width_rad if isinstance(f, DeadBandFinding)
+        else f.final_error_rad if isinstance(f, GoalMissFinding)
+        else f.fraction if isinstance(f, SaturationFinding)
+        else f.max_depth_m
+        for f in fs
+    ]  # fmt: skip
+    return max(values)
+
+
+def check_alerts(grid: Sequence[CheckCell]) -> tuple[CheckAlert, ...]:
+    """The failed checks of :func:`check_grid`, one alert per check and set of controllers
+    failing it on the same joints (joints in recorded order): dead bands first (they make a
+    joint's error meaningless), then goal misses, saturation, contacts; within a check,
+    the alerts every controller shares first."""
+    kinds = (
+        (DEAD_BAND, DeadBandFinding), (GOAL, GoalMissFinding),
+        (SATURATION, SaturationFinding), (CONTACTS, ContactFinding),
+    )  # fmt: skip
+    controllers = list(dict.fromkeys(c.controller for c in grid))
+    runs = {c.controller: c.episodes for c in grid if c.joint == ""}
+    out: list[CheckAlert] = []
+    for check, kind in kinds:
+        # joint -> the controllers failing the check there, and their findings
+        by_joint: dict[str, dict[str, list[Finding]]] = {}
+        for cell in grid:
+            fs = [f for f in cell.findings if isinstance(f, kind)]
+            if fs:
+                by_joint.setdefault(cell.joint, {}).setdefault(cell.controller, []).extend(fs)
+        groups: dict[tuple[str, ...], list[str]] = {}
+        for joint, failing in by_joint.items():
+            names = tuple(c for c in controllers if c in failing)
+            groups.setdefault(names, []).append(joint)
+        alerts = []
+        for names, joints in groups.items():
+            fs = [f for j in joints for c in names for f in by_joint[j][c]]
+            every = len(controllers) > 1 and len(names) == len(controllers)
+            episodes = len({f.episode for f in fs})
+            total = sum(runs.get(c, 0) for c in names)
+            shown = tuple(j for j in joints if j)
+            alerts.append(CheckAlert(check, names, shown, _worst(fs), episodes, total, every))
+        out += sorted(alerts, key=lambda a: (not a.every_controller, -len(a.controllers)))
+    return tuple(out)

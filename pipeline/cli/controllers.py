@@ -22,7 +22,12 @@ def check_controller_cmd(
         ),
     ],
     robot: Annotated[
-        str, typer.Option("--robot", help="Robot to check on (name or YAML path).")
+        str,
+        typer.Option(
+            "--robot",
+            help="Robot to check on: a built-in name or a robot file (DH YAML, URDF, MJCF); "
+            "the checks start from its SRDF named state, else mid-range.",
+        ),
     ] = "ur5",
     as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:

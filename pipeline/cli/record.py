@@ -4,7 +4,8 @@ campaigns, and list the campaigns of a params file."""
 from __future__ import annotations
 
 import sys
-from typing import Annotated, Any, Literal
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import typer
 from rich.console import Console
@@ -15,6 +16,9 @@ from pipeline.constants import ERROR_FORMAT
 from pipeline.errors import (
     PipelineError,
 )
+
+if TYPE_CHECKING:
+    from pipeline.params import Episode
 
 
 @app.command("record")
@@ -124,6 +128,7 @@ def record_cmd(
         loaded = loaded.with_ros_distro(_ros_distro(ros_distro))
     # every input error first: a refused run creates nothing
     selected = prepare(loaded, out_dir=Path(out), only=only, force=force, jobs=jobs)
+    _warn_missing_facts(selected)
     # One run per --out at a time: two runs would mix episodes of two params files.
     with OutputLock(Path(out), command="`pipeline record`"):
         check_outputs_free(selected, Path(out), force=force)  # again, now that we own it
@@ -272,6 +277,14 @@ def _keep_sample_bags(
 SUMMARY_TABLE_MAX = 30  # larger campaigns: counts and the failures, not a row per episode
 
 
+def _warn_missing_facts(episodes: Sequence[Episode]) -> None:
+    """Say on stderr, before any work, which facts the robots lack and what stands in."""
+    from pipeline.stages.record import missing_fact_lines
+
+    for line in missing_fact_lines(episodes):
+        sys.stderr.write(f"warning: {line}\n")
+
+
 def _record_campaign(
     params: str, name: str, *, out: str | None, jobs: int, force: bool, executor: str,
     address: str | None, ros_distro: str | None = None, episodes: list[str] | None = None,
@@ -299,6 +312,7 @@ def _record_campaign(
     run = plan_run(loaded, name, out=out_dir, force=force, only=episodes)
     # every input error first: a refused run creates nothing
     validate_episodes(loaded, distinct_settings(run.pending))
+    _warn_missing_facts(run.pending)
     check_campaign_size(loaded, run, motion_s=0.0, jobs=jobs)
     ensure_dir(run.out_dir)
     # one run per campaign folder at a time (two would write the same episodes)

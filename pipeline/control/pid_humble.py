@@ -83,6 +83,11 @@ class PidHumbleController:
     NAME = NAME
     GAINS = GAINS
     REPORTS = ("warning",)  # gains_in_effect() says when the integral is off (not a gain)
+    KIT_STEADY_OFFSET = (
+        "i_clamp = 0 (Humble's default) switches the integral off: under gravity the arm "
+        "settles g / kp away from the reference"
+    )
+    """Why the controller test kit measures this law's error about its settled pose."""
     DEFAULT_GAINS = staticmethod(default_gains)
 
     def __init__(

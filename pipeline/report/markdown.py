@@ -19,6 +19,7 @@ from pipeline.analysis.aggregate import CONFIDENCE, MeanCI
 from pipeline.analysis.episodes import shown_status
 from pipeline.analysis.findings import (
     SATURATION_WARN_FRACTION,
+    check_alerts,
     check_grid,
     physical_checks,
     unsettled_joints,
@@ -40,7 +41,7 @@ from pipeline.report.md import (
     SALVAGE_CUT,
 )
 from pipeline.report.paper import versus_paper
-from pipeline.report.physical_checks import physical_checks_section
+from pipeline.report.physical_checks import check_banner, physical_checks_section
 from pipeline.report.setup import setup_section
 from pipeline.report.summary import summary_section
 
@@ -142,6 +143,9 @@ def _intro(data: ReportData) -> list[str]:
     typed = [r.settings for r in recs]
     versions = sorted({md.value(s.package_version if s else None) or md.NA for s in typed})
     commits = sorted({md.value(s.git_commit if s else None) or md.NA for s in typed})
+    checks = physical_checks(data.recordings, data.protocol, data.metrics)
+    grid = check_grid(data.recordings, data.protocol, data.metrics, checks)
+    joints = list(dict.fromkeys(c.joint for c in grid if c.joint))
     lines = [
         "# Tracking report",
         "",
@@ -156,6 +160,7 @@ def _intro(data: ReportData) -> list[str]:
         + f"Recorded by armlab-pipeline {', '.join(versions)} (git {', '.join(commits)}).",
         *_salvaged_summary(data),
         "",
+        *check_banner(check_alerts(grid), joints),
         *summary_section(data),
         "Interactive view: [`recording.rrd`](recording.rrd), next to this file: open it with "
         "`rerun recording.rrd` (per-joint time series, the arm in 3D per controller).",
@@ -239,8 +244,6 @@ def _intro(data: ReportData) -> list[str]:
         f"{catalog.DRIFT_FLOOR_RAD:g} rad): a transient, not a steady state (a longer "
         "`hold_s` measures the steady state).",
     ]
-    checks = physical_checks(data.recordings, data.protocol, data.metrics)
-    grid = check_grid(data.recordings, data.protocol, data.metrics, checks)
     lines += physical_checks_section(checks, grid)
     failed = [r for r in recs if r.status != "ok"]
     if failed:

@@ -5,8 +5,12 @@ from __future__ import annotations
 
 from pipeline.analysis.catalog import SETTLING_TOLERANCE_RAD
 from pipeline.analysis.findings import (
+    CONTACTS,
+    DEAD_BAND,
+    GOAL,
     GOAL_MISS_RAD,
     SATURATION_WARN_FRACTION,
+    CheckAlert,
     CheckCell,
     ContactFinding,
     DeadBandFinding,
@@ -86,3 +90,57 @@ def physical_checks_section(checks: PhysicalChecks, grid: tuple[CheckCell, ...] 
         "record, effort limit, planned goal, gains or friction), so it is not a pass.",
     ]
     return lines
+
+
+BANNER_MAX = 8
+"""Alerts listed on the first screen; the rest are in the Physical checks table."""
+
+_WHAT = {
+    DEAD_BAND: lambda a: f"friction dead band {a.worst:.2g} rad (friction / position stiffness)",
+    GOAL: lambda a: f"goal missed by {a.worst:.2g} rad",
+    "saturation": lambda a: f"effort at its limit {a.worst * 100:.0f} % of the time",
+    CONTACTS: lambda a: f"contact during execution, {a.worst * 1e3:.2f} mm deep",
+}
+_MEANS = {
+    DEAD_BAND: "the joint may stop anywhere within that band, so its error and settling "
+    "numbers measure the friction, not the control law",
+    GOAL: "its error at the target is an offset the law leaves, not tracking noise",
+    "saturation": "the law asked for more torque than the joint has: its numbers measure the "
+    "effort limit as much as the law",
+    CONTACTS: "the arm touched something: its errors include the collision",
+}
+_EVERY = (
+    "every controller shows it: on {where} the comparison measures the setup (friction, "
+    "limits, obstacles), not the controllers"
+)
+
+
+def _joints(names: tuple[str, ...], order: list[str]) -> str:
+    """``joint 7 `j7``` for one joint, ``joints 1, 3 and 7`` for several (by number)."""
+    if not names:
+        return "the whole arm"
+    nums = [str(order.index(j) + 1) if j in order else f"`{j}`" for j in names]
+    if len(names) == 1:
+        return f"joint {nums[0]} `{names[0]}`" if names[0] in order else f"joint {nums[0]}"
+    return f"joints {', '.join(nums[:-1])} and {nums[-1]}"
+
+
+def check_banner(alerts: tuple[CheckAlert, ...], joints: list[str]) -> list[str]:
+    """The first screen's banner: each failed physical check, which controller, which
+    joint, and what it means for the comparison (empty when every check passes)."""
+    if not alerts:
+        return []
+    lines = ["> **Physical checks failed**: read the comparison below with these in mind.", ">"]
+    for a in alerts[:BANNER_MAX]:
+        who = (
+            ("every controller (" if a.every_controller else "")
+            + ", ".join(f"**{c}**" for c in a.controllers)
+            + (")" if a.every_controller else "")
+        )
+        where = _joints(a.joints, joints)
+        share = f" in {a.episodes}/{a.of} episodes" if a.of > 1 else ""
+        means = _EVERY.format(where=where) if a.every_controller else _MEANS[a.check]
+        lines.append(f"> - {who}, {where}: {_WHAT[a.check](a)}{share}; {means}.")
+    if len(alerts) > BANNER_MAX:
+        lines.append(f"> - … {len(alerts) - BANNER_MAX} more: see *Physical checks* below.")
+    return [*lines, ""]

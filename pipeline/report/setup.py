@@ -146,6 +146,22 @@ def _friction_lines(robot: Any) -> list[str]:
     return [f"- Where the plant's joint friction comes from: {named}."]
 
 
+def _acceleration_lines(robot: Any) -> list[str]:
+    """The acceleration limits the planner used and where they come from, for a robot that
+    records its sources (a URDF or MJCF robot: its sidecar, or derived by the stated rule)."""
+    sources = robot.get("settings_sources") if isinstance(robot, Mapping) else None
+    joints = robot.get("joints") if isinstance(robot, Mapping) else None
+    if not isinstance(sources, Mapping) or "acceleration" not in sources:
+        return []
+    values = [
+        j["limits"].get("acceleration")
+        for j in joints or []
+        if isinstance(j, Mapping) and isinstance(j.get("limits"), Mapping)
+    ]
+    shown = md.value([float(f"{v:.3g}") for v in values if isinstance(v, int | float)])
+    return [f"- Acceleration limits [rad/s²]: {shown}; source: {sources['acceleration']}."]
+
+
 def setup_section(data: ReportData, scenario: str) -> list[str]:
     """The ``### Setup`` section of a scenario (or campaign condition): its first
     episode's settings, and one row per episode (per controller and gains when many)."""
@@ -173,6 +189,7 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
         f"- Planner: {_planner_line(planner)}.",
         *_armature_lines(s.robot if s is not None else None, plant, sc),
         *_friction_lines(s.robot if s is not None else None),
+        *_acceleration_lines(s.robot if s is not None else None),
         f"- Plant: {_settings_line(plant, _PLANT_KEYS, skip=('links',))}"
         + (
             "; link masses, centres of mass and inertias (and the armature above) drawn per "

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from pipeline.errors import SpecError, unknown_name_message
 from pipeline.robots.dh_yaml import parse_dh_text
+from pipeline.robots.facts import with_derived_accelerations
 from pipeline.robots.spec import (
     RobotSpec,
 )
@@ -94,7 +95,7 @@ def _load_file(path: str, sha256: str, package_path: tuple[str, ...]) -> RobotSp
 
     module, func = LOADERS[loader_suffix(Path(path)) or ""].split(":")
     loader = getattr(importlib.import_module(module), func)
-    spec: RobotSpec = loader(Path(path), package_path=package_path)
+    spec: RobotSpec = with_derived_accelerations(loader(Path(path), package_path=package_path))
     return dataclasses.replace(spec, source_sha256=sha256, loaded_from=path)
 
 
@@ -104,7 +105,7 @@ def _load_builtin(name: str) -> RobotSpec:
     if sidecar.is_file():  # a URDF robot: its settings sidecar names the URDF
         from pipeline.robots.urdf_loader import load_sidecar
 
-        spec = load_sidecar(Path(str(sidecar)))
+        spec = with_derived_accelerations(load_sidecar(Path(str(sidecar))))
         digest = hashlib.sha256(Path(spec.source).read_bytes()).hexdigest()
         return dataclasses.replace(spec, source_sha256=digest, loaded_from=name)
     content = (resources.files("pipeline.robots") / f"{name}.yaml").read_text(encoding="utf-8")

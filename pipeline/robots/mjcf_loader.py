@@ -371,7 +371,7 @@ def load_mjcf(path: Path, *, package_path: tuple[str, ...] = ()) -> RobotSpec:
         armature_source=armature_source,
         settings_sources=(
             ("armature", armature_source),
-            ("acceleration", sidecar),
+            ("acceleration", opts.source_of("acceleration", sidecar)),
             ("velocity", sidecar if opts.velocity is not None else f"default {DEFAULT_VELOCITY:g}"),
             ("damping", facts["damping"][1]),
             ("frictionloss", facts["frictionloss"][1]),

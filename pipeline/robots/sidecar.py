@@ -53,6 +53,11 @@ class Sidecar(StrictModel):
     frictionloss: NonNegative | list[NonNegative] = 0.0
     collision_radius: float = Field(default=DEFAULT_RADIUS_M, gt=0, le=1.0)
 
+    def source_of(self, key: str, sidecar: str) -> str:
+        """``sidecar`` (its name) when it gives ``key``, else :data:`NOT_STATED` (a robot fact
+        the files do not state: :mod:`pipeline.robots.facts` supplies and reports it)."""
+        return sidecar if key in self.model_fields_set else NOT_STATED
+
 
 def read_sidecar(path: Path) -> dict[str, Any]:
     """A sidecar file's YAML mapping (validate it with :func:`validate_sidecar`).

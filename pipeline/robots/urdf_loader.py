@@ -560,8 +560,8 @@ def load_urdf(
         base_shapes=tuple(shapes.get(root_link, ())),
         armature_source=opts.armature_source or sidecar_name,
         settings_sources=(
-            ("armature", opts.armature_source or sidecar_name),
-            ("acceleration", sidecar_name),
+            ("armature", opts.armature_source or opts.source_of("armature", sidecar_name)),
+            ("acceleration", opts.source_of("acceleration", sidecar_name)),
             *((("velocity", sidecar_name),) if velocity is not None else ()),
             ("damping", damping_from),
             ("frictionloss", friction_from),

@@ -118,6 +118,17 @@ def prepare(
     return episodes
 
 
+def missing_fact_lines(episodes: Sequence[Episode]) -> list[str]:
+    """The warnings for the facts the episodes' robots do not state (armature, acceleration
+    and velocity limits), one line per robot and field (:mod:`pipeline.robots.facts`)."""
+    from pipeline.robots.facts import fact_warnings, missing_facts
+    from pipeline.stages.assemble import scenario_spec
+
+    scenarios = {ep.scenario.robot: ep.scenario for ep in episodes}
+    facts = tuple(f for sc in scenarios.values() for f in missing_facts(scenario_spec(sc)))
+    return fact_warnings(facts)
+
+
 def record(
     params: Params,
     episodes: Sequence[Episode],

@@ -5,8 +5,11 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import numpy as np
+import pytest
+
 from pipeline.stages.report import run_report
-from tests.analysis.bagfactory import paper_like, write_bag
+from tests.analysis.bagfactory import default_settings, paper_like, write_bag
 
 FIRST_SCREEN = 40
 
@@ -34,6 +37,7 @@ def test_the_first_screen_holds_the_headline_table_and_the_verdicts(tmp_path: Pa
     assert "joint space, max |error| higher on joints 1, 2, 3, 4, 5" in verdict
     assert "task space (TCP), max position error higher" in verdict
     assert "## Episodes" not in screen.split("### Verdicts")[0]
+    assert "Physical checks failed" not in text  # every check passes: no banner
 
 
 def test_physical_checks_are_one_controller_by_joint_table(tmp_path: Path) -> None:
@@ -59,3 +63,29 @@ def test_a_foreign_bag_shows_na_for_what_it_does_not_hold_and_no_pass(tmp_path: 
     # saturation without an effort limit is n/a, not 0 %
     episodes = text.split("## Episodes", 1)[1].split("\n\n", 2)[1]
     assert not re.search(r"\| 0\.0 % \|", episodes)
+
+
+@pytest.mark.slow
+def test_a_failed_physical_check_is_a_banner_on_the_first_screen(tmp_path: Path) -> None:
+    for controller in ("pid", "ctc"):
+        ep = paper_like(f"{controller}-0", controller)
+        t = ep.stamp_ns * 1e-9
+        ep.q[:, 0] -= 0.05 * np.clip(t - 1.0, 0.0, 1.0)  # both end 0.05 rad short on joint 1
+        if controller == "pid":  # kp = 100 N m/rad against 2 N m of friction on joint 6
+            settings = default_settings(ep)
+            settings["plant"]["frictionloss"] = [0.0, 0.0, 0.0, 0.0, 0.0, 2.0]
+            ep.settings = settings
+        write_bag(tmp_path / "recordings", ep)
+    run_report(recordings_dir=tmp_path / "recordings", out_dir=tmp_path / "reports")
+    lines = (tmp_path / "reports" / "report.md").read_text(encoding="utf-8").splitlines()
+    screen = lines[: lines.index("## Answer")]
+    assert "> **Physical checks failed**: read the comparison below with these in mind." in screen
+    banner = [line for line in screen if line.startswith("> - ")]
+    assert banner == [
+        "> - **pid**, joint 6 `wrist_3_joint`: friction dead band 0.02 rad (friction / position "
+        "stiffness); the joint may stop anywhere within that band, so its error and settling "
+        "numbers measure the friction, not the control law.",
+        "> - every controller (**ctc**, **pid**), joint 1 `shoulder_pan_joint`: goal missed by "
+        "0.05 rad in 2/2 episodes; every controller shows it: on joint 1 `shoulder_pan_joint` "
+        "the comparison measures the setup (friction, limits, obstacles), not the controllers.",
+    ]
