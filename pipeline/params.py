@@ -206,6 +206,11 @@ class ControllerParams(_Strict):
 
     @model_validator(mode="after")
     def _finite_gains(self) -> ControllerParams:
+        if "planned_path_rad" in self.gains:
+            raise ValueError(
+                "gains.planned_path_rad: set from the planned motion, not in params "
+                "(choose the design configuration with gains.design_at)"
+            )
         for key, value in self.gains.items():
             for v in value if isinstance(value, list) else [value]:
                 if isinstance(v, bool) or not isinstance(v, int | float):

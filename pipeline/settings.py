@@ -249,18 +249,62 @@ class ProtocolSettings(Contract):
     reproduces_paper: Flag = False
 
 
+DESIGN_MODES = ("path", "start", "given", "zero")
+DesignMode = Annotated[str, rule(f"one of {', '.join(DESIGN_MODES)}", lambda v: v in DESIGN_MODES)]
+
+
+@dataclass(frozen=True)
+class GainDesign(Contract):
+    """Where the default gains were designed (``gains.design_at``, docs/control.md).
+
+    Attributes:
+        at: ``path`` (per joint the largest nominal inertia along the planned motion),
+            ``start`` (the planned motion's first configuration), ``given`` (``q_rad``)
+            or ``zero`` (no planned motion: q = 0 clipped into the joint limits).
+        inertia_kg_m2: the nominal inertia diagonal the default gains were scaled by.
+        q_rad: the given configuration (``at: given``), else empty.
+    """
+
+    _where = "controller.design"
+
+    at: DesignMode
+    inertia_kg_m2: NonNegatives
+    q_rad: Numbers = ()
+
+    @classmethod
+    def split_from(cls, gains: Mapping[str, Any]) -> tuple[GainDesign | None, dict[str, Any]]:
+        """The design recorded in a controller's ``gains_in_effect()`` (its ``design_at``
+        and ``design_inertia_kg_m2``), and the gains without them."""
+        rest = {k: v for k, v in gains.items() if k not in ("design_at", "design_inertia_kg_m2")}
+        at = gains.get("design_at")
+        if at is None:
+            return None, rest
+        given = not isinstance(at, str)
+        design = cls.from_dict(
+            {
+                "at": "given" if given else at,
+                "inertia_kg_m2": gains.get("design_inertia_kg_m2", []),
+                "q_rad": list(at) if given else [],
+            }
+        )
+        return design, rest
+
+
 @dataclass(frozen=True)
 class ControllerSettings(Contract):
-    """The controller as run: its params name, registry type, every gain in effect and
-    where its code came from (``origin``: ``pipeline.control.controller_origin``)."""
+    """The controller as run: its params name, registry type, every gain in effect, where
+    its code came from (``origin``: ``pipeline.control.controller_origin``) and where its
+    default gains were designed (``design``; None when they do not depend on it)."""
 
     _where = "controller"
-    _may_be_absent = frozenset({"origin"})  # bags written before issue 18: built-in
+    # bags written before issue 18: built-in; before issue 28: designed at q = 0
+    _may_be_absent = frozenset({"origin", "design"})
 
     name: Text
     type: Text
     gains: Plain
     origin: Plain = field(default_factory=lambda: {"kind": "builtin"})
+    design: GainDesign | None = None
 
 
 @dataclass(frozen=True)

@@ -183,6 +183,22 @@ PARAMS_CASES: list[tuple[str, Callable[[dict[str, Any]], None], str]] = [
     ("gain-nan", _set("controllers.ctc.gains.kp", float("nan")), "gains.kp"),
     ("gain-list-inf", _set("controllers.ctc.gains.kp", [float("inf")] * 6), "gains.kp"),
     ("controller-unknown", _set("controllers.pid.type", "lqr"), "lqr"),
+    # where the default gains are designed (issue 28)
+    (
+        "design-at-outside-limits",
+        _set("controllers.pid.gains.design_at", [0.0, 0.0, 9.0, 0.0, 0.0, 0.0]),
+        "controllers.pid.gains.design_at: joint elbow_joint = 9 rad is outside",
+    ),
+    (
+        "design-at-wrong-length",
+        _set("controllers.pid.gains.design_at", [0.0, 0.0, 0.0]),
+        "controllers.pid.gains.design_at: expected 6 finite joint angles",
+    ),
+    (
+        "design-at-unknown",
+        _set("controllers.pid.gains.design_at", "goal"),
+        "controllers.pid.gains.design_at: expected 'path', 'start'",
+    ),
     # shape
     ("not-a-mapping", lambda d: d.clear() or d.update({"x": None}), "params.yaml"),
     ("no-episodes", lambda d: d.pop("episodes"), "episodes"),

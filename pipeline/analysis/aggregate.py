@@ -41,6 +41,9 @@ REDUCTION_SCHEMA: dict[str, pl.DataType | type[pl.DataType]] = {
     "mean": pl.Float64,
     "std": pl.Float64,
     "ci95_half_width": pl.Float64,
+    # the report's one rule (pipeline.analysis.verdict.compare) on the pairs' values
+    "verdict": pl.String,
+    "equivalence_margin": pl.Float64,
 }
 
 
@@ -177,14 +180,22 @@ def reduction_aggregates(
     """Per (scenario, candidate controller, joint, metric): the reduction % of each seed pair
     (see :func:`seed_pairs`) summarised as n, mean, std, 95 % half width (columns
     :data:`REDUCTION_SCHEMA`; ``metric`` is e.g. ``max_abs_error_reduction_pct``)."""
+    from pipeline.analysis.verdict import compare
+
     rows: list[dict[str, Any]] = []
     pairs = seed_pairs(comparisons, episodes)
+    seed_of = dict(episodes.select("episode", "seed").iter_rows())
     for (scenario, base, controller, pairing, joint), group in pairs.group_by(
         "scenario", "baseline_controller", "controller", "pairing", "joint", maintain_order=True
     ):
         for metric in _applying(compared, str(joint)):
             key = f"{metric}_reduction_pct"
             ci = mean_ci(group.get_column(key).to_list())
+            verdict = compare(
+                *_keyed(group, metric, seed_of, paired=pairing == "seed"),
+                unit=BY_NAME[metric].unit if metric in BY_NAME else "",
+                lower_is_better=BY_NAME[metric].lower_is_better if metric in BY_NAME else True,
+            )
             rows.append(
                 {
                     "scenario": scenario,
@@ -197,6 +208,21 @@ def reduction_aggregates(
                     "mean": ci.mean,
                     "std": ci.std,
                     "ci95_half_width": ci.half_width,
+                    "verdict": verdict.outcome,
+                    "equivalence_margin": verdict.margin,
                 }
             )
     return pl.DataFrame(rows, schema=REDUCTION_SCHEMA, orient="row")
+
+
+def _keyed(
+    group: pl.DataFrame, metric: str, seed_of: dict[str, Any], *, paired: bool
+) -> tuple[dict[Any, Any], dict[Any, Any]]:
+    """The pairs' baseline and candidate values keyed by seed (paired), else by episode."""
+    base: dict[Any, Any] = {}
+    cand: dict[Any, Any] = {}
+    cols = ("baseline", "candidate", f"{metric}_baseline", f"{metric}_candidate")
+    for b, c, vb, vc in group.select(*cols).iter_rows():
+        base[seed_of.get(b) if paired else ("b", b)] = vb
+        cand[seed_of.get(c) if paired else ("c", c)] = vc
+    return base, cand

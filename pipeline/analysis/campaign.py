@@ -19,8 +19,14 @@ import numpy as np
 import polars as pl
 
 from pipeline.analysis.aggregate import MeanCI, mean_ci
-from pipeline.analysis.catalog import BY_NAME, METRIC_COLUMNS
+from pipeline.analysis.catalog import BY_NAME, METRIC_COLUMNS, Metric
 from pipeline.analysis.episodes import SALVAGED_CUT, comparable
+from pipeline.analysis.verdict import ALPHA as ALPHA  # the rule's, re-exported
+from pipeline.analysis.verdict import MANN_WHITNEY as MANN_WHITNEY
+from pipeline.analysis.verdict import MIN_PAIRS as MIN_PAIRS
+from pipeline.analysis.verdict import TOO_FEW as TOO_FEW
+from pipeline.analysis.verdict import WILCOXON as WILCOXON
+from pipeline.analysis.verdict import Outcome, Verdict, compare
 from pipeline.settings import EpisodeSettings
 
 TABLE_DIR = "campaigns"
@@ -100,10 +106,6 @@ def campaign_tables(
 
 # --- summaries over a campaign table --------------------------------------------------------
 
-ALPHA = 0.05
-WILCOXON = "Wilcoxon signed-rank (paired by seed)"
-MANN_WHITNEY = "Mann-Whitney U (unpaired: seeds do not pair)"
-TOO_FEW = "too few pairs for a test"
 HOLM = "Holm"
 
 WIN_LOSS_SCHEMA: dict[str, pl.DataType | type[pl.DataType]] = {
@@ -123,6 +125,7 @@ WIN_LOSS_SCHEMA: dict[str, pl.DataType | type[pl.DataType]] = {
     "p_holm": pl.Float64,
     "tests": pl.Int64,
     "verdict": pl.String,
+    "equivalence_margin": pl.Float64,
 }
 
 
@@ -148,8 +151,7 @@ def smallest_p(test: str, n: int, m: int = 0) -> float:
 
 @dataclass(frozen=True)
 class Effect:
-    """One candidate-vs-baseline cell: the size of the effect and, with enough pairs, a test
-    of its sign.
+    """One candidate-vs-baseline cell: the size of the effect and the rule's verdict.
 
     Attributes:
         n: pairs (paired) or the smaller group (unpaired).
@@ -158,25 +160,21 @@ class Effect:
         abs_diff: the mean per-pair difference baseline − candidate [the metric's unit]
             with its interval (the medians' difference when unpaired).
         baseline_mean: the baseline's mean (how near the noise the percentage's divisor is).
-        test: :data:`WILCOXON`, :data:`MANN_WHITNEY` or :data:`TOO_FEW` (the test cannot
-            reach p < :data:`ALPHA` with so few runs).
-        p: its two-sided p (None without a test).
+        verdict: :func:`pipeline.analysis.verdict.compare` (test, p, equivalence).
     """
 
     n: int
     effect: MeanCI
     abs_diff: MeanCI
     baseline_mean: float | None
-    test: str
-    p: float | None
+    verdict: Verdict
 
 
-def _test(
-    base: dict[int, float], cand: dict[int, float], lower_is_better: bool, floor: float
-) -> Effect:
-    """Paired by seed when seeds pair (at least two), else unpaired."""
-    from scipy import stats
-
+def _test(base: dict[int, float], cand: dict[int, float], metric: Metric) -> Effect:
+    """The size (paired by seed when seeds pair, at least two, else unpaired) and the
+    report's one rule (:func:`pipeline.analysis.verdict.compare`)."""
+    lower_is_better, floor = metric.lower_is_better, metric.floor
+    v = compare(base, cand, unit=metric.unit, lower_is_better=lower_is_better)
     sign = 1.0 if lower_is_better else -1.0
     common = sorted(set(base) & set(cand))
     if len(common) >= 2:
@@ -187,23 +185,25 @@ def _test(
             sign * (x - y) / abs(x) * 100.0 for x, y in zip(b, c, strict=True) if abs(x) >= floor
         ]
         n = len(common)
-        base_mean = math.fsum(b) / n
-        if smallest_p(WILCOXON, n) >= ALPHA:
-            return Effect(n, mean_ci(red), mean_ci(diffs), base_mean, TOO_FEW, None)
-        p = 1.0 if all(d == 0 for d in diffs) else float(stats.wilcoxon(diffs).pvalue)
-        return Effect(n, mean_ci(red), mean_ci(diffs), base_mean, WILCOXON, p)
+        return Effect(n, mean_ci(red), mean_ci(diffs), math.fsum(b) / n, v)
     bs, cs = list(base.values()), list(cand.values())
     n = min(len(bs), len(cs))
     if n == 0:
-        return Effect(0, mean_ci([]), mean_ci([]), None, TOO_FEW, None)
+        return Effect(0, mean_ci([]), mean_ci([]), None, v)
     mb, mc = float(np.median(bs)), float(np.median(cs))
     effect = sign * (mb - mc) / abs(mb) * 100.0 if abs(mb) >= floor else None
-    point = mean_ci([effect])
-    diff = mean_ci([sign * (mb - mc)])
-    if len(bs) < 2 or len(cs) < 2 or smallest_p(MANN_WHITNEY, len(bs), len(cs)) >= ALPHA:
-        return Effect(n, point, diff, mb, TOO_FEW, None)
-    p = float(stats.mannwhitneyu(bs, cs, alternative="two-sided").pvalue)
-    return Effect(n, point, diff, mb, MANN_WHITNEY, p)
+    return Effect(n, mean_ci([effect]), mean_ci([sign * (mb - mc)]), mb, v)
+
+
+WIN_LOSS_WORDS: dict[Outcome, str] = {
+    "better": "wins",
+    "worse": "loses",
+    "no clear difference": "n.s.",
+    "equivalent": "equivalent",
+    "too few pairs": "too few pairs",
+    "n/a": "n/a",
+}
+"""The rule's outcomes as a win/loss cell says them."""
 
 
 def holm(p_values: list[float | None]) -> list[float | None]:
@@ -224,17 +224,18 @@ def win_loss(table: pl.DataFrame, *, baseline: str, metrics: tuple[str, ...]) ->
     One method per question. The size: where both controllers ran the same seeds (at
     least two), the mean per-pair reduction (baseline − candidate) / baseline × 100 with
     its paired 95 % Student-t interval, and the mean absolute difference in the metric's
-    unit beside it; else the reduction of the medians. The sign: a two-sided Wilcoxon
-    signed-rank test of the per-seed differences (Mann-Whitney U when seeds do not pair),
-    only when the test can reach p < :data:`ALPHA` with that many runs (signed rank: 6
-    pairs), else :data:`TOO_FEW`. The p values of one table (one metric and candidate:
-    every joint and condition) are Holm-corrected together, ``tests`` says how many.
-    ``verdict``: "wins" / "loses" when the corrected p < :data:`ALPHA` (by the effect's
-    sign), "n.s." when not, "too few pairs" without a test, "n/a" without values.
+    unit beside it; else the reduction of the medians. The verdict: the report's one rule
+    (:func:`pipeline.analysis.verdict.compare`: *equivalent* within the practical
+    margin; a two-sided Wilcoxon signed-rank test, Mann-Whitney U when seeds do not pair,
+    only from :data:`MIN_PAIRS` pairs, else "too few pairs"), its p Holm-corrected over
+    the tests of one table (one metric and candidate: every joint and condition),
+    ``tests`` says how many. ``verdict``: "wins" / "loses" / "n.s." / "equivalent" /
+    "too few pairs" / "n/a" (:data:`WIN_LOSS_WORDS`).
     Columns :data:`WIN_LOSS_SCHEMA`.
     """
     ok = table.filter(pl.col("status") == "ok")
     rows: list[dict[str, Any]] = []
+    verdicts: list[Verdict] = []
     controllers = sorted(set(ok.get_column("controller").to_list()) - {baseline})
     if baseline not in set(ok.get_column("controller").to_list()):
         return pl.DataFrame(schema=WIN_LOSS_SCHEMA)
@@ -249,8 +250,8 @@ def win_loss(table: pl.DataFrame, *, baseline: str, metrics: tuple[str, ...]) ->
             for cand in controllers:
                 if cand not in per or baseline not in per:
                     continue
-                m = BY_NAME[metric]
-                e = _test(per[baseline], per[cand], m.lower_is_better, m.floor)
+                e = _test(per[baseline], per[cand], BY_NAME[metric])
+                verdicts.append(e.verdict)
                 rows.append(
                     {
                         "condition": condition,
@@ -264,51 +265,31 @@ def win_loss(table: pl.DataFrame, *, baseline: str, metrics: tuple[str, ...]) ->
                         "abs_diff": e.abs_diff.mean,
                         "abs_diff_ci95_half_width": e.abs_diff.half_width,
                         "baseline_mean": e.baseline_mean,
-                        "test": e.test,
-                        "p_value": e.p,
+                        "test": e.verdict.test,
+                        "p_value": e.verdict.p,
                     }
                 )
-    out = pl.DataFrame(
-        rows, schema={k: v for k, v in WIN_LOSS_SCHEMA.items() if k not in _DERIVED}, orient="row"
-    )
-    parts = []
-    for _, family in out.group_by("metric", "candidate", maintain_order=True):
-        ps = family.get_column("p_value").to_list()
-        adjusted = holm(ps)
-        tests = sum(p is not None for p in ps)
-        parts.append(
-            family.with_columns(
-                pl.Series("p_holm", adjusted, dtype=pl.Float64),
-                pl.lit(tests, dtype=pl.Int64).alias("tests"),
+    # Holm over each table's family (one metric and candidate: every joint and condition)
+    families: dict[tuple[str, str], list[int]] = {}
+    for k, row in enumerate(rows):
+        families.setdefault((row["metric"], row["candidate"]), []).append(k)
+    for members in families.values():
+        adjusted = holm([verdicts[k].p for k in members])
+        tests = sum(verdicts[k].p is not None for k in members)
+        for k, p in zip(members, adjusted, strict=True):
+            decided = verdicts[k].with_p(p)
+            rows[k].update(
+                p_holm=p,
+                tests=tests,
+                verdict=WIN_LOSS_WORDS[decided.outcome]
+                if rows[k]["effect_pct"] is not None or decided.outcome == "equivalent"
+                else "n/a",
+                equivalence_margin=decided.margin,
             )
-        )
-    out = (
-        pl.concat(parts)
-        if parts
-        else out.with_columns(
-            pl.lit(None, dtype=pl.Float64).alias("p_holm"), pl.lit(0, dtype=pl.Int64).alias("tests")
-        )
+    out = pl.DataFrame(rows, schema=WIN_LOSS_SCHEMA, orient="row")
+    return out.select(list(WIN_LOSS_SCHEMA)).sort(
+        "metric", "candidate", "condition", "joint", maintain_order=True
     )
-    effect, p = pl.col("effect_pct"), pl.col("p_holm")
-    verdict = (
-        pl.when(effect.is_null())
-        .then(pl.lit("n/a"))
-        .when(p.is_null())
-        .then(pl.lit("too few pairs"))
-        .when((p < ALPHA) & (effect > 0))
-        .then(pl.lit("wins"))
-        .when((p < ALPHA) & (effect < 0))
-        .then(pl.lit("loses"))
-        .otherwise(pl.lit("n.s."))
-    )
-    return (
-        out.with_columns(verdict.alias("verdict"))
-        .select(list(WIN_LOSS_SCHEMA))
-        .sort("metric", "candidate", "condition", "joint", maintain_order=True)
-    )
-
-
-_DERIVED = ("p_holm", "tests", "verdict")
 
 
 def condition_values(condition: str) -> dict[str, str]:
@@ -321,9 +302,10 @@ def condition_values(condition: str) -> dict[str, str]:
 
 
 def _stance(row: Mapping[str, Any]) -> str | None:
-    """A win/loss row's answer: its tested verdict, else the sign of its size (untested)."""
+    """A win/loss row's answer: its verdict (tested, or equivalent), else the sign of its
+    size (untested)."""
     verdict, effect = row["verdict"], row["effect_pct"]
-    if verdict in ("wins", "loses", "n.s."):
+    if verdict in ("wins", "loses", "n.s.", "equivalent"):
         return str(verdict)
     if verdict == "too few pairs" and isinstance(effect, float) and effect != 0:
         return "better (untested)" if effect > 0 else "worse (untested)"

@@ -22,9 +22,12 @@ from typing import Any, Literal
 import polars as pl
 
 from pipeline.analysis.aggregate import MeanCI, mean_ci
+from pipeline.analysis.catalog import BY_NAME
 from pipeline.analysis.findings import nominal_plant
 from pipeline.analysis.metrics import ERROR_FLOOR_RAD, pairs
 from pipeline.analysis.protocol import ProtocolView
+from pipeline.analysis.verdict import Outcome, compare
+from pipeline.analysis.verdict import Verdict as RuleVerdict
 from pipeline.log.reader import Recording
 
 PAPER_CITATION = (
@@ -85,21 +88,44 @@ PAPER_FINAL_ERROR_REDUCTION_BY_BASELINE_PCT = tuple(
     )
 )
 
-Verdict = Literal["holds", "does not hold", "inconclusive", "n/a"]
+Verdict = Literal[
+    "holds",
+    "does not hold",
+    "inconclusive",
+    "equivalent",
+    "holds (one pair, no test)",
+    "does not hold (one pair, no test)",
+    "too few pairs for a test",
+    "n/a",
+]
+"""A claim "the candidate is below the baseline" by the report's one rule
+(:func:`pipeline.analysis.verdict.compare`): tested (holds, does not hold,
+inconclusive) from :data:`pipeline.analysis.verdict.MIN_PAIRS` pairs; *equivalent*
+within the practical margin; the single (deterministic) pair's sign said as one pair
+without a test; else too few pairs for a test."""
 
 
-def verdict(ci: MeanCI) -> Verdict:
-    """Does "the candidate is below the baseline" hold for a paired reduction: by its
-    confidence interval when there are several pairs."""
-    if ci.mean is None:
+def verdict(rule: RuleVerdict | None) -> Verdict:
+    """The paper-claim wording of the report's one rule's verdict."""
+    if rule is None or rule.outcome == "n/a":
         return "n/a"
-    if ci.half_width is None:
-        return "holds" if ci.mean > 0 else "does not hold"
-    if ci.mean - ci.half_width > 0:
-        return "holds"
-    if ci.mean + ci.half_width < 0:
-        return "does not hold"
-    return "inconclusive"
+    if rule.outcome == "too few pairs":
+        if rule.n == 1 and rule.mean_diff:
+            return (
+                "holds (one pair, no test)"
+                if rule.mean_diff > 0
+                else "does not hold (one pair, no test)"
+            )
+        return "too few pairs for a test"
+    return _CLAIM_WORDS[rule.outcome]
+
+
+_CLAIM_WORDS: dict[Outcome, Verdict] = {
+    "better": "holds",
+    "worse": "does not hold",
+    "no clear difference": "inconclusive",
+    "equivalent": "equivalent",
+}
 
 
 _EMPTY = MeanCI(0, None, None, None)
@@ -114,17 +140,20 @@ class JointComparison:
         candidate: mean ± CI over the candidate runs.
         by_baseline: (baseline - candidate) / baseline x 100 of each pair, summarised.
         by_candidate: (baseline - candidate) / candidate x 100 of each pair, summarised.
+        rule: the report's one rule on the pairs' values
+            (:func:`pipeline.analysis.verdict.compare`).
     """
 
     baseline: MeanCI = _EMPTY
     candidate: MeanCI = _EMPTY
     by_baseline: MeanCI = _EMPTY
     by_candidate: MeanCI = _EMPTY
+    rule: RuleVerdict | None = None
 
     @property
     def verdict(self) -> Verdict:
-        """Whether "candidate below baseline" holds (:func:`verdict` of ``by_baseline``)."""
-        return verdict(self.by_baseline)
+        """Whether "candidate below baseline" holds, by the report's one rule."""
+        return verdict(self.rule)
 
 
 @dataclass(frozen=True)
@@ -232,13 +261,24 @@ def paper_comparison(
     cands = list(dict.fromkeys(c for _, c in chosen))
     joints = tuple(by_episode[bases[0]].joint_names)
 
-    def compare(joint: str, metric: str) -> JointComparison:
+    seed_of = {rec.episode: rec.meta("seed") for rec in recordings}
+    by_seed = all(seed_of.get(b) == seed_of.get(c) for b, c in chosen)
+
+    def rule(joint: str, metric: str) -> RuleVerdict:
+        """Keyed by seed when every pair shares its seed, else unpaired (by episode)."""
+        base = {seed_of[b] if by_seed else b: value(b, joint, metric) for b, _ in chosen}
+        cand = {seed_of[c] if by_seed else ("c", c): value(c, joint, metric) for _, c in chosen}
+        m = BY_NAME[metric]
+        return compare(base, cand, unit=m.unit, lower_is_better=m.lower_is_better)
+
+    def compare_one(joint: str, metric: str) -> JointComparison:
         per_pair = [(value(b, joint, metric), value(c, joint, metric)) for b, c in chosen]
         return JointComparison(
             baseline=mean_ci(value(e, joint, metric) for e in bases),
             candidate=mean_ci(value(e, joint, metric) for e in cands),
             by_baseline=mean_ci(reduction_pct(vb, vc, vb) for vb, vc in per_pair),
             by_candidate=mean_ci(reduction_pct(vb, vc, vc) for vb, vc in per_pair),
+            rule=rule(joint, metric),
         )
 
     seeds = sorted({by_episode[c].meta("seed") for c in cands}, key=lambda x: (len(x), x))
@@ -250,5 +290,5 @@ def paper_comparison(
         pairs=chosen,
         joints=joints,
         seeds=tuple(seeds),
-        metrics={m: tuple(compare(j, m) for j in joints) for m in PAPER_METRICS},
+        metrics={m: tuple(compare_one(j, m) for j in joints) for m in PAPER_METRICS},
     )

@@ -2,28 +2,40 @@
 
 A question is "does the candidate controller track better than the baseline in this group
 (scenario or campaign condition)?", asked in joint space (max |error| per joint) and in
-task space (the TCP's max position and orientation errors). Its one test is the paired
-95 % Student-t confidence interval of the mean per-pair reduction
-(:func:`pipeline.analysis.aggregate.reduction_aggregates`): "lower" when the interval lies
-above 0, "higher" when below, "no clear difference" when it spans 0; a single pair has no
-interval and says so.
+task space (the TCP's max position and orientation errors). It is decided by the
+report's one rule (:func:`pipeline.analysis.verdict.compare`, through
+:func:`pipeline.analysis.aggregate.reduction_aggregates`' ``verdict``): "equivalent"
+within the practical margin; "lower" / "higher" / "no clear difference" by the test,
+which needs :data:`pipeline.analysis.verdict.MIN_PAIRS` pairs; below that, the sign of
+the mean reduction, untested (one pair: the sign of one run).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, cast
 
 import polars as pl
 
 from pipeline.analysis.aggregate import MeanCI
 from pipeline.analysis.catalog import TCP_JOINT
+from pipeline.analysis.verdict import Outcome
 
 # The metric the headline table and the verdicts use, per space.
 HEADLINE_JOINT_METRIC = "max_abs_error"
 HEADLINE_TASK_METRICS = ("tcp_max_position_error", "tcp_max_orientation_error")
 
-Direction = Literal["lower", "higher", "no clear difference", "n/a"]
+Direction = Literal[
+    "lower",
+    "higher",
+    "no clear difference",
+    "equivalent",
+    "lower (untested)",
+    "higher (untested)",
+    "n/a",
+]
+"""Tested: lower, higher, no clear difference; equivalent: within the practical margin;
+untested: too few pairs for a test, the sign of the mean reduction."""
 
 
 @dataclass(frozen=True)
@@ -40,21 +52,29 @@ class Effect:
     joint: str
     metric: str
     reduction: MeanCI
+    outcome: Outcome = "n/a"
 
     @property
     def direction(self) -> Direction:
-        """The candidate's error against the baseline's, by the interval (by the single
-        pair's sign when there is one pair)."""
-        ci = self.reduction
-        if ci.mean is None:
-            return "n/a"
-        if ci.half_width is None:
-            return "lower" if ci.mean > 0 else "higher" if ci.mean < 0 else "no clear difference"
-        if ci.mean - ci.half_width > 0:
-            return "lower"
-        if ci.mean + ci.half_width < 0:
-            return "higher"
-        return "no clear difference"
+        """The candidate's error against the baseline's, by the report's one rule
+        (:func:`pipeline.analysis.verdict.compare`); with too few pairs, the sign of the
+        mean reduction, marked untested."""
+        if self.outcome == "too few pairs":
+            mean = self.reduction.mean
+            if not mean:
+                return "n/a" if mean is None else "no clear difference"
+            return "lower (untested)" if mean > 0 else "higher (untested)"
+        return _WORDS[self.outcome]
+
+
+_WORDS: dict[Outcome, Direction] = {
+    "better": "lower",
+    "worse": "higher",
+    "no clear difference": "no clear difference",
+    "equivalent": "equivalent",
+    "too few pairs": "n/a",
+    "n/a": "n/a",
+}
 
 
 @dataclass(frozen=True)
@@ -98,7 +118,10 @@ def _ci(row: dict[str, object]) -> MeanCI:
 
 def _effect(by: dict[tuple[str, str], dict[str, object]], joint: str, metric: str) -> Effect | None:
     row = by.get((joint, f"{metric}_reduction_pct"))
-    return None if row is None else Effect(joint, metric, _ci(row))
+    if row is None:
+        return None
+    outcome = row.get("verdict")
+    return Effect(joint, metric, _ci(row), cast(Outcome, outcome) if outcome else "n/a")
 
 
 def questions(reduction_summary: pl.DataFrame, joints: dict[str, list[str]]) -> list[Question]:

@@ -42,11 +42,12 @@ control step's; ``gains_in_effect()`` adds the final per-link mass and armature 
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from pipeline.control import passivity
 from pipeline.control.base import (
@@ -83,7 +84,7 @@ def default_gains(
     *,
     omega_n_rad_s: float = DEFAULT_OMEGA_N_RAD_S,
     zeta: float = DEFAULT_ZETA,
-    q_config: Sequence[float] | None = None,
+    q_config: ArrayLike | None = None,
 ) -> dict[str, Any]:
     """``passivity``'s ``lambda`` and ``kd``; ``gamma = 1 /J``, ``box_rel = 0.5``."""
     g = passivity.default_gains(spec, omega_n_rad_s=omega_n_rad_s, zeta=zeta, q_config=q_config)

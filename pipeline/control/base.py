@@ -191,24 +191,56 @@ def friction_feedforward(gains: Mapping[str, Any], qd_ref: F64) -> F64 | None:
     return out
 
 
-TUNING_KEYS = ("omega_n_rad_s", "zeta")
+TUNING_KEYS = ("omega_n_rad_s", "zeta", "design_at")
+"""The knobs that choose the default gains (``params.yaml``: ``controllers.NAME.gains``)."""
+DESIGN_INERTIA_KEY = "design_inertia_kg_m2"
+"""Recorded beside the knobs: the nominal inertia diagonal the default gains were designed on."""
+RECORDED_TUNING_KEYS = (*TUNING_KEYS, DESIGN_INERTIA_KEY)
+PLANNED_PATH_KEY = "planned_path_rad"
+"""Set by the pipeline (never in ``params.yaml``): the planned motion's configurations
+[rad], (K, n), that ``design_at: path`` and ``start`` design the gains on."""
+DESIGN_AT_MODES = ("path", "start")
+DEFAULT_DESIGN_AT = "path"
+"""Default gain-design configuration: the per-joint maximum of the nominal inertia along
+the planned motion (docs/control.md, "Where the gains are designed")."""
+NO_MOTION = "zero"
+"""Recorded ``design_at`` when no planned motion was given (a bare ``make_controller``):
+q = 0 clipped into the joint limits."""
+
+DesignAt = str | tuple[float, ...]
 
 
 @dataclass(frozen=True)
 class Tuning:
-    """The knobs that choose default gains: closed-loop natural frequency and damping."""
+    """The knobs that choose default gains: closed-loop natural frequency and damping, and
+    the configurations whose nominal inertia the per-joint gains are designed on."""
 
     omega_n_rad_s: float = DEFAULT_OMEGA_N_RAD_S
     zeta: float = DEFAULT_ZETA
     used: bool = True  # False when explicit gains overrode every tuned default
+    design_at: DesignAt = NO_MOTION  # "path", "start", a configuration, or NO_MOTION
+    design_inertia_kg_m2: tuple[float, ...] = ()  # filled by resolve_tuned_gains
 
-    def knobs_in_effect(self) -> dict[str, float]:
+    def knobs_in_effect(self) -> dict[str, Any]:
         """The knobs, if they chose any gain in effect (else they would mislead)."""
-        return {"omega_n_rad_s": self.omega_n_rad_s, "zeta": self.zeta} if self.used else {}
+        if not self.used:
+            return {}
+        if self.design_at == NO_MOTION and not self.design_inertia_kg_m2:
+            return {"omega_n_rad_s": self.omega_n_rad_s, "zeta": self.zeta}
+        at = self.design_at if isinstance(self.design_at, str) else list(self.design_at)
+        out: dict[str, Any] = {
+            "omega_n_rad_s": self.omega_n_rad_s,
+            "zeta": self.zeta,
+            "design_at": at,
+        }
+        if self.design_inertia_kg_m2:
+            out[DESIGN_INERTIA_KEY] = list(self.design_inertia_kg_m2)
+        return out
 
 
 def split_tuning(gains: Any, *, where: str) -> tuple[Tuning, Any]:
-    """Separate the tuning knobs (``omega_n_rad_s``, ``zeta``) from explicit gains.
+    """Separate the tuning knobs (``omega_n_rad_s``, ``zeta``, ``design_at``) from explicit
+    gains (``design_at`` is checked against the robot by :func:`design_configurations`).
 
     The knobs choose the default gains (the fair-comparison mapping, see
     docs/control.md); explicit gains such as ``kp`` then override those defaults.
@@ -216,13 +248,13 @@ def split_tuning(gains: Any, *, where: str) -> tuple[Tuning, Any]:
     if not isinstance(gains, Mapping):
         return Tuning(), gains  # None, or a wrong type that resolve_gains reports
     tuning: dict[str, float] = {}
-    for key in TUNING_KEYS:
+    for key in ("omega_n_rad_s", "zeta"):
         if key in gains:
             value = gains[key]
             if not (_is_number(value) and math.isfinite(value) and value > 0):
                 raise ParamsError(f"{where}.{key}: expected a positive number, got {value!r}")
             tuning[key] = float(value)
-    rest = {k: v for k, v in gains.items() if k not in TUNING_KEYS}
+    rest = {k: v for k, v in gains.items() if k not in (*TUNING_KEYS, PLANNED_PATH_KEY)}
     return (
         Tuning(
             omega_n_rad_s=tuning.get("omega_n_rad_s", DEFAULT_OMEGA_N_RAD_S),
@@ -230,6 +262,62 @@ def split_tuning(gains: Any, *, where: str) -> tuple[Tuning, Any]:
         ),
         rest,
     )
+
+
+def design_configurations(
+    spec: RobotSpec, gains: Any, *, where: str = "gains"
+) -> tuple[DesignAt, F64]:
+    """The configurations [rad], (K, n), whose nominal inertia the default gains use.
+
+    ``gains.design_at``: ``path`` (default: every configuration of the planned motion,
+    ``gains.planned_path_rad``), ``start`` (its first), or one configuration ``[q...]``
+    within the joint limits. Without a planned motion, ``path`` and ``start`` fall back
+    to q = 0 clipped into the joint limits (recorded as ``design_at: zero``).
+
+    Raises:
+        ParamsError: ``design_at`` is neither ``path``, ``start`` nor ``dof`` finite angles
+            within the joint limits (one line naming ``<where>.design_at``).
+    """
+    mapping = gains if isinstance(gains, Mapping) else {}
+    at = mapping.get("design_at", DEFAULT_DESIGN_AT)
+    lower, upper = spec.lower, spec.upper
+    if isinstance(at, str):
+        if at not in DESIGN_AT_MODES:
+            raise ParamsError(
+                f"{where}.design_at: expected 'path', 'start' or a list of {spec.dof} joint "
+                f"angles [rad], got {at!r}"
+            )
+        planned = mapping.get(PLANNED_PATH_KEY)
+        if planned is None:
+            return NO_MOTION, np.clip(np.zeros(spec.dof), lower, upper)[None, :]
+        qs = np.asarray(planned, dtype=float).reshape(-1, spec.dof)
+        return at, (qs if at == "path" else qs[:1])
+    if not isinstance(at, list | tuple) or not all(_is_number(v) for v in at):
+        raise ParamsError(
+            f"{where}.design_at: expected 'path', 'start' or a list of {spec.dof} joint "
+            f"angles [rad], got {at!r}"
+        )
+    q = np.asarray(at, dtype=float)
+    if q.shape != (spec.dof,) or not np.isfinite(q).all():
+        raise ParamsError(
+            f"{where}.design_at: expected {spec.dof} finite joint angles [rad], got {len(at)}: "
+            f"{list(at)}"
+        )
+    outside = np.flatnonzero((q < lower - 1e-9) | (q > upper + 1e-9))
+    if outside.size:
+        j = int(outside[0])
+        raise ParamsError(
+            f"{where}.design_at: joint {spec.joints[j].name} = {q[j]:g} rad is outside its "
+            f"limits [{lower[j]:g}, {upper[j]:g}]"
+        )
+    return tuple(float(v) for v in q), q[None, :]
+
+
+def with_planned_path(gains: Mapping[str, Any] | None, q_path_rad: Any) -> dict[str, Any]:
+    """``gains`` plus the planned motion's configurations (K, n) [rad], which ``design_at``
+    (``path`` by default, or ``start``) designs the default gains on."""
+    q = np.asarray(q_path_rad, dtype=float)
+    return {**(gains or {}), PLANNED_PATH_KEY: q.tolist()}
 
 
 def resolve_tuned_gains(
@@ -243,7 +331,10 @@ def resolve_tuned_gains(
 ) -> tuple[Tuning, dict[str, Any]]:
     """The tuning knobs in ``gains`` choose the defaults; explicit gains override them."""
     tuning, explicit = split_tuning(gains, where=where)
-    defaults = default_gains(spec, omega_n_rad_s=tuning.omega_n_rad_s, zeta=tuning.zeta)
+    design_at, q_design = design_configurations(spec, gains, where=where)
+    defaults = default_gains(
+        spec, omega_n_rad_s=tuning.omega_n_rad_s, zeta=tuning.zeta, q_config=q_design
+    )
     keys = {g.key for g in schema}
     # friction feed-forward: off and zero unless given (no tuning knob chooses it)
     untuned = {k: v for k, v in friction_defaults(spec).items() if k in keys - set(defaults)}
@@ -251,7 +342,33 @@ def resolve_tuned_gains(
         controller, spec, schema, {**defaults, **untuned}, explicit, where=where
     )
     overridden = isinstance(explicit, Mapping) and set(defaults) <= set(explicit)
-    return replace(tuning, used=not overridden), resolved
+    depends = _depends_on_configuration(spec, default_gains, tuning, defaults)
+    inertia = tuple(float(m) for m in nominal_mass_diagonal(spec, q_design)) if depends else ()
+    return replace(
+        tuning,
+        used=not overridden,
+        design_at=design_at if depends else NO_MOTION,
+        design_inertia_kg_m2=inertia,
+    ), resolved
+
+
+def _depends_on_configuration(
+    spec: RobotSpec,
+    default_gains: Callable[..., dict[str, Any]],
+    tuning: Tuning,
+    defaults: Mapping[str, Any],
+) -> bool:
+    """Whether the law's default gains depend on the design configuration (PID's do, CTC's
+    do not): the defaults at a second, unrelated configuration differ. Only then is
+    ``design_at`` recorded (else it would mislead)."""
+    if not spec.has_dynamics:
+        return False
+    lower, upper = spec.lower, spec.upper
+    probe = np.clip(0.37 + 0.61 * np.arange(spec.dof) % 1.3, lower, upper)
+    other = default_gains(
+        spec, omega_n_rad_s=tuning.omega_n_rad_s, zeta=tuning.zeta, q_config=probe
+    )
+    return any(not np.array_equal(np.asarray(other[k]), np.asarray(v)) for k, v in defaults.items())
 
 
 def gains_as_json(gains: Mapping[str, Any]) -> dict[str, Any]:
@@ -265,20 +382,29 @@ def gains_as_json(gains: Mapping[str, Any]) -> dict[str, Any]:
     }
 
 
-def nominal_mass_diagonal(spec: RobotSpec, q_config: Sequence[float] | None = None) -> F64:
-    """Diagonal of the nominal joint-space inertia matrix M_n(q) [kg m^2].
+def nominal_mass_diagonal(spec: RobotSpec, q_config: Any = None) -> F64:
+    """Diagonal of the nominal joint-space inertia matrix M_n(q) [kg m^2], per joint the
+    maximum over the given configurations.
 
     Args:
         spec: robot with dynamics.
-        q_config: configuration [rad]; ``None`` = all zeros (the paper's start pose).
+        q_config: one configuration (n,) or several (K, n) [rad] (the planned motion:
+            per joint the largest inertia along it, see docs/control.md); ``None`` = all
+            zeros.
     """
     spec.require_dynamics("model-based default gains")
     model = build_pinocchio_model(spec)
     q = np.zeros(spec.dof) if q_config is None else np.asarray(q_config, dtype=float)
-    if q.shape != (spec.dof,) or not np.isfinite(q).all():
-        raise ParamsError(f"q_config: expected {spec.dof} finite angles [rad], got {q.tolist()}")
-    mass: F64 = pin.crba(model, model.createData(), q)
-    return np.array(np.diag(mass), dtype=float)
+    qs = q[None, :] if q.ndim == 1 else q
+    if qs.ndim != 2 or qs.shape[1] != spec.dof or qs.shape[0] < 1 or not np.isfinite(qs).all():
+        raise ParamsError(
+            f"q_config: expected {spec.dof} finite angles [rad] per configuration, "
+            f"got shape {q.shape}"
+        )
+    data = model.createData()
+    diag = np.array([np.diag(pin.crba(model, data, qk)) for qk in qs], dtype=float)
+    out: F64 = diag.max(axis=0)
+    return out
 
 
 def check_tuning(omega_n_rad_s: float, zeta: float) -> None:

@@ -10,11 +10,11 @@ per joint (eq. 17).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from pipeline.control.base import (
     DEFAULT_OMEGA_N_RAD_S,
@@ -41,7 +41,7 @@ def default_gains(
     *,
     omega_n_rad_s: float = DEFAULT_OMEGA_N_RAD_S,
     zeta: float = DEFAULT_ZETA,
-    q_config: Sequence[float] | None = None,
+    q_config: ArrayLike | None = None,
 ) -> dict[str, Any]:
     """``Kp = w^2`` [1/s^2], ``Kd = 2 zeta w`` [1/s]: the linearized loop's poles directly.
 

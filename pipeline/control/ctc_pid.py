@@ -17,11 +17,12 @@ then the output uses the clamped ``z``.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from pipeline.control.base import (
     DEFAULT_OMEGA_N_RAD_S,
@@ -54,7 +55,7 @@ def default_gains(
     *,
     omega_n_rad_s: float = DEFAULT_OMEGA_N_RAD_S,
     zeta: float = DEFAULT_ZETA,
-    q_config: Sequence[float] | None = None,
+    q_config: ArrayLike | None = None,
 ) -> dict[str, Any]:
     """Gains placing the linearized loop's poles at ``(s + p)(s^2 + 2 zeta w s + w^2)``.
 

@@ -28,11 +28,12 @@ the target's roots are complex, which the real cascade cannot produce: ``r = 1``
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from pipeline.control.base import (
     DEFAULT_OMEGA_N_RAD_S,
@@ -64,7 +65,7 @@ def default_gains(
     *,
     omega_n_rad_s: float = DEFAULT_OMEGA_N_RAD_S,
     zeta: float = DEFAULT_ZETA,
-    q_config: Sequence[float] | None = None,
+    q_config: ArrayLike | None = None,
 ) -> dict[str, Any]:
     """``Lambda = w r`` [1/s], ``Kd_j = (w / r) m_jj`` [N m s/rad] (``r``: ``pole_ratio``).
 

@@ -7,10 +7,10 @@ but neither feeds forward the inertial torques nor decouples the joints.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from pipeline.control.base import (
     DEFAULT_OMEGA_N_RAD_S,
@@ -35,7 +35,7 @@ def default_gains(
     *,
     omega_n_rad_s: float = DEFAULT_OMEGA_N_RAD_S,
     zeta: float = DEFAULT_ZETA,
-    q_config: Sequence[float] | None = None,
+    q_config: ArrayLike | None = None,
 ) -> dict[str, Any]:
     """``kp_j = m_jj w^2``, ``kd_j = 2 zeta w m_jj`` (as the PID, without the integrator)."""
     check_tuning(omega_n_rad_s, zeta)

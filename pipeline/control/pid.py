@@ -16,10 +16,11 @@ No model terms: gravity and inertia are left to the feedback and the integrator.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.control.base import (
     DEFAULT_OMEGA_N_RAD_S,
@@ -53,7 +54,7 @@ def default_gains(
     *,
     omega_n_rad_s: float = DEFAULT_OMEGA_N_RAD_S,
     zeta: float = DEFAULT_ZETA,
-    q_config: Sequence[float] | None = None,
+    q_config: ArrayLike | None = None,
 ) -> dict[str, Any]:
     """Gains giving each joint, alone, the closed loop ``s^2 + 2 zeta w s + w^2``.
 

@@ -24,11 +24,12 @@ The PID part and its gains are ``pid``'s (same bandwidth design).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from pipeline.control import pid
 from pipeline.control.base import (
@@ -51,7 +52,7 @@ def default_gains(
     *,
     omega_n_rad_s: float = DEFAULT_OMEGA_N_RAD_S,
     zeta: float = DEFAULT_ZETA,
-    q_config: Sequence[float] | None = None,
+    q_config: ArrayLike | None = None,
 ) -> dict[str, Any]:
     """``pid``'s gains (per-joint bandwidth design), feed-forward sampled at ``t + dt``."""
     gains = pid.default_gains(spec, omega_n_rad_s=omega_n_rad_s, zeta=zeta, q_config=q_config)

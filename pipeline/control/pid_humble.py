@@ -21,10 +21,11 @@ defaults are 0 for all three); ``i_clamp`` and the absent anti-windup are Humble
 from __future__ import annotations
 
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pipeline.control import pid
 from pipeline.control.base import (
@@ -64,7 +65,7 @@ def default_gains(
     *,
     omega_n_rad_s: float = DEFAULT_OMEGA_N_RAD_S,
     zeta: float = DEFAULT_ZETA,
-    q_config: Sequence[float] | None = None,
+    q_config: ArrayLike | None = None,
 ) -> dict[str, Any]:
     """``pid``'s ``kp``, ``ki``, ``kd``; Humble's ``i_clamp = 0`` and ``ff_velocity_scale = 0``."""
     g = pid.default_gains(spec, omega_n_rad_s=omega_n_rad_s, zeta=zeta, q_config=q_config)

@@ -11,9 +11,11 @@ controller class that declares ``GAINS`` (a tuple of :class:`GainSpec`) and
 from __future__ import annotations
 
 import inspect
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
+
+from numpy.typing import ArrayLike
 
 from pipeline.control import adaptive, ctc, ctc_pid, passivity, pd_gravity, pid, pid_ff, pid_humble
 from pipeline.control.base import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, Controller, GainSpec
@@ -204,7 +206,7 @@ def default_gains(
     *,
     omega_n_rad_s: float = DEFAULT_OMEGA_N_RAD_S,
     zeta: float = DEFAULT_ZETA,
-    q_config: Sequence[float] | None = None,
+    q_config: ArrayLike | None = None,
 ) -> dict[str, Any]:
     """Default gains of ``controller_name`` for the closed loop (omega_n [rad/s], zeta).
 

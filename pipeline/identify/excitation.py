@@ -346,8 +346,16 @@ def record_excitation(
         nominal_path(scenario.nominal, seed=seed),
         where=f"scenarios.{scenario_name}",
     )
+    from pipeline.control.base import with_planned_path
+
     controller = make_controller(
-        cparams.type, nominal, cparams.gains, source=f"controllers.{controller_name}"
+        cparams.type,
+        nominal,
+        with_planned_path(
+            cparams.gains,
+            ref.sample_many(np.linspace(0.0, 1.0 / ref.base_frequency_hz, 200, endpoint=False))[0],
+        ),
+        source=f"controllers.{controller_name}",
     )
     plant_spec, plant, plant_settings = scenario_plant(spec, scenario, seed=seed)
     sim = params.sim

@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 from pipeline.analysis import catalog
 from pipeline.analysis.campaign import (
     ALPHA,
+    MIN_PAIRS,
     SWEPT_PREFIX,
     TABLE_DIR,
     TOO_FEW,
@@ -34,6 +35,7 @@ from pipeline.analysis.campaign import (
     win_loss,
 )
 from pipeline.analysis.summary import HEADLINE_TASK_METRICS
+from pipeline.analysis.verdict import EQUIVALENCE_REL
 from pipeline.report import md
 from pipeline.report.colors import controller_colors, mpl
 from pipeline.report.figures import (
@@ -49,8 +51,6 @@ from pipeline.report.flips import flip_lines
 MAX_CONDITIONS_SHOWN = 12
 # Up to this many values per box the individual episodes are drawn as points too.
 MAX_POINTS_PER_BOX = 40
-# The exact two-sided signed-rank test needs 6 pairs to reach p < 0.05.
-MIN_SIGNED_RANK_N = 6
 # Figures are drawn for at most this many swept axes per campaign.
 MAX_AXES_DRAWN = 4
 
@@ -303,6 +303,10 @@ def _verdict_cell(row: dict[str, object], m: catalog.Metric) -> str:
         and abs(base) < NEAR_NOISE_FLOORS * m.floor
     ):
         size += f" (Δ {diff:+.2g} {m.unit})"
+    if verdict == "equivalent":
+        margin = row["equivalence_margin"]
+        within = f"|Δ| < {margin:.2g} {m.unit}" if isinstance(margin, float) else "within margin"
+        return f"*equivalent* {size} ({within}, n = {row['n']})"
     if not isinstance(p, float):
         return f"{size} (n = {row['n']}; too few pairs for a test)"
     mark = {"wins": "**wins**", "loses": "**loses**"}.get(str(verdict), "n.s.")
@@ -398,8 +402,12 @@ def campaign_section(
             "baseline with its paired 95 % Student-t interval where seeds pair (else the "
             "reduction of the medians), the absolute difference beside it where the "
             "baseline is near the noise, a ratio where the candidate is more than twice the "
-            f"baseline. The sign: a two-sided test ({'; '.join(tests) or 'none'}) only where "
-            f"it can reach p < {ALPHA:g} (signed rank: {MIN_SIGNED_RANK_N} pairs), its p "
+            f"baseline. The verdict: the report's one rule (the Verdicts and the paper's "
+            "claims use it too): *equivalent* when the difference is within the practical "
+            "margin (the larger of the encoder's resolution and "
+            f"{EQUIVALENCE_REL * 100:.0f} % of the baseline); else a two-sided test "
+            f"({'; '.join(tests) or 'none'}) only from "
+            f"{MIN_PAIRS} pairs (where it can reach p < {ALPHA:g}), its p "
             "Holm-corrected over the tests of its table "
             f"({', '.join(str(c) for c in n_tests)} test(s) per table); **wins** / **loses** "
             f"when the corrected p < {ALPHA:g}, *n.s.* when not; with fewer pairs the cell "

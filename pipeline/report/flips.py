@@ -1,7 +1,8 @@
 """Verdicts that flip within a swept assumption's range (a campaign report's section).
 
-A verdict (wins / loses / n.s.; the sign where too few pairs for a test) that changes as
-one swept value changes, the others held, hangs on that assumption: the report names it.
+A verdict (the report's one rule: wins / loses / n.s. / equivalent; the sign where too few
+pairs for a test) that changes as one swept value changes, the others held, hangs on that
+assumption: the report names it.
 """
 
 from __future__ import annotations
@@ -40,8 +41,9 @@ def flip_lines(
         lines += [f"### Verdicts that flip with `{label}`", ""]
         if not sub.height:
             lines += [
-                f"None: every verdict (wins / loses / n.s.; the sign where untested) is the "
-                f"same for {label} = {', '.join(values)}, the other swept values held.",
+                "None: every verdict (wins / loses / n.s. / equivalent; the sign where "
+                f"untested) is the same for {label} = {', '.join(values)}, the other swept "
+                "values held.",
                 "",
             ]
             continue

@@ -6,6 +6,7 @@ from __future__ import annotations
 from pipeline.analysis import paper
 from pipeline.analysis.aggregate import CONFIDENCE, MeanCI
 from pipeline.analysis.paper import JointComparison, PaperComparison
+from pipeline.analysis.verdict import ALPHA, MIN_PAIRS
 from pipeline.constants import FINAL_WINDOW_S
 from pipeline.report import md
 from pipeline.report.inputs import ReportData
@@ -111,9 +112,11 @@ def _versus_paper_one(cmp: PaperComparison) -> list[str]:
     lines += [
         f"Ours: scenario **{cmp.group}**, {ours}. Paper: {paper.PAPER_SOURCE}.",
         "",
-        f"**The paper's claims here** (a claim *holds* when {c_name} is below {b_name}; with "
-        "several seed pairs, when the whole confidence interval of the paired reduction is "
-        "above zero; *inconclusive* when it straddles zero):",
+        f"**The paper's claims here** (a claim *holds* when {c_name} is below {b_name}, by "
+        "the report's one rule, as the Verdicts: *equivalent* within the practical margin; "
+        f"from {MIN_PAIRS} seed pairs a two-sided Wilcoxon signed-rank test, *holds* / *does "
+        f"not hold* when p < {ALPHA:g}, else *inconclusive*; with fewer pairs *too few pairs "
+        "for a test*; a single pair's sign is said as one pair, no test):",
         "",
         md.table(["claim", "here"], claims),
         "",

@@ -226,8 +226,7 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
             for (ctrl, shown), members in grouped.items()
         ]
     lines.append(md.table(["episode", "controller", "gains and settings", "seed", "status"], rows))
-    lines += _origin_lines(recs)
-    return lines
+    return [*lines, *_design_lines(recs), *_origin_lines(recs)]
 
 
 def _origin_lines(recs: Sequence[Any]) -> list[str]:
@@ -257,3 +256,30 @@ def _origin_lines(recs: Sequence[Any]) -> list[str]:
     return ["", "Plug-in controllers (their code as recorded in each bag):", ""] + [
         f"- {name}: {text}." for name, text in seen.items()
     ]
+
+
+_DESIGN_WORDS = {
+    "path": "per joint the largest nominal inertia along the planned motion",
+    "start": "the nominal inertia at the planned motion's start",
+    "given": "the nominal inertia at a given configuration",
+    "zero": "the nominal inertia at q = 0 (clipped into the joint limits; no planned motion)",
+}
+
+
+def _design_lines(recs: Sequence[Any]) -> list[str]:
+    """Where each controller's default gains were designed (``gains.design_at``), one
+    line per controller whose defaults depend on it (PID's do, CTC's do not)."""
+    shown: dict[str, str] = {}
+    for rec in recs:
+        design = rec.settings.controller.design if rec.settings is not None else None
+        if design is None or rec.controller in shown:
+            continue
+        where = _DESIGN_WORDS[design.at] + (
+            f" {md.value(list(design.q_rad))} rad" if design.q_rad else ""
+        )
+        shown[rec.controller] = (
+            f"- `{rec.controller}`'s default gains designed at **{design.at}** ({where}): "
+            f"M_jj = {md.value(list(design.inertia_kg_m2))} kg m² "
+            "(`gains.design_at`, docs/control.md)."
+        )
+    return ["", *shown.values()] if shown else []

@@ -8,6 +8,7 @@ from __future__ import annotations
 from pipeline.analysis import summary
 from pipeline.analysis.aggregate import CONFIDENCE, MeanCI
 from pipeline.analysis.catalog import BY_NAME
+from pipeline.analysis.verdict import ALPHA, ENCODER_RESOLUTION_RAD, EQUIVALENCE_REL, MIN_PAIRS
 from pipeline.report import md
 from pipeline.report.inputs import ReportData
 
@@ -57,6 +58,16 @@ def _effect(e: summary.Effect, unit_name: str) -> str:
     return f"{unit_name} {e.direction} ({size})"
 
 
+_DIRECTIONS: tuple[summary.Direction, ...] = (
+    "lower",
+    "higher",
+    "no clear difference",
+    "equivalent",
+    "lower (untested)",
+    "higher (untested)",
+)
+
+
 def _question(q: summary.Question) -> str:
     pairs = (
         f"{q.pairs} seed pair{'s' if q.pairs != 1 else ''}"
@@ -64,16 +75,21 @@ def _question(q: summary.Question) -> str:
         else f"{q.pairs} pairs (runs do not share seeds: every baseline run with every "
         "candidate run)"
     )
-    words = {"lower": "lower", "higher": "higher", "no clear difference": "no clear difference"}
     by = q.joints_by_direction()
-    joint_parts = [f"{words[d]} on joint{'s' if len(by[d]) > 1 else ''} {_numbers(by[d])}"
-                   for d in ("lower", "higher", "no clear difference") if by.get(d)]  # fmt: skip
+    joint_parts = [f"{d} on joint{'s' if len(by[d]) > 1 else ''} {_numbers(by[d])}"
+                   for d in _DIRECTIONS if by.get(d)]  # fmt: skip
     task = (
         "; ".join(_effect(e, BY_NAME[e.metric].title.removeprefix("TCP ")) for e in q.task_space)
         if q.task_space
         else "n/a (no robot model in the bag)"
     )
-    single = "; one pair: no interval, the sign of one run" if q.pairs == 1 else ""
+    single = (
+        "; one pair, no test: the sign of one run"
+        if q.pairs == 1
+        else f"; too few pairs for a test (fewer than {MIN_PAIRS}): signs untested"
+        if q.pairs < MIN_PAIRS
+        else ""
+    )
     return (
         f"- **{q.candidate} vs {q.baseline}** in `{q.group}` ({pairs}{single}): "
         f"joint space, max |error| {'; '.join(joint_parts) or 'n/a'}; "
@@ -125,9 +141,16 @@ def summary_section(data: ReportData) -> list[str]:
     else:
         lines.append(
             f"Does the candidate have a lower max error than the baseline **{data.baseline}**? "
-            f"One test per question: the paired {CONFIDENCE * 100:.0f} % Student-t interval "
-            "of the mean per-pair reduction (baseline − candidate) / baseline; *lower* / "
-            "*higher* when the interval excludes 0, else *no clear difference*."
+            "One rule for every comparison of this report (the win/loss tables and the "
+            "paper's claims use it too): *equivalent* when the difference is within the "
+            f"practical margin (the larger of the encoder's resolution, "
+            f"{ENCODER_RESOLUTION_RAD:.1e} rad, and {EQUIVALENCE_REL * 100:.0f} % of the "
+            "baseline); "
+            f"else, from {MIN_PAIRS} pairs, a two-sided Wilcoxon signed-rank test of the "
+            f"per-pair differences (Mann-Whitney U when seeds do not pair), *lower* / "
+            f"*higher* when p < {ALPHA:g}, else *no clear difference*; with fewer pairs no "
+            "test: the sign of the mean per-pair reduction (baseline − candidate) / "
+            "baseline, marked *untested*."
         )
         lines.append("")
         lines += [_question(q) for q in qs[:MAX_QUESTIONS]]

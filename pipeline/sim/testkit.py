@@ -39,7 +39,12 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.control import Controller, controller_entry, make_controller
-from pipeline.control.base import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, F64, TUNING_KEYS
+from pipeline.control.base import (
+    DEFAULT_OMEGA_N_RAD_S,
+    DEFAULT_ZETA,
+    F64,
+    RECORDED_TUNING_KEYS,
+)
 from pipeline.errors import ParamsError, PipelineError
 from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.loaders import load_spec
@@ -206,7 +211,7 @@ def _gains_in_effect(ctl: Controller, declared: set[str]) -> str:
         raise _Fail(f"gains_in_effect() is not JSON-serializable: {err}") from err
     # REPORTS: facts that are not gains (a warning, final estimates), declared by the class
     reports = set(getattr(type(ctl), "REPORTS", ()))
-    undeclared = sorted(set(gains) - declared - reports - set(TUNING_KEYS))
+    undeclared = sorted(set(gains) - declared - reports - set(RECORDED_TUNING_KEYS))
     if undeclared:
         raise _Fail(
             f"gains_in_effect() reports gains it does not declare: {', '.join(undeclared)} "

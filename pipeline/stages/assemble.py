@@ -22,6 +22,7 @@ from pipeline.settings import (
     ControllerSettings,
     EpisodeSettings,
     ExecutionSafety,
+    GainDesign,
     LoopSettings,
     PlannerSettings,
     PlantSettings,
@@ -243,6 +244,7 @@ def episode_settings(
     k0 = int(result.extra["motion_start_row"])
     at_start = min(k0, len(result.stamp_ns) - 1)
     damping, frictionloss = plant_friction(spec, scenario)
+    design, recorded_gains = GainDesign.split_from(gains)
     plant = PlantSettings(
         exact=_plant_is_exact(nominal, plant_spec, scenario),
         links=link_inertials(plant_spec),
@@ -267,8 +269,9 @@ def episode_settings(
         controller=ControllerSettings(
             name=episode.controller_name,
             type=episode.controller.type,
-            gains=gains,
+            gains=recorded_gains,
             origin=origin,
+            design=design,
         ),
         plant=plant,
         planner=PlannerSettings(

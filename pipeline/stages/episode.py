@@ -49,6 +49,10 @@ class EpisodeOutcome:
     contact: str = ""  # the execution-safety summary when the arm touched anything
 
 
+DESIGN_SAMPLE_S = 0.01
+"""Spacing [s] of the planned motion's samples the default gains are designed on."""
+
+
 def failed_outcome(name: str, reason: str, wall_s: float = 0.0) -> EpisodeOutcome:
     """The outcome of an episode that produced no recording."""
     return EpisodeOutcome(name, "failed", reason, "", float("nan"), float("nan"), 0.0, wall_s)
@@ -118,6 +122,7 @@ def _run_and_write(
     before_write: Callable[[], None] | None = None,
 ) -> EpisodeOutcome:
     from pipeline.control import controller_origin, make_controller
+    from pipeline.control.base import with_planned_path
     from pipeline.identify.model_file import nominal_path, nominal_spec, with_nominal_friction
     from pipeline.sim.runner import run_episode
     from pipeline.sim.safety import SKIP_WITHIN_M, assess_execution
@@ -130,7 +135,11 @@ def _run_and_write(
     controller = make_controller(
         episode.controller.type,
         nominal,
-        with_nominal_friction(episode.controller.gains, model_path),
+        # default gains designed on the nominal inertia along the planned motion
+        with_planned_path(
+            with_nominal_friction(episode.controller.gains, model_path),
+            trajectory.samples(DESIGN_SAMPLE_S).positions,
+        ),
         source=f"controllers.{episode.controller_name}",
     )
     p = scenario.plant

@@ -3,18 +3,26 @@
 from __future__ import annotations
 
 from pipeline.analysis import paper
-from pipeline.analysis.aggregate import MeanCI, mean_ci
 from pipeline.analysis.findings import DeadBandFinding
 from pipeline.analysis.metrics import ERROR_FLOOR_RAD
+from pipeline.analysis.verdict import MIN_PAIRS, compare
 
 
-def test_a_claim_holds_only_when_the_whole_interval_is_above_zero() -> None:
-    assert paper.verdict(MeanCI(0, None, None, None)) == "n/a"
-    assert paper.verdict(MeanCI(1, 5.0, None, None)) == "holds"
-    assert paper.verdict(MeanCI(1, -5.0, None, None)) == "does not hold"
-    assert paper.verdict(mean_ci([10.0, 11.0, 12.0])) == "holds"
-    assert paper.verdict(mean_ci([-10.0, -11.0, -12.0])) == "does not hold"
-    assert paper.verdict(mean_ci([-10.0, 10.0, 1.0])) == "inconclusive"
+def test_a_claim_is_decided_by_the_reports_one_rule() -> None:
+    """Tested only from MIN_PAIRS pairs; one pair keeps its sign, said as one pair."""
+
+    def claim(base: list[float], cand: list[float]) -> paper.Verdict:
+        return paper.verdict(compare(dict(enumerate(base)), dict(enumerate(cand)), unit="rad"))
+
+    assert paper.verdict(None) == "n/a"
+    assert claim([2e-3], [1e-3]) == "holds (one pair, no test)"
+    assert claim([1e-3], [2e-3]) == "does not hold (one pair, no test)"
+    assert claim([2e-3] * 3, [1e-3] * 3) == "too few pairs for a test"
+    assert claim([2e-3] * MIN_PAIRS, [1e-3] * MIN_PAIRS) == "holds"
+    assert claim([1e-3] * MIN_PAIRS, [2e-3] * MIN_PAIRS) == "does not hold"
+    alternating = [1e-3 * (1.5 if k % 2 else 0.5) for k in range(8)]
+    assert claim([1e-3] * 8, alternating) == "inconclusive"
+    assert claim([0.28] * 3, [0.28 + 1e-6] * 3) == "equivalent"
 
 
 def test_reduction_is_none_below_the_noise_floor_or_when_missing() -> None:

@@ -130,6 +130,8 @@ def test_scalar_gain_applies_to_every_joint_and_settings_report_every_gain(ur5):
         "ff_velocity_scale",
         "omega_n_rad_s",
         "zeta",
+        "design_at",
+        "design_inertia_kg_m2",
     }
     assert settings["kp"] == [100.0] * 6
     assert settings["ff_velocity_scale"] == [0.0] * 5 + [0.5]
@@ -138,10 +140,15 @@ def test_scalar_gain_applies_to_every_joint_and_settings_report_every_gain(ur5):
     assert json.loads(json.dumps(settings)) == settings
 
 
-@pytest.mark.parametrize("name", ["ctc", "pd_gravity"])
-def test_model_based_settings_are_json_and_complete(ur5, name):
+@pytest.mark.parametrize(
+    ("name", "design"),
+    [("ctc", set()), ("pd_gravity", {"design_at", "design_inertia_kg_m2"})],
+)
+def test_model_based_settings_are_json_and_complete(ur5, name, design):
+    """CTC's gains do not depend on the configuration, so no design configuration is
+    recorded for it; pd_gravity's are scaled by the inertia there, so it is."""
     settings = make_controller(name, ur5).gains_in_effect()
-    assert set(settings) == {"kp", "kd", "omega_n_rad_s", "zeta"}
+    assert set(settings) == {"kp", "kd", "omega_n_rad_s", "zeta"} | design
     assert json.loads(json.dumps(settings)) == settings
 
 

@@ -44,7 +44,10 @@ def test_default_clamp_lets_the_integral_ask_for_half_the_effort_limit(ur5):
 
 def test_settings_are_json_complete_and_bad_gains_are_refused(ur5):
     settings = make_controller("ctc_pid", ur5).gains_in_effect()
-    assert set(settings) == {"kp", "kd", "ki", "i_clamp", "omega_n_rad_s", "zeta"}
+    assert set(settings) == {
+        *("kp", "kd", "ki", "i_clamp", "omega_n_rad_s", "zeta"),
+        *("design_at", "design_inertia_kg_m2"),  # the clamp is scaled by the inertia
+    }
     assert json.loads(json.dumps(settings)) == settings
     with pytest.raises(ParamsError, match=r"^gains\.i_clamp: must be >= 0"):
         make_controller("ctc_pid", ur5, {"i_clamp": -1.0})

@@ -32,10 +32,11 @@ def test_the_first_screen_holds_the_headline_table_and_the_verdicts(tmp_path: Pa
     assert "| TCP max position error [mm] |" in screen
     assert "| TCP max orientation error [mrad] |" in screen
     verdict = next(line for line in screen.splitlines() if line.startswith("- **ctc vs pid**"))
-    # the one test behind it, in both spaces
-    assert "paired 95 % Student-t interval" in screen
-    assert "joint space, max |error| higher on joints 1, 2, 3, 4, 5" in verdict
-    assert "task space (TCP), max position error higher" in verdict
+    # the report's one rule behind it, in both spaces: 3 pairs are too few for a test
+    assert "One rule for every comparison of this report" in screen
+    assert "too few pairs for a test (fewer than 6): signs untested" in verdict
+    assert "higher (untested) on joints 1, 2, 3, 4, 5" in verdict
+    assert "task space (TCP), max position error higher (untested)" in verdict
     assert "## Episodes" not in screen.split("### Verdicts")[0]
     assert "Physical checks failed" not in text  # every check passes: no banner
 

@@ -73,6 +73,35 @@ def test_two_runs_give_byte_identical_recordings(tmp_path):
         # 0.3 s after the motion: PID is still settling (wrist 1 ~2 mrad), CTC has converged
         tolerance = {"paper-pid": 5e-3, "paper-ctc": 1e-6}[name]
         np.testing.assert_allclose(final, TABLE_2_GOAL, atol=tolerance)
+    # issue 28: PID's default gains were designed along the planned motion, and the
+    # recording says so (CTC's explicit gains depend on no configuration: no design)
+    import json
+
+    def design(name: str) -> object:
+        meta = yaml.safe_load((tmp_path / "a" / name / "metadata.yaml").read_text())
+        text = _find_settings(meta)
+        return json.loads(text)["controller"]["design"]
+
+    pid = design("paper-pid")
+    assert isinstance(pid, dict) and pid["at"] == "path" and len(pid["inertia_kg_m2"]) == 6
+    assert design("paper-ctc") is None
+
+
+def _find_settings(node: object) -> str:
+    """The settings JSON string inside a bag's metadata.yaml."""
+    if isinstance(node, dict):
+        if isinstance(node.get("settings"), str):
+            return str(node["settings"])
+        for value in node.values():
+            found = _find_settings(value)
+            if found:
+                return found
+    if isinstance(node, list):
+        for value in node:
+            found = _find_settings(value)
+            if found:
+                return found
+    return ""
 
 
 TABLE_2_GOAL = [-0.15, -0.5, 0.785, -1.15, -0.3925, 0.0]

@@ -1,0 +1,170 @@
+"""The one rule that decides every candidate-vs-baseline comparison of a report.
+
+The Verdicts sentence (:mod:`pipeline.analysis.summary`), the campaign win/loss cells
+(:func:`pipeline.analysis.campaign.win_loss`, and the flips drawn from them) and the
+paper's claims (:mod:`pipeline.analysis.paper`) all call :func:`compare`, so one page
+cannot hold two rules (issue 28):
+
+1. **Equivalent** (practical equivalence, TOST-style): the difference is within the
+   margin :func:`equivalence_margin`, the larger of the quantity's resolution
+   (:data:`RESOLUTION_BY_UNIT`: a 20-bit joint encoder's step) and
+   :data:`EQUIVALENCE_REL` of the baseline's mean. Every pair within it (any n), or, with
+   :data:`MIN_PAIRS` pairs or more, the 90 % Student-t interval of the mean difference
+   within it (two one-sided tests at 5 %).
+2. **A test** of the sign only with :data:`MIN_PAIRS` pairs or more: the two-sided exact
+   Wilcoxon signed-rank test of the per-seed differences (Mann-Whitney U when the runs do
+   not share seeds: with at least :data:`MIN_PAIRS` runs each), p < :data:`ALPHA` (Holm-
+   corrected where a table tests a family: :meth:`Verdict.with_p`): *better* / *worse*,
+   else *no clear difference*.
+3. **Too few pairs** below that: no verdict from a test anywhere; the sign of the mean
+   difference may be shown, marked untested (one pair: the sign of one run).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from typing import Any, Literal
+
+from pipeline.analysis.aggregate import mean_ci
+
+ALPHA = 0.05
+MIN_PAIRS = 6
+"""The fewest pairs at which the two-sided exact signed-rank test can reach p < ALPHA
+(2 / 2^n < 0.05 from n = 6); also the fewest runs per side for the unpaired test."""
+EQUIVALENCE_REL = 0.02
+"""Practical-equivalence margin as a fraction of the baseline's mean (2 %)."""
+ENCODER_RESOLUTION_RAD = 2.0 * math.pi / 2**20
+"""A 20-bit absolute joint encoder's step, 6.0e-6 rad (UR e-Series, Franka: 19-20 bits)."""
+RESOLUTION_BY_UNIT = {"rad": ENCODER_RESOLUTION_RAD, "m": 1.0 * ENCODER_RESOLUTION_RAD}
+"""The smallest difference of a quantity that is resolved [its unit]: a joint angle's,
+and at the TCP the encoder step times 1 m of reach."""
+
+WILCOXON = "Wilcoxon signed-rank (paired by seed)"
+MANN_WHITNEY = "Mann-Whitney U (unpaired: seeds do not pair)"
+TOO_FEW = "too few pairs for a test"
+
+Outcome = Literal["better", "worse", "no clear difference", "equivalent", "too few pairs", "n/a"]
+TESTED: tuple[Outcome, ...] = ("better", "worse", "no clear difference")
+
+
+def equivalence_margin(unit: str, baseline_mean: float | None) -> float:
+    """The practical-equivalence margin [the metric's unit]: the larger of the unit's
+    resolution (0 for a unit without one) and :data:`EQUIVALENCE_REL` x |baseline mean|."""
+    rel = EQUIVALENCE_REL * abs(baseline_mean) if baseline_mean is not None else 0.0
+    return max(RESOLUTION_BY_UNIT.get(unit, 0.0), rel)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """One comparison decided by the rule.
+
+    Attributes:
+        outcome: see the module docstring; *better* means the candidate is better (lower
+            where lower is better).
+        n: pairs (paired) or the smaller side's runs (unpaired).
+        paired: whether the runs pair by seed.
+        test: :data:`WILCOXON`, :data:`MANN_WHITNEY` or :data:`TOO_FEW`.
+        p: the test's two-sided p (None without a test).
+        margin: the equivalence margin [the metric's unit].
+        mean_diff: mean improvement (baseline - candidate, sign-adjusted: > 0 = the
+            candidate better) [the metric's unit]; the medians' difference when unpaired.
+        equivalent: whether the difference is within the margin.
+    """
+
+    outcome: Outcome
+    n: int
+    paired: bool
+    test: str
+    p: float | None
+    margin: float
+    mean_diff: float | None
+    equivalent: bool
+
+    def with_p(self, p: float | None) -> Verdict:
+        """The verdict with a corrected p (Holm over a table's family)."""
+        return replace(self, p=p, outcome=_decide(self.equivalent, self.test, p, self.mean_diff))
+
+    @property
+    def untested_sign(self) -> str | None:
+        """``better (untested)`` / ``worse (untested)`` when too few pairs, else None."""
+        if self.outcome != "too few pairs" or not self.mean_diff:
+            return None
+        return "better (untested)" if self.mean_diff > 0 else "worse (untested)"
+
+
+def _decide(equivalent: bool, test: str, p: float | None, mean_diff: float | None) -> Outcome:
+    if mean_diff is None:
+        return "n/a"
+    if equivalent:
+        return "equivalent"
+    if test == TOO_FEW or p is None:
+        return "too few pairs"
+    if p < ALPHA:
+        return "better" if mean_diff > 0 else "worse" if mean_diff < 0 else "no clear difference"
+    return "no clear difference"
+
+
+def compare(
+    base: Mapping[Any, float | None],
+    cand: Mapping[Any, float | None],
+    *,
+    unit: str,
+    lower_is_better: bool = True,
+) -> Verdict:
+    """Decide candidate vs baseline: values keyed by seed (equal keys pair; with fewer
+    than two common keys the runs are compared unpaired). None/NaN values are dropped."""
+    b = {k: float(v) for k, v in base.items() if v is not None and math.isfinite(float(v))}
+    c = {k: float(v) for k, v in cand.items() if v is not None and math.isfinite(float(v))}
+    sign = 1.0 if lower_is_better else -1.0
+    common = [k for k in b if k in c]
+    if len(common) >= 2 or (len(common) == 1 and len(b) == len(c) == 1):
+        diffs = [sign * (b[k] - c[k]) for k in common]
+        n = len(diffs)
+        margin = equivalence_margin(unit, math.fsum(b[k] for k in common) / n)
+        mean = math.fsum(diffs) / n
+        equivalent = all(abs(d) < margin for d in diffs) or (
+            n >= MIN_PAIRS and _tost(diffs, margin)
+        )
+        if n < MIN_PAIRS:
+            return _verdict(equivalent, TOO_FEW, None, n, True, margin, mean)
+        from scipy import stats
+
+        p = 1.0 if all(d == 0 for d in diffs) else float(stats.wilcoxon(diffs).pvalue)
+        return _verdict(equivalent, WILCOXON, p, n, True, margin, mean)
+    bs, cs = list(b.values()), list(c.values())
+    n = min(len(bs), len(cs))
+    if n == 0:
+        return Verdict("n/a", 0, False, TOO_FEW, None, 0.0, None, False)
+    mb, mc = _median(bs), _median(cs)
+    margin = equivalence_margin(unit, mb)
+    diff = sign * (mb - mc)
+    equivalent = all(abs(x - y) < margin for x in bs for y in cs)
+    if n < MIN_PAIRS:
+        return _verdict(equivalent, TOO_FEW, None, n, False, margin, diff)
+    from scipy import stats
+
+    p = float(stats.mannwhitneyu(bs, cs, alternative="two-sided").pvalue)
+    return _verdict(equivalent, MANN_WHITNEY, p, n, False, margin, diff)
+
+
+def _verdict(
+    equivalent: bool, test: str, p: float | None, n: int, paired: bool, margin: float, diff: float
+) -> Verdict:
+    return Verdict(_decide(equivalent, test, p, diff), n, paired, test, p, margin, diff, equivalent)
+
+
+def _tost(diffs: list[float], margin: float) -> bool:
+    """Two one-sided t tests at ALPHA: the 1 - 2 ALPHA interval of the mean difference
+    lies within (-margin, margin)."""
+    ci = mean_ci(diffs, confidence=1.0 - 2.0 * ALPHA)
+    if ci.mean is None or ci.half_width is None:
+        return False
+    return -margin < ci.mean - ci.half_width and ci.mean + ci.half_width < margin
+
+
+def _median(xs: list[float]) -> float:
+    s = sorted(xs)
+    k = len(s) // 2
+    return s[k] if len(s) % 2 else 0.5 * (s[k - 1] + s[k])
