@@ -53,7 +53,10 @@ def validate_episodes(params: Params, episodes: Sequence[Episode]) -> None:
     outside the joint limits, unknown controller type or bad gains. Collisions
     and reachability are the planner's to judge, per episode.
     """
+    import functools
+
     from pipeline.control import make_controller
+    from pipeline.control.contain import PluginError, contained_controller
 
     for episode in episodes:
         scenario = episode.scenario
@@ -75,12 +78,18 @@ def validate_episodes(params: Params, episodes: Sequence[Episode]) -> None:
                     f"expected 1 or {spec.dof} values, got {len(value)}"
                 )
         _check_loop(params, episode, where)
-        make_controller(
+        build = functools.partial(
+            make_controller,
             episode.controller.type,
             spec,
             episode.controller.gains,
             source=f"{params.source}: controllers.{episode.controller_name}",
         )
+        try:
+            with contained_controller(episode.controller.type, build):
+                pass
+        except PluginError:
+            pass  # plug-in code misbehaved: its episode fails on its own, in its worker
 
 
 def _check_loop(params: Params, episode: Episode, where: str) -> None:
