@@ -38,7 +38,7 @@ def teach_cmd(
         str,
         typer.Option(
             "--params",
-            help="The params file 'Use as goal' writes (the only one: a client cannot pick another).",
+            help="The params file 'Use as goal' writes (the only one: a page cannot pick another).",
         ),
     ] = "params.yaml",
 ) -> None:
