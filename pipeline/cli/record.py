@@ -87,7 +87,8 @@ def record_cmd(
         float | None,
         typer.Option(
             "--plugin-episode-budget-s",
-            help="Wall-clock budget of all of a plug-in controller's calls in one episode [s]. "
+            help="Wall-clock budget of one episode with a plug-in controller (its import to its "
+            "last call, the simulation included) [s]. "
             "Default: 600 (or $ARMLAB_PLUGIN_EPISODE_BUDGET_S).",
         ),
     ] = None,

@@ -8,8 +8,9 @@ wrong-shaped output, fails the episode with one :class:`PluginError` line naming
 controller, its origin, the call and the reason. ``compute`` gets read-only copies of its
 inputs, so a law that writes into them cannot corrupt the recording.
 
-Budgets: :data:`CALL_BUDGET_S` per call, :data:`EPISODE_BUDGET_S` for the plug-in's calls
-in one episode (import included); the environment variables ``ARMLAB_PLUGIN_CALL_BUDGET_S``
+Budgets: :data:`CALL_BUDGET_S` per call, :data:`EPISODE_BUDGET_S` of wall clock per episode
+(from the plug-in's import to the episode's last call, the simulation included, checked at
+each call); the environment variables ``ARMLAB_PLUGIN_CALL_BUDGET_S``
 and ``ARMLAB_PLUGIN_EPISODE_BUDGET_S`` override them (``record`` and ``check-controller``
 set them from ``--plugin-call-budget-s`` and ``--plugin-episode-budget-s``; pool workers
 inherit them). A call that never returns is interrupted by ``SIGALRM`` (main thread only,
@@ -37,7 +38,10 @@ CALL_BUDGET_S = 1.0
 """Default wall-clock budget of one plug-in call [s] (import, ``__init__``, ``reset``,
 ``compute``)."""
 EPISODE_BUDGET_S = 600.0
-"""Default wall-clock budget of all of a plug-in's calls in one episode [s]."""
+"""Default wall-clock budget of one episode with a plug-in, from its import to its last
+call, the simulation included [s]."""
+WATCH_PERIOD_S = 0.02
+"""How often the watchdog looks at the call under way [s] (the overrun resolution)."""
 CALL_ENV = "ARMLAB_PLUGIN_CALL_BUDGET_S"
 EPISODE_ENV = "ARMLAB_PLUGIN_EPISODE_BUDGET_S"
 
@@ -109,6 +113,10 @@ class PluginScope:
         self._deadline = math.inf
         self._handlers = False
         self._sigint = False
+        # the call under way, for the watchdog: its start (NaN: none) and its limit [s]
+        self._started = math.nan
+        self._limit = math.inf
+        self._stop = threading.Event()
 
     def __enter__(self) -> PluginScope:
         self._deadline = time.monotonic() + self.budget.episode_s
@@ -118,17 +126,32 @@ class PluginScope:
             if self._old_int is signal.default_int_handler:
                 signal.signal(signal.SIGINT, self._on_sigint)
             self._handlers = True
+            main = threading.main_thread().ident
+            threading.Thread(
+                target=self._watch, args=(main,), name="armlab-plugin-watchdog", daemon=True
+            ).start()
         return self
 
     def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._started = math.nan
         if self._handlers:
-            signal.setitimer(signal.ITIMER_REAL, 0.0)
             signal.signal(signal.SIGALRM, self._old_alarm)
             if signal.getsignal(signal.SIGINT) == self._on_sigint:
                 signal.signal(signal.SIGINT, self._old_int)
 
+    def _watch(self, main: int | None) -> None:
+        """A call past its limit gets SIGALRM in the main thread (cheaper per call than a
+        timer armed and disarmed around each one: a 1 kHz loop calls ``compute`` often)."""
+        while not self._stop.wait(WATCH_PERIOD_S):
+            started = self._started
+            if started == started and time.monotonic() - started > self._limit and main:
+                signal.pthread_kill(main, signal.SIGALRM)
+
     def _on_alarm(self, signum: int, frame: FrameType | None) -> None:
-        raise _Overrun
+        if self._started == self._started:  # still inside the plug-in's call
+            self._started = math.nan
+            raise _Overrun
 
     def _on_sigint(self, signum: int, frame: FrameType | None) -> None:
         self._sigint = True  # a real Ctrl-C, not a KeyboardInterrupt raised by plug-in code
@@ -144,38 +167,48 @@ class PluginScope:
 
     def call(self, call: str, fn: Callable[[], T]) -> T:
         """Run ``fn`` (plug-in code for ``call``) within the budgets; any escape is a
-        :class:`PluginError` (a :class:`PipelineError` from our own checks passes through,
-        prefixed)."""
+        :class:`PluginError` (a :class:`PipelineError` raised by the plug-in's validation
+        of its settings passes through)."""
         now = time.monotonic()
         left = self._deadline - now
         if left <= 0:
-            raise self.fail(call, f"episode budget of {self.budget.episode_s:g} s used up")
+            raise self.fail(call, f"ran past the episode budget of {self.budget.episode_s:g} s")
         limit = min(self.budget.call_s, left)
-        armed = self._handlers
-        if armed:
-            signal.setitimer(signal.ITIMER_REAL, limit)
+        try:
+            return self._call(call, fn, now, limit)
+        except _Overrun:  # (wherever the alarm landed while the call was under way)
+            self._started = math.nan
+            raise self.fail(call, self._overrun_reason(limit, left)) from None
+        finally:
+            if time.monotonic() - now > limit:
+                self._started = math.nan
+                raise self.fail(call, self._overrun_reason(limit, left)) from None
+
+    def _call(self, call: str, fn: Callable[[], T], now: float, limit: float) -> T:
+        self._limit = limit
+        self._started = now
         try:
             out = fn()
         except _Overrun:
-            raise self.fail(call, self._overrun_reason(limit, left)) from None
+            raise
         except PipelineError:
+            self._started = math.nan
             raise
         except KeyboardInterrupt:
+            self._started = math.nan
             if self._sigint:
                 raise
             raise self.fail(call, "raised KeyboardInterrupt") from None
         except SystemExit as err:
+            self._started = math.nan
             raise self.fail(call, f"called sys.exit({err.code!r})") from None
         except RecursionError:
+            self._started = math.nan
             raise self.fail(call, "RecursionError: maximum recursion depth exceeded") from None
         except BaseException as err:  # plug-in code may raise anything
+            self._started = math.nan
             raise self.fail(call, f"raised {type(err).__name__}: {err}"[:300]) from None
-        finally:
-            if armed:
-                signal.setitimer(signal.ITIMER_REAL, 0.0)
-        took = time.monotonic() - now
-        if took > limit:
-            raise self.fail(call, self._overrun_reason(limit, left))
+        self._started = math.nan
         return out
 
     def _overrun_reason(self, limit: float, left: float) -> str:
@@ -194,7 +227,8 @@ class ContainedController:
     def __init__(self, inner: Any, scope: PluginScope) -> None:
         self._inner = inner
         self._scope = scope
-        self._dof: int | None = None
+        self._buffer: Any = np.empty((5, 0))
+        self._views: tuple[Any, ...] | None = None
 
     @property
     def name(self) -> str:
@@ -217,30 +251,35 @@ class ContainedController:
     def compute(self, q: Any, qd: Any, q_ref: Any, qd_ref: Any, qdd_ref: Any, dt_s: float) -> Any:
         """The plug-in's torque on read-only copies of its inputs; refused unless it is
         ``dof`` finite floats."""
-        args = tuple(_frozen(a) for a in (q, qd, q_ref, qd_ref, qdd_ref))
+        if self._views is None or self._buffer.shape[1:] != np.shape(q):
+            self._buffer = np.empty((5, *np.shape(q)))
+            self._views = tuple(self._frozen_row(i) for i in range(5))
+        buf = self._buffer  # private: a plug-in that writes here corrupts nothing recorded
+        buf[0], buf[1], buf[2], buf[3], buf[4] = q, qd, q_ref, qd_ref, qdd_ref
+        args = self._views
         out = self._scope.call("compute", lambda: self._inner.compute(*args, float(dt_s)))
-        try:
-            tau = np.asarray(out, dtype=np.float64)
-        except (TypeError, ValueError) as err:
-            raise self._scope.fail("compute", f"returned {type(out).__name__}: {err}") from None
-        if not (isinstance(out, np.ndarray) and np.isrealobj(out)) or tau.shape != q.shape:
-            raise self._scope.fail(
-                "compute",
-                f"returned {type(out).__name__} of shape {np.shape(out)} and dtype "
-                f"{getattr(out, 'dtype', '?')}, expected {q.shape[0]} real torques",
-            )
-        if not np.isfinite(tau).all():
-            raise self._scope.fail("compute", f"returned a non-finite torque {tau.tolist()}")
-        return tau
+        if not (
+            isinstance(out, np.ndarray) and out.dtype == np.float64 and out.shape == buf.shape[1:]
+        ):
+            if isinstance(out, np.ndarray) and out.shape == buf.shape[1:] and np.isrealobj(out):
+                out = out.astype(np.float64)  # float32, int: exact enough
+            else:
+                raise self._scope.fail(
+                    "compute",
+                    f"returned {type(out).__name__} of shape {np.shape(out)} and dtype "
+                    f"{getattr(out, 'dtype', '?')}, expected {buf.shape[1]} real torques",
+                )
+        if not math.isfinite(math.fsum(out.tolist())) and not np.isfinite(out).all():
+            raise self._scope.fail("compute", f"returned a non-finite torque {out.tolist()}")
+        return out
+
+    def _frozen_row(self, i: int) -> Any:
+        view = self._buffer[i]
+        view.flags.writeable = False
+        return view
 
     def __getattr__(self, attr: str) -> Any:
         return getattr(self._inner, attr)
-
-
-def _frozen(a: Any) -> Any:
-    copy = np.array(a, dtype=np.float64, copy=True)
-    copy.flags.writeable = False
-    return copy
 
 
 def is_builtin(name: str) -> bool:
