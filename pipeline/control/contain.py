@@ -8,13 +8,14 @@ wrong-shaped output, fails the episode with one :class:`PluginError` line naming
 controller, its origin, the call and the reason. ``compute`` gets read-only copies of its
 inputs, so a law that writes into them cannot corrupt the recording.
 
-Budgets: :data:`CALL_BUDGET_S` per call, :data:`EPISODE_BUDGET_S` of wall clock per episode
-(from the plug-in's import to the episode's last call, the simulation included, checked at
-each call); the environment variables ``ARMLAB_PLUGIN_CALL_BUDGET_S``
-and ``ARMLAB_PLUGIN_EPISODE_BUDGET_S`` override them (``record`` and ``check-controller``
-set them from ``--plugin-call-budget-s`` and ``--plugin-episode-budget-s``; pool workers
-inherit them). A call that never returns is interrupted by ``SIGALRM`` (main thread only,
-Python-level code: a C loop that never checks signals is bounded by killing its worker).
+Budgets: :data:`CALL_BUDGET_S` per call, :data:`IMPORT_BUDGET_S` for the import,
+:data:`EPISODE_BUDGET_S` of wall clock per episode (from the import to the last call, the
+simulation included, checked at each call). The environment variables
+``ARMLAB_PLUGIN_CALL_BUDGET_S``, ``ARMLAB_PLUGIN_IMPORT_BUDGET_S`` and
+``ARMLAB_PLUGIN_EPISODE_BUDGET_S`` override them (``record`` sets two from
+``--plugin-call-budget-s`` and ``--plugin-episode-budget-s``; pool workers inherit them).
+A call that never returns is interrupted by ``SIGALRM`` from a watchdog thread (main
+thread only, Python-level code: a C loop that never checks signals is not).
 """
 
 from __future__ import annotations
@@ -42,6 +43,10 @@ EPISODE_BUDGET_S = 600.0
 call, the simulation included [s]."""
 WATCH_PERIOD_S = 0.02
 """How often the watchdog looks at the call under way [s] (the overrun resolution)."""
+IMPORT_BUDGET_S = 30.0
+"""Default wall-clock budget of importing a plug-in's module [s] (a cold import of a heavy
+library takes seconds)."""
+IMPORT_ENV = "ARMLAB_PLUGIN_IMPORT_BUDGET_S"
 CALL_ENV = "ARMLAB_PLUGIN_CALL_BUDGET_S"
 EPISODE_ENV = "ARMLAB_PLUGIN_EPISODE_BUDGET_S"
 
@@ -58,6 +63,7 @@ class Budget:
 
     call_s: float = CALL_BUDGET_S
     episode_s: float = EPISODE_BUDGET_S
+    import_s: float = IMPORT_BUDGET_S
 
     @staticmethod
     def from_env() -> Budget:
@@ -69,6 +75,7 @@ class Budget:
         return Budget(
             call_s=_env_seconds(CALL_ENV, CALL_BUDGET_S),
             episode_s=_env_seconds(EPISODE_ENV, EPISODE_BUDGET_S),
+            import_s=_env_seconds(IMPORT_ENV, IMPORT_BUDGET_S),
         )
 
 
@@ -173,7 +180,7 @@ class PluginScope:
         left = self._deadline - now
         if left <= 0:
             raise self.fail(call, f"ran past the episode budget of {self.budget.episode_s:g} s")
-        limit = min(self.budget.call_s, left)
+        limit = min(self.budget.import_s if call == "import" else self.budget.call_s, left)
         try:
             return self._call(call, fn, now, limit)
         except _Overrun:  # (wherever the alarm landed while the call was under way)
@@ -213,7 +220,8 @@ class PluginScope:
 
     def _overrun_reason(self, limit: float, left: float) -> str:
         if limit < left:
-            return f"took longer than its budget of {limit:g} s per call"
+            per = "to import" if limit == self.budget.import_s else "per call"
+            return f"took longer than its budget of {limit:g} s {per}"
         return f"ran past the episode budget of {self.budget.episode_s:g} s"
 
     def wrap(self, controller: Any) -> ContainedController:

@@ -58,6 +58,10 @@ class Spins(GoodPd):
 class Quits(GoodPd):
     def compute(self, *a):
         os._exit(0)
+
+class QuitsEarly(GoodPd):
+    def __init__(self, *a, **k):
+        os._exit(0)
 """
 
 CASES = {  # controller class: what its one line says
@@ -69,8 +73,9 @@ CASES = {  # controller class: what its one line says
     "Writes": "compute: raised ValueError: assignment destination is read-only",
     "Sleeps": "compute: took longer than its budget of 0.5 s per call",
     "Spins": "compute: took longer than its budget of 0.5 s per call",
-    "Hangs": "import: took longer than its budget of 0.5 s per call",
+    "Hangs": "import: took longer than its budget of 8 s to import",
     "Quits": "its worker process died (exit code 0) while running plug-in controller",
+    "QuitsEarly": "its worker process died (exit code 0) while running plug-in controller",
 }
 
 
@@ -101,7 +106,8 @@ def test_each_misbehaving_plug_in_fails_its_episode_in_one_line_and_the_others_r
 ) -> None:
     params = _params(tmp_path)
     out = tmp_path / "rec"
-    env = {"PYTHONPATH": f"{tmp_path}:{REPO}", "PATH": "/usr/bin:/bin", "HOME": str(tmp_path)}
+    env = {"PYTHONPATH": f"{tmp_path}:{REPO}", "PATH": "/usr/bin:/bin", "HOME": str(tmp_path),
+           "ARMLAB_PLUGIN_IMPORT_BUDGET_S": "8"}  # fmt: skip
     done = subprocess.run(
         [sys.executable, "-m", "pipeline", "record", "--params", str(params), "--out", str(out),
          "-j", "1", "--plugin-call-budget-s", "0.5"],
@@ -114,7 +120,7 @@ def test_each_misbehaving_plug_in_fails_its_episode_in_one_line_and_the_others_r
     for cls, words in CASES.items():
         line = next((ln for ln in err.splitlines() if f"e-{cls.lower()}" in ln), "")
         assert words in line, (cls, err)
-        if cls not in ("Quits", "Hangs"):
+        if cls not in ("Quits", "QuitsEarly", "Hangs"):
             assert f"controller 'hostile_plugins:{cls}' (module {tmp_path}" in line, line
         assert not (out / f"e-{cls.lower()}").exists()
 
