@@ -108,7 +108,8 @@ def record_cmd(
     A params file runs code: a controller `type: package.module:Object` (also through
     `dvc exp run -S`) imports that module, which runs its top-level code with your rights,
     before anything is checked. Plug-in controllers (entry points and module:Object) run in a
-    worker process even at -j 1, on read-only inputs, within the budgets above: a plug-in
+    worker process even at -j 1, on read-only inputs, within time budgets
+    (--plugin-call-budget-s, --plugin-episode-budget-s; imports 30 s): a plug-in
     that raises, exits, overruns or returns a non-finite or wrong-shaped torque fails its
     episode in one line; the others go on.
     """
