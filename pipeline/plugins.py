@@ -5,7 +5,10 @@ A name resolves to, in order:
 1. a built-in (the registry's dict from name to entry);
 2. an installed entry point in the family's group (``armlab.controllers``,
    ``armlab.ik_solvers``), found through :mod:`importlib.metadata` on ``sys.path``;
-3. ``package.module:Object`` (``Object`` may be dotted), imported.
+3. ``package.module:Object`` (``Object`` may be dotted), imported: only for a name
+   written in params (``imports=True``). A name read from data (a bag's controller
+   label or recorded type) is looked up among 1 and 2 only, never imported, so reading
+   a recording cannot run code.
 
 Nothing is registered at run time: a pool or Ray worker resolves the same name by
 import, afresh. Each resolution also says where the code came from (its origin),
@@ -56,6 +59,7 @@ def resolve(
     what: str,
     error: type[PipelineError],
     where: str = "",
+    imports: bool = True,
 ) -> Resolved:
     """Find ``name``: a built-in, else an entry point of ``group``, else ``module:Object``.
 
@@ -66,6 +70,8 @@ def resolve(
         what: the family in messages, e.g. ``controller``.
         error: the error raised (one line, listing built-in and installed names).
         where: prefix of error messages (e.g. ``controllers.mine.type: ``).
+        imports: whether a ``module:Object`` name is imported; False for a name read
+            from data (a bag), which then resolves to built-ins and entry points only.
 
     Raises:
         error: unknown name (with the near miss), an entry point or module that fails
@@ -76,7 +82,7 @@ def resolve(
     if name in builtins:
         return Resolved(builtins[name], BUILTIN_ORIGIN)
     try:
-        return _external(name, group, what)
+        return _external(name, group, what, imports)
     except _NotFound:
         pass
     except PipelineError as err:
@@ -84,7 +90,8 @@ def resolve(
     installed = installed_names(group)
     message = unknown_name_message(what, name, sorted(builtins), also=installed)
     extra = f"; installed ({group}): {', '.join(installed)}" if installed else ""
-    raise error(f"{where}{message}{extra}; or 'package.module:Object'")
+    plugin = "; or 'package.module:Object'" if imports else " (not imported: read from data)"
+    raise error(f"{where}{message}{extra}{plugin}")
 
 
 class _NotFound(Exception):
@@ -92,7 +99,7 @@ class _NotFound(Exception):
 
 
 @functools.lru_cache(maxsize=64)
-def _external(name: str, group: str, what: str) -> Resolved:
+def _external(name: str, group: str, what: str, imports: bool) -> Resolved:
     """Entry point or ``module:Object`` (cached: a campaign resolves one name per episode)."""
     eps = [ep for ep in md.entry_points(group=group) if ep.name == name]
     if eps:
@@ -114,7 +121,7 @@ def _external(name: str, group: str, what: str) -> Resolved:
                 "version": dist.version if dist is not None else "",
             },
         )
-    if ":" not in name:
+    if ":" not in name or not imports:
         raise _NotFound
     module_name, _, attr = name.partition(":")
     if not module_name or not attr:

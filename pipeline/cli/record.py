@@ -78,6 +78,24 @@ def record_cmd(
         str | None,
         typer.Option("--address", help="Ray cluster to join (e.g. auto); default: start one."),
     ] = None,
+    plugin_call_budget_s: Annotated[
+        float | None,
+        typer.Option(
+            "--plugin-call-budget-s",
+            help="Wall-clock budget of one call of a plug-in controller (import, __init__, "
+            "reset, compute) [s]; past it the episode fails. Default: 1 "
+            "(or $ARMLAB_PLUGIN_CALL_BUDGET_S).",
+        ),
+    ] = None,
+    plugin_episode_budget_s: Annotated[
+        float | None,
+        typer.Option(
+            "--plugin-episode-budget-s",
+            help="Wall-clock budget of one episode with a plug-in controller (its import to its "
+            "last call, the simulation included) [s]. "
+            "Default: 600 (or $ARMLAB_PLUGIN_EPISODE_BUDGET_S).",
+        ),
+    ] = None,
 ) -> None:
     """Plan, simulate and record every episode in PARAMS as a ROS 2 bag (MCAP).
 
@@ -90,8 +108,20 @@ def record_cmd(
     work. One run per OUT at a time; Ctrl-C exits 130 and says which episodes were
     recorded.
     With --campaign, runs that campaign instead of the hand-listed episodes.
+
+    A params file runs code: a controller `type: package.module:Object` (also through
+    `dvc exp run -S`) imports that module, which runs its top-level code with your rights,
+    before anything is checked. Plug-in controllers (entry points and module:Object) run in a
+    worker process even at -j 1, on read-only inputs, within time budgets
+    (--plugin-call-budget-s, --plugin-episode-budget-s; imports 30 s): a plug-in
+    that raises, exits, overruns or returns a non-finite or wrong-shaped torque fails its
+    episode in one line; the others go on.
     """
     from pathlib import Path
+
+    from pipeline.control.contain import set_budget_env
+
+    set_budget_env(call_s=plugin_call_budget_s, episode_s=plugin_episode_budget_s)
 
     if ros_distro is not None:
         _ros_distro(ros_distro)  # refused before any work

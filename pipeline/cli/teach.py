@@ -35,7 +35,11 @@ def teach_cmd(
         ),
     ] = "127.0.0.1",
     params: Annotated[
-        str, typer.Option("--params", help="Default params file for 'Use as goal'.")
+        str,
+        typer.Option(
+            "--params",
+            help="The params file 'Use as goal' writes (the only one: a page cannot pick another).",
+        ),
     ] = "params.yaml",
 ) -> None:
     """Interactive IK in the browser: a local web page with a draggable flange target.

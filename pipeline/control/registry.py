@@ -126,24 +126,32 @@ def controller_origin(name: str) -> dict[str, str]:
     return dict(found.origin)
 
 
-def stiffness_gains(name: str) -> tuple[str, ...] | None:
-    """Keys of controller ``name``'s gains that are joint stiffnesses [N m/rad];
-    None when the name resolves to nothing here (a plug-in not importable)."""
+def known_entry(name: str) -> ControllerEntry | None:
+    """The entry of a controller name read from data (a bag's label or recorded type):
+    a built-in or an installed entry point, else None. Never imports ``module:Object``
+    (a bag folder named ``this:s`` must not run code); such a name is plain text."""
     try:
-        entry = controller_entry(name)
+        found = resolve(
+            name, CONTROLLERS, group=GROUP, what="controller", error=UnknownControllerError,
+            imports=False,
+        )  # fmt: skip
+        return _as_entry(found.obj, name, "")
     except PipelineError:
         return None
-    return tuple(g.key for g in entry.gain_specs if g.stiffness)
+
+
+def stiffness_gains(name: str) -> tuple[str, ...] | None:
+    """Keys of controller ``name``'s gains that are joint stiffnesses [N m/rad]; None
+    when the name is no built-in or installed entry point (see :func:`known_entry`)."""
+    entry = known_entry(name)
+    return None if entry is None else tuple(g.key for g in entry.gain_specs if g.stiffness)
 
 
 def declared_color(name: str) -> RGB | None:
-    """Controller ``name``'s own colour, if it resolves and declares one."""
-    if name in CONTROLLERS:
-        return CONTROLLERS[name].color
-    try:
-        return controller_entry(name).color
-    except PipelineError:
-        return None
+    """Controller ``name``'s own colour, if it is a built-in or an installed entry point
+    that declares one (see :func:`known_entry`)."""
+    entry = known_entry(name)
+    return None if entry is None else entry.color
 
 
 def _as_entry(obj: object, name: str, where: str) -> ControllerEntry:

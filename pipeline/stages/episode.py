@@ -121,27 +121,46 @@ def _run_and_write(
     progress: Callable[[float], None] | None,
     before_write: Callable[[], None] | None = None,
 ) -> EpisodeOutcome:
-    from pipeline.control import controller_origin, make_controller
+    from pipeline.control import make_controller
     from pipeline.control.base import with_planned_path
+    from pipeline.control.contain import contained_controller
     from pipeline.identify.model_file import nominal_path, nominal_spec, with_nominal_friction
-    from pipeline.sim.runner import run_episode
-    from pipeline.sim.safety import SKIP_WITHIN_M, assess_execution
 
     scenario = episode.scenario
     spec = scenario_spec(scenario)
-    sim = episode.sim
     model_path = nominal_path(scenario.nominal, seed=episode.seed)
     nominal = nominal_spec(spec, model_path, where=f"scenarios.{episode.scenario_name}")
-    controller = make_controller(
+    with contained_controller(
         episode.controller.type,
-        nominal,
-        # default gains designed on the nominal inertia along the planned motion
-        with_planned_path(
-            with_nominal_friction(episode.controller.gains, model_path),
-            trajectory.samples(DESIGN_SAMPLE_S).positions,
+        lambda: make_controller(
+            episode.controller.type,
+            nominal,
+            # default gains designed on the nominal inertia along the planned motion
+            with_planned_path(
+                with_nominal_friction(episode.controller.gains, model_path),
+                trajectory.samples(DESIGN_SAMPLE_S).positions,
+            ),
+            source=f"controllers.{episode.controller_name}",
         ),
-        source=f"controllers.{episode.controller_name}",
-    )
+    ) as controller:  # a plug-in runs within its budgets, on read-only inputs
+        result, gains, drawn = _simulate(episode, spec, controller, trajectory, progress)
+    return _assess_and_write(
+        episode, path, trajectory, spec=spec, nominal=nominal, result=result, gains=gains,
+        drawn=drawn, bag_dir=bag_dir, force=force, commit=commit, before_write=before_write,
+    )  # fmt: skip
+
+
+def _simulate(
+    episode: Episode,
+    spec: Any,
+    controller: Any,
+    trajectory: TimedTrajectory,
+    progress: Callable[[float], None] | None,
+) -> tuple[Any, dict[str, Any], tuple[Any, Any]]:
+    """Run the episode on the plant: (result, gains in effect, (plant spec, uncertainty))."""
+    from pipeline.sim.runner import run_episode
+
+    scenario, sim = episode.scenario, episode.sim
     p = scenario.plant
     plant_spec, plant, uncertainty = draw_scenario_plant(spec, scenario, seed=episode.seed)
     result = run_episode(
@@ -162,6 +181,30 @@ def _run_and_write(
         seed=episode.seed,
         progress=progress,
     )
+    return result, controller.gains_in_effect(), (plant_spec, uncertainty)
+
+
+def _assess_and_write(
+    episode: Episode,
+    path: PlannedPath,
+    trajectory: TimedTrajectory,
+    *,
+    spec: Any,
+    nominal: Any,
+    result: Any,
+    gains: dict[str, Any],
+    drawn: tuple[Any, Any],
+    bag_dir: Path,
+    force: bool,
+    commit: str,
+    before_write: Callable[[], None] | None,
+) -> EpisodeOutcome:
+    from pipeline.control import controller_origin
+    from pipeline.sim.safety import SKIP_WITHIN_M, assess_execution
+
+    scenario = episode.scenario
+    sim = episode.sim
+    plant_spec, uncertainty = drawn
     k0 = int(result.extra["motion_start_row"])
     motion_start_s = float(result.extra["motion_start_s"])
     # contacts and clearance along the plant's true motion: every control step that is
@@ -179,7 +222,7 @@ def _run_and_write(
         nominal=nominal,
         plant_spec=plant_spec,
         uncertainty=uncertainty,
-        gains=controller.gains_in_effect(),
+        gains=gains,
         origin=controller_origin(episode.controller.type),
         path=path,
         trajectory=trajectory,

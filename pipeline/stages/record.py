@@ -10,9 +10,12 @@ here puts a wall-clock reading into a recording.
 
 from __future__ import annotations
 
+import contextlib
+import os
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 from pipeline.errors import ParamsError, PipelineError, SimulationError
 from pipeline.fsutil import ensure_dir
@@ -53,8 +56,12 @@ def validate_episodes(params: Params, episodes: Sequence[Episode]) -> None:
     outside the joint limits, unknown controller type or bad gains. Collisions
     and reachability are the planner's to judge, per episode.
     """
-    from pipeline.control import make_controller
+    import functools
 
+    from pipeline.control import make_controller
+    from pipeline.control.contain import is_builtin
+
+    probed: set[tuple[str, ...]] = set()
     for episode in episodes:
         scenario = episode.scenario
         try:
@@ -75,12 +82,64 @@ def validate_episodes(params: Params, episodes: Sequence[Episode]) -> None:
                     f"expected 1 or {spec.dof} values, got {len(value)}"
                 )
         _check_loop(params, episode, where)
-        make_controller(
+        build = functools.partial(
+            make_controller,
             episode.controller.type,
             spec,
             episode.controller.gains,
             source=f"{params.source}: controllers.{episode.controller_name}",
         )
+        if is_builtin(episode.controller.type):
+            build()
+        else:
+            probe_key = (episode.controller.type, repr(episode.controller.gains), spec.name,
+                   episode.controller_name)  # fmt: skip
+            if probe_key not in probed:
+                probed.add(probe_key)
+                _probe_plugin(episode.controller.type, build)
+
+
+def _probe_plugin(name: str, build: Callable[[], object]) -> None:
+    """Build a plug-in controller once in a forked child, contained: its settings errors
+    (an unknown gain, a module that does not import) refuse the run here in one line; plug-in
+    code that misbehaves (raises, exits, hangs, ``os._exit``) is left to fail its own
+    episode in its worker, with the others going on. This process never runs plug-in code.
+    """
+    import multiprocessing as mp
+
+    from pipeline.control.contain import Budget, PluginError, contained_controller
+
+    def probe(conn: Any) -> None:
+        message = ""
+        try:
+            with contained_controller(name, build):
+                pass
+        except PluginError:
+            pass
+        except PipelineError as err:
+            message = str(err)
+        except BaseException:
+            pass
+        with contextlib.suppress(Exception):
+            conn.send(message)
+        os._exit(0)  # no atexit handlers, no flushing of the parent's buffers
+
+    ctx = mp.get_context("fork")
+    recv, send = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=probe, args=(send,), daemon=True)
+    proc.start()
+    send.close()
+    budget = Budget.from_env()
+    message = ""
+    if recv.poll(2 * budget.call_s + 30.0):
+        with contextlib.suppress(EOFError, OSError):
+            message = recv.recv()
+    recv.close()
+    if proc.is_alive():
+        proc.kill()
+    proc.join()
+    if message:
+        raise ParamsError(message)
 
 
 def _check_loop(params: Params, episode: Episode, where: str) -> None:

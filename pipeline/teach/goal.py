@@ -7,7 +7,12 @@ written, atomically. A failed validation leaves the file untouched.
 
 from __future__ import annotations
 
+import contextlib
+import copy
+import fcntl
 import io
+import os
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Literal
 
@@ -81,6 +86,30 @@ def write_goal(
         raise ParamsError(f"{params_path}: scenario name must not be empty")
     if not params_path.is_file():
         raise ParamsError(f"{params_path}: no such params file (give an existing params YAML)")
+    with _writers_lock(params_path):  # read, change and replace as one step per writer
+        return _write_goal_locked(params_path, scenario=scenario, robot=robot, spec=spec, goal=goal)
+
+
+@contextlib.contextmanager
+def _writers_lock(params_path: Path) -> Iterator[None]:
+    """An exclusive ``flock`` on the params file's folder: two teach servers (or two pages)
+    writing one file take turns, so neither loses the other's change. (The folder, not the
+    file: the file is replaced by a rename, which a lock on its old inode would not cover.)"""
+    folder = params_path.absolute().parent
+    try:
+        fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError as err:
+        raise ParamsError(f"{folder}: cannot lock the params file's folder ({err})") from err
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
+def _write_goal_locked(
+    params_path: Path, *, scenario: str, robot: str, spec: RobotSpec, goal: dict[str, Any]
+) -> Params:
     try:
         text = params_path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as err:
@@ -116,6 +145,9 @@ def write_goal(
         if not isinstance(entry, dict):
             raise ParamsError(f"{params_path}: scenarios.{scenario}: expected a mapping")
         _same_robot(params_path, scenario, entry.get("robot"), spec)
+        if _uses(data, entry) > 1:  # an anchor or alias (taught: *paper): change this one only
+            entry = _unshared_copy(entry)
+            scenarios[scenario] = entry
         entry["goal"] = goal_node
     out = io.StringIO()
     yaml.dump(data, out)
@@ -126,6 +158,37 @@ def write_goal(
     )
     atomic_write_bytes(params_path, new_text.encode("utf-8"))
     return parsed
+
+
+def _uses(node: object, target: object) -> int:
+    """How many times ``target`` (by identity) appears in the tree under ``node``."""
+    count, seen, stack = 0, set(), [node]
+    while stack:
+        item = stack.pop()
+        if item is target:
+            count += 1
+        if id(item) in seen or not isinstance(item, dict | list):
+            continue
+        seen.add(id(item))
+        stack.extend(item.values() if isinstance(item, dict) else item)
+    return count
+
+
+def _unshared_copy(entry: dict[Any, Any]) -> CommentedMap:
+    """A deep copy of an anchored or aliased mapping with no anchors of its own (the
+    original keeps its anchor for its other users)."""
+    new = copy.deepcopy(entry)
+    if not isinstance(new, CommentedMap):
+        new = CommentedMap(new)
+    stack: list[object] = [new]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, CommentedMap | CommentedSeq):
+            if item.anchor.value is not None:
+                item.anchor.value = None
+                item.anchor.always_dump = False
+            stack.extend(item.values() if isinstance(item, dict) else item)
+    return new
 
 
 def _same_robot(params_path: Path, scenario: str, robot: object, spec: RobotSpec) -> None:

@@ -52,7 +52,7 @@ from pipeline.model.dh import link_frames
 from pipeline.model.mjcf import FLOOR_Z_M
 from pipeline.teach.goal import GoalKind, goal_from_state, write_goal
 from pipeline.teach.meshes import add_link_meshes
-from pipeline.teach.origin import origin_checked_serve
+from pipeline.teach.origin import guard_incoming_messages, origin_checked_serve
 from pipeline.teach.session import TeachSession, TeachState
 
 Array = NDArray[np.float64]
@@ -254,6 +254,7 @@ class TeachServer:
         self._lock = threading.RLock()
         self._syncing = False
         check_port_free(host, port)
+        guard_incoming_messages()  # a malformed message: one line, the session goes on
         with (
             contextlib.redirect_stdout(io.StringIO()),  # viser's banner; we print the URL
             origin_checked_serve(host) as built,
@@ -272,6 +273,7 @@ class TeachServer:
             raise TeachError(f"port {port} on {host} is already in use; pick another with --port N")
         self.host = host
         self.port = int(self._server.get_port())
+        self.params_path = Path(params_path)
         self._build_scene()
         self._build_gui(params_path)
         self.render(session.state, move_target=True)
@@ -359,7 +361,8 @@ class TeachServer:
             show.on_click(self._on_show_map)
             hide.on_click(self._on_hide_map)
         with gui.add_folder("Use as goal", expand_by_default=False):
-            self._goal_path = gui.add_text("params file", initial_value=params_path)
+            # shown, not chosen: teach writes only the file it was started with (--params)
+            self._goal_path = gui.add_text("params file", initial_value=params_path, disabled=True)
             self._goal_scenario = gui.add_text("scenario", initial_value="taught")
             self._goal_kind = gui.add_dropdown(
                 "goal as", options=("pose", "joints"), initial_value="pose"
@@ -413,8 +416,13 @@ class TeachServer:
 
     def _on_write_goal(self) -> None:
         try:
+            if str(self._goal_path.value) != str(self.params_path):
+                raise TeachError(
+                    f"params file {str(self._goal_path.value)!r:.200}: teach writes only the "
+                    f"file it was started with ({self.params_path}; restart with --params)"
+                )
             path = self.write_goal(
-                Path(self._goal_path.value), scenario=self._goal_scenario.value.strip(),
+                self.params_path, scenario=str(self._goal_scenario.value).strip(),
                 kind="joints" if self._goal_kind.value == "joints" else "pose",
             )  # fmt: skip
         except PipelineError as err:
@@ -531,7 +539,16 @@ class TeachServer:
         self._map_status.content = ""
 
     def write_goal(self, params_path: Path, *, scenario: str, kind: GoalKind) -> Path:
-        """Write the shown pose (or joints) as ``scenarios.<scenario>.goal`` (validated, atomic)."""
+        """Write the shown pose (or joints) as ``scenarios.<scenario>.goal`` (validated, atomic).
+
+        Raises:
+            TeachError: ``params_path`` is not the file the server was started with.
+        """
+        if Path(params_path).absolute() != self.params_path.absolute():
+            raise TeachError(
+                f"{params_path}: teach writes only the file it was started with "
+                f"({self.params_path})"
+            )
         with self._lock:
             goal = goal_from_state(self.state, kind=kind, solver=self.session.solver.name)
             write_goal(

@@ -115,18 +115,20 @@ def test_a_plug_in_refuses_gains_it_does_not_declare_in_one_line(ur5):
     assert "valid: kp, kd" in message and "\n" not in message
 
 
-def test_the_report_asks_the_entry_which_gains_are_stiffnesses():
+def test_the_report_asks_the_entry_which_gains_are_stiffnesses(installed):
     assert stiffness_gains("pid") == ("kp",) and stiffness_gains("pd_gravity") == ("kp",)
     assert stiffness_gains("ctc") == () and stiffness_gains("ctc_pid") == ()
-    assert stiffness_gains(GOOD) == ("kp",)
+    assert stiffness_gains("fake_pd") == ("kp",)  # an installed entry point
+    assert stiffness_gains(GOOD) is None  # a name read from a bag is never imported
     assert stiffness_gains("not_a_controller_anywhere") is None
 
 
-def test_colours_come_from_the_entries_and_others_take_free_palette_colours():
+def test_colours_come_from_the_entries_and_others_take_free_palette_colours(installed):
     assert {n: e.color for n, e in CONTROLLERS.items() if e.color is not None} == FIXED
-    assert declared_color(GOOD) == (188, 189, 34)
-    colors = controller_colors(["pid", "ctc", GOOD, "zz_a", "zz_b"])
-    assert colors["pid"] == CONTROLLERS["pid"].color and colors[GOOD] == (188, 189, 34)
+    assert declared_color("fake_pd") == (188, 189, 34)
+    assert declared_color(GOOD) is None  # module:Object from data: plain text
+    colors = controller_colors(["pid", "ctc", "fake_pd", "zz_a", "zz_b"])
+    assert colors["pid"] == CONTROLLERS["pid"].color and colors["fake_pd"] == (188, 189, 34)
     assert colors["zz_a"] != colors["zz_b"]
     assert {colors["zz_a"], colors["zz_b"]}.isdisjoint({*FIXED.values(), (188, 189, 34)})
     assert set(colors.values()) <= set(PALETTE)

@@ -103,3 +103,44 @@ def test_missing_params_file_is_one_clear_error(ur5: RobotSpec, tmp_path: Path) 
     goal = goal_from_state(_taught(ur5).state, kind="joints", solver="analytic")
     with pytest.raises(ParamsError, match="no such params file"):
         write_goal(tmp_path / "nope.yaml", scenario="t", robot="ur5", spec=ur5, goal=goal)
+
+
+def test_use_as_goal_on_an_alias_writes_only_that_scenario(
+    ur5: RobotSpec, params_file: Path
+) -> None:
+    text = params_file.read_text().replace("  paper:\n", "  paper: &paper\n", 1)
+    text = text.replace("\ncontrollers:", "\n  taught: *paper\n  also: *paper\ncontrollers:", 1)
+    params_file.write_text(text)
+    before = load_params(params_file).scenarios
+    write_goal(params_file, scenario="taught", robot="ur5", spec=ur5,
+               goal={"joints": TAUGHT_Q})  # fmt: skip
+    after = load_params(params_file).scenarios
+    assert after["taught"].goal.joints == TAUGHT_Q
+    for other in ("paper", "also"):  # the anchor and its other user are unchanged
+        assert after[other] == before[other]
+    assert after["taught"].start == before["paper"].start  # the rest of the alias expanded
+
+
+def _write_many(path: str, prefix: str, count: int) -> None:
+    from pipeline.robots import load_spec
+
+    spec = load_spec("ur5")
+    for k in range(count):
+        q = [0.01 * k, -0.5, 0.3, -0.2, 0.1, 0.0]
+        write_goal(Path(path), scenario=f"{prefix}{k}", robot="ur5", spec=spec,
+                   goal={"joints": q})  # fmt: skip
+
+
+@pytest.mark.slow
+def test_concurrent_writers_take_turns_and_lose_no_goal(params_file: Path) -> None:
+    import multiprocessing as mp
+
+    ctx = mp.get_context("fork")
+    procs = [ctx.Process(target=_write_many, args=(str(params_file), p, 6)) for p in "ab"]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(300)
+    assert [p.exitcode for p in procs] == [0, 0]
+    scenarios = load_params(params_file).scenarios
+    assert {f"{p}{k}" for p in "ab" for k in range(6)} <= set(scenarios)

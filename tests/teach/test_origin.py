@@ -4,6 +4,7 @@ and what a client sends that cannot be acted on is told to that client, not prin
 from __future__ import annotations
 
 import math
+import socket
 
 import pytest
 from websockets.exceptions import InvalidStatus
@@ -37,12 +38,26 @@ def test_the_page_s_own_origin_is_accepted(ur5_server: TeachServer, name: str) -
         assert client.pump_until(lambda c: bool(c.gui_label))
 
 
+def _own_non_loopback_ip() -> str:
+    """An address of this machine other than 127.0.0.1 (the route out; 127.0.0.2 if none)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.connect(("192.0.2.1", 9))  # no packet is sent: picks the outgoing interface
+            return str(probe.getsockname()[0])
+        except OSError:
+            return "127.0.0.2"  # all of 127/8 is this machine's
+
+
 def test_own_origin_rules() -> None:
     assert own_origin("http://127.0.0.1:8080", host="127.0.0.1", port=8080)
     assert own_origin("http://[::1]:8080", host="127.0.0.1", port=8080)
     assert not own_origin("http://127.0.0.1:8081", host="127.0.0.1", port=8080)
     assert not own_origin("http://192.168.1.7:8080", host="127.0.0.1", port=8080)
-    assert own_origin("http://192.168.1.7:8080", host="0.0.0.0", port=8080)
+    # listening on all interfaces: only this machine's own addresses, not any IP literal
+    assert own_origin("http://127.0.0.1:8080", host="0.0.0.0", port=8080)
+    assert own_origin(f"http://{_own_non_loopback_ip()}:8080", host="0.0.0.0", port=8080)
+    for foreign in ("203.0.113.5", "192.0.2.1", "0.0.0.0", "224.0.0.1", "[2001:db8::1]"):
+        assert not own_origin(f"http://{foreign}:8080", host="0.0.0.0", port=8080), foreign
     assert not own_origin("http://rebind.example:8080", host="0.0.0.0", port=8080)
     assert own_origin("http://armlab.local:8080", host="armlab.local", port=8080)
     assert not own_origin("http://127.0.0.1:99999999", host="127.0.0.1", port=8080)

@@ -182,27 +182,26 @@ def test_choosing_another_solution_on_the_page_moves_the_arm_not_the_flange(
         np.testing.assert_allclose(q, ur5_server.state.solutions[2], atol=0)
 
 
-def test_use_as_goal_button_writes_a_valid_params_file(
-    ur5_server: TeachServer, tmp_path: Path
-) -> None:
+def test_use_as_goal_button_writes_a_valid_params_file(tmp_path: Path) -> None:
     import shutil
 
     from pipeline.params import load_params
 
     params = tmp_path / "params.yaml"
     shutil.copy(Path(__file__).resolve().parents[2] / "params.yaml", params)
-    spec = ur5_server.session.spec
+    server = start_server("ur5", params=str(params))  # teach writes only this file
+    spec = server.session.spec
     target = forward_kinematics(spec, [0.4, -1.1, 1.3, -0.6, 0.9, -0.3])
-    with _connected(ur5_server) as client:
+    with _connected(server) as client:
         client.move_target(target[:3, 3], tf.quat_wxyz(target[:3, :3]))
         assert client.pump_until(lambda c: str(c.value("IK solution")).startswith("1 of 8"))
-        client.set_gui("params file", str(params))
         client.set_gui("scenario", "from-page")
         client.set_gui("goal as", "joints")
         client.set_gui("Write goal", True)  # handled after the inputs above, in order
         assert client.pump_until(
             lambda c: any("wrote scenarios.from-page.goal" in str(m) for _, m in c.received)
         ), "the page never confirmed the write"
+    server.close()
     joints = load_params(params).scenarios["from-page"].goal.joints
     assert joints is not None
     np.testing.assert_allclose(forward_kinematics(spec, joints), target, atol=1e-9)

@@ -18,6 +18,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
+from pipeline.control.contain import is_builtin
 from pipeline.params import Episode
 from pipeline.stages.episode import EpisodeOutcome, remove_work_folders, run_one
 from pipeline.stages.executors.base import Emit, interrupted
@@ -45,7 +46,10 @@ class LocalExecutor:
     ) -> dict[str, EpisodeOutcome]:
         """See :meth:`pipeline.stages.executors.base.Executor.run`."""
         started_s = time.time()
-        if self.jobs > 1 and len(episodes) > 1:
+        # plug-in code runs in a worker even at jobs 1: an os._exit, a crash or a C loop
+        # in it fails its episode instead of ending (or hanging) this process
+        plugins = any(not is_builtin(e.controller.type) for e in episodes)
+        if (self.jobs > 1 and len(episodes) > 1) or plugins:
             return _run_pool(episodes, plans, out_dir=out_dir, force=force, commit=commit,
                              jobs=self.jobs, emit=emit, started_s=started_s)  # fmt: skip
         outcomes: dict[str, EpisodeOutcome] = {}
@@ -133,6 +137,7 @@ def _run_pool(
     ctx = _mp_context()
     cancel = ctx.Event()
     queued = [(e.name, (e, plans[e.name])) for e in episodes]
+    by_name = {e.name: e.controller.type for e in episodes}
     outcomes: dict[str, EpisodeOutcome] = {}
     pool = WorkerPool[str](
         ctx, _worker_main, (cancel, str(out_dir), force, commit), name="pipeline-record-worker"
@@ -150,7 +155,7 @@ def _run_pool(
                 except (EOFError, OSError):
                     exitcode = pool.drop(conn)
                     if current is not None and current not in outcomes:
-                        outcomes[current] = _worker_died(current, exitcode)
+                        outcomes[current] = _worker_died(current, exitcode, by_name[current])
                         emit("done", current, 1.0)
                     if queued:
                         pool.feed(pool.start(), queued)
@@ -163,7 +168,7 @@ def _run_pool(
                     pool.feed(conn, queued)
             if not pool.workers and len(outcomes) < len(episodes):  # pragma: no cover - defensive
                 for name, _ in queued:
-                    outcomes[name] = _worker_died(name, None)
+                    outcomes[name] = _worker_died(name, None, by_name[name])
                 queued.clear()
     except KeyboardInterrupt as err:
         cancel.set()
@@ -196,10 +201,12 @@ def _collect_until_idle(
                 busy.remove(conn)
 
 
-def _worker_died(name: str, exitcode: int | None) -> EpisodeOutcome:
+def _worker_died(name: str, exitcode: int | None, controller: str = "") -> EpisodeOutcome:
     how = f"killed by signal {-exitcode}" if exitcode is not None and exitcode < 0 else (
         f"exit code {exitcode}")  # fmt: skip
     hint = " (out of memory?)" if exitcode == -signal.SIGKILL else ""
+    if controller and not is_builtin(controller):
+        hint += f" while running plug-in controller '{controller}' (did it call os._exit?)"
     return EpisodeOutcome(
         name, "failed", f"its worker process died ({how}){hint}", "", float("nan"),
         float("nan"), 0.0, 0.0,
