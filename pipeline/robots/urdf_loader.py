@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,7 @@ import numpy as np
 
 from pipeline.errors import SpecError
 from pipeline.model import transforms as tf
+from pipeline.robots import caps
 from pipeline.robots.link_facts import check_physical, link_capsules, merged_inertial
 from pipeline.robots.packages import package_search_path
 from pipeline.robots.sidecar import (
@@ -58,6 +60,7 @@ __all__ = [
 MOVABLE = ("revolute", "continuous", "prismatic")
 MESH_SUFFIXES = (".stl", ".obj")  # what MuJoCo reads as a collision mesh
 CONTINUOUS_RANGE_RAD = 2 * math.pi
+MAX_MIMIC_MULTIPLIER = 1e3
 F64 = np.ndarray
 
 
@@ -109,6 +112,11 @@ def xml_origin(el: ElementTree.Element | None, where: str) -> F64:
     if el is None:
         return np.eye(4)
     x, y, z = xml_floats(el.get("xyz"), 3, f"{where}.origin.xyz", "0 0 0")
+    if max(abs(x), abs(y), abs(z)) > caps.MAX_ORIGIN_M:
+        raise SpecError(
+            f"{where}.origin.xyz: {el.get('xyz')!r} is out of range, expected |value| <= "
+            f"{caps.MAX_ORIGIN_M:g} m"
+        )
     r, p, yaw = xml_floats(el.get("rpy"), 3, f"{where}.origin.rpy", "0 0 0")
     out = np.eye(4)
     out[:3, :3] = tf.rpy_to_matrix(r, p, yaw)
@@ -120,11 +128,18 @@ def resolve_uri(uri: str, *, base: Path, where: str, package_path: tuple[str, ..
     """A URDF file reference as a path: ``package://NAME/rest`` through the search path,
     ``file://`` and relative paths from ``base`` (the URDF's folder).
 
+    A ``package://`` path that leaves its package through ``..`` is refused: a robot file
+    names files of its own package, never others on the machine.
+
     Raises:
-        SpecError: an unresolved package (named, with the folders searched).
+        SpecError: an unresolved package (named, with the folders searched), or a path
+            leaving its package.
     """
     if uri.startswith("package://"):
         package, _, rest = uri.removeprefix("package://").partition("/")
+        inside = os.path.normpath(rest or ".")
+        if os.path.isabs(rest) or inside == ".." or inside.startswith("../"):
+            raise SpecError(f"{where}: {uri!r} leaves the package '{package}'")
         folders = package_search_path(package_path)
         for folder in folders:
             for root in (folder / package, folder if folder.name == package else None):
@@ -161,10 +176,15 @@ def _parse_links(
     root: ElementTree.Element, source: str, base: Path, package_path: tuple[str, ...]
 ) -> dict[str, _Link]:
     links: dict[str, _Link] = {}
-    for el in root.findall("link"):
+    elements = root.findall("link")
+    if len(elements) > caps.MAX_LINKS:
+        raise SpecError(f"{source}: {len(elements)} links, more than the cap of {caps.MAX_LINKS}")
+    for el in elements:
         name = el.get("name")
         if not name:
             raise SpecError(f"{source}: a <link> without a name")
+        if name in links:
+            raise SpecError(f"{source}: duplicate link name '{name}'")
         where = f"{source}: link '{name}'"
         link = _Link(name)
         inertial = el.find("inertial")
@@ -172,11 +192,19 @@ def _parse_links(
             mass_el = inertial.find("mass")
             mass = xml_floats(mass_el.get("value") if mass_el is not None else None, 1,
                            f"{where}.mass", "0")[0]  # fmt: skip
-            if mass < 0:
-                raise SpecError(f"{where}: mass {mass} kg must be > 0")
+            if mass != 0 and not caps.MIN_MASS_KG <= mass <= caps.MAX_MASS_KG:
+                raise SpecError(
+                    f"{where}: mass {mass} kg is out of range, expected 0 or "
+                    f"[{caps.MIN_MASS_KG:g}, {caps.MAX_MASS_KG:g}] kg"
+                )
             frame = xml_origin(inertial.find("origin"), where)
             inertia_el = inertial.find("inertia")
             tensor = _inertia(inertia_el, where) if inertia_el is not None else np.zeros((3, 3))
+            if float(np.abs(tensor).max()) > caps.MAX_INERTIA_KG_M2:
+                raise SpecError(
+                    f"{where}: inertia entry {float(np.abs(tensor).max()):g} kg m^2 is out of "
+                    f"range, expected |value| <= {caps.MAX_INERTIA_KG_M2:g}"
+                )
             check_physical(mass, tensor, where)
             rot = frame[:3, :3]
             link.mass, link.com, link.inertia = mass, frame[:3, 3].copy(), rot @ tensor @ rot.T
@@ -184,9 +212,27 @@ def _parse_links(
             for k, geo in enumerate(el.findall(kind)):
                 shape = _shape(geo, f"{where}.{kind}[{k}]", base, package_path)
                 if kind == "collision" and shape is not None:
+                    if shape[0] == "mesh" and Path(shape[3]).suffix.lower() in MESH_SUFFIXES:
+                        caps.check_mesh(Path(shape[3]), f"{where}.{kind}[{k}]")
                     link.shapes.append(shape)
         links[name] = link
     return links
+
+
+def robot_folder(base: Path) -> Path:
+    """The folder a URDF's file paths must stay in: its own folder, or its parent when it
+    sits in a ``urdf/`` folder (a ROS description package: ``urdf/`` next to ``meshes/``)."""
+    return base.parent if base.name == "urdf" else base
+
+
+def _check_inside_robot_folder(uri: str, path: Path, base: Path, where: str) -> None:
+    root = os.path.normpath(os.path.abspath(robot_folder(base)))
+    target = os.path.normpath(os.path.abspath(path))
+    if os.path.commonpath([root, target]) != root:
+        raise SpecError(
+            f"{where}: mesh {uri!r} lies outside the robot's folder {root}: keep meshes "
+            "there, or name them package://NAME/... with --package-path"
+        )
 
 
 def urdf_geometry(
@@ -203,6 +249,8 @@ def urdf_geometry(
     if g.tag == "mesh":
         uri = g.get("filename") or ""
         path = resolve_uri(uri, base=base, where=where, package_path=package_path)
+        if not uri.startswith("package://"):
+            _check_inside_robot_folder(uri, path, base, where)
         if not path.is_file():
             raise SpecError(f"{where}: missing mesh {uri!r} ({path})")
         scale = xml_floats(g.get("scale"), 3, f"{where}.mesh.scale", "1 1 1")
@@ -238,10 +286,20 @@ def _shape(
 
 
 def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link]) -> list[_Joint]:
-    joints = []
-    for el in root.findall("joint"):
+    joints: list[_Joint] = []
+    elements = root.findall("joint")
+    movable = sum(el.get("type") in MOVABLE for el in elements)
+    if movable > caps.MAX_JOINTS:
+        raise SpecError(
+            f"{source}: {movable} movable joints, more than the cap of {caps.MAX_JOINTS}"
+        )
+    seen: set[str] = set()
+    for el in elements:
         name = el.get("name") or "?"
         where = f"{source}: joint '{name}'"
+        if name in seen:
+            raise SpecError(f"{source}: duplicate joint name '{name}'")
+        seen.add(name)
         kind = el.get("type") or ""
         if kind in ("floating", "planar"):
             raise SpecError(f"{where}: type '{kind}' (a floating base): only fixed-base arms")
@@ -270,6 +328,7 @@ def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link
                 else math.nan
                 for k in ("lower", "upper", "velocity", "effort")
             }
+            _check_limit(limit, kind, where)
         mimic_el = el.find("mimic")
         mimic = None
         if mimic_el is not None:
@@ -278,6 +337,12 @@ def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link
                 xml_floats(mimic_el.get("multiplier"), 1, f"{where}.mimic.multiplier", "1")[0],
                 xml_floats(mimic_el.get("offset"), 1, f"{where}.mimic.offset", "0")[0],
             )
+            if abs(mimic[1]) > MAX_MIMIC_MULTIPLIER or abs(mimic[2]) > caps.MAX_ORIGIN_M:
+                raise SpecError(
+                    f"{where}.mimic: multiplier {mimic[1]!r} or offset {mimic[2]!r} out of "
+                    f"range, expected |multiplier| <= {MAX_MIMIC_MULTIPLIER:g} and |offset| <= "
+                    f"{caps.MAX_ORIGIN_M:g}"
+                )
         dynamics_el = el.find("dynamics")
         stated = {}
         for key in ("damping", "friction"):
@@ -302,6 +367,41 @@ def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link
             )
         )
     return joints
+
+
+def _check_limit(limit: dict[str, float], kind: str, where: str) -> None:
+    """Refuse limits beyond :mod:`~pipeline.robots.caps` magnitudes (NaN: not stated)."""
+    from pipeline.robots.dh_yaml import MAX_EFFORT_NM, MAX_JOINT_RAD, MAX_VELOCITY_RAD_S
+
+    position = (caps.MAX_ORIGIN_M, "m") if kind == "prismatic" else (MAX_JOINT_RAD, "rad")
+    if kind == "continuous":
+        position = (math.inf, "rad")  # a continuous joint's lower and upper are ignored
+    bounds = {"lower": position, "upper": position,
+              "velocity": (MAX_VELOCITY_RAD_S, "rad/s or m/s"),
+              "effort": (MAX_EFFORT_NM, "N m or N")}  # fmt: skip
+    for key, (bound, unit) in bounds.items():
+        if abs(limit[key]) > bound:
+            raise SpecError(
+                f"{where}.limit.{key}: {limit[key]!r} is out of range, expected |value| <= "
+                f'{bound:.6g} {unit} (a joint without limits is type="continuous")'
+            )
+
+
+def _check_mimics(source: str, by_name: dict[str, _Joint]) -> None:
+    """Refuse a mimic cycle or a chain longer than :data:`caps.MAX_MIMIC_CHAIN`."""
+    for start in by_name.values():
+        seen = [start.name]
+        j = start
+        while j.mimic is not None and j.mimic[0] in by_name:
+            j = by_name[j.mimic[0]]
+            if j.name in seen:
+                raise SpecError(f"{source}: mimic cycle: {' -> '.join([*seen, j.name])}")
+            seen.append(j.name)
+            if len(seen) > caps.MAX_MIMIC_CHAIN:
+                raise SpecError(
+                    f"{source}: joint '{start.name}' mimics through more than "
+                    f"{caps.MAX_MIMIC_CHAIN} joints"
+                )
 
 
 def _tree(
@@ -396,9 +496,11 @@ def load_urdf(
     opts = validate_sidecar(settings or {}, settings_source or source)
     try:
         text = path.read_text(encoding="utf-8")
-        root = ElementTree.fromstring(text)
     except (OSError, UnicodeDecodeError) as err:
         raise SpecError(f"{source}: cannot read URDF ({err})") from err
+    try:
+        caps.check_xml_depth(text, source)
+        root = ElementTree.fromstring(text)
     except ElementTree.ParseError as err:
         raise SpecError(f"{source}: not well-formed XML ({err})") from err
     if root.tag != "robot":
@@ -418,6 +520,7 @@ def load_urdf(
         del parent_of[mount.child]
         root_link = mount.child
     by_name = {j.name: j for j in joints}
+    _check_mimics(source, by_name)
     for name in opts.locked:
         if name not in by_name:
             raise SpecError(f"{settings_source}: locked: no joint '{name}' in {source}")
