@@ -60,8 +60,8 @@ _STL_HEADER = 84
 _STL_FACET = 50
 
 
-def check_xml_depth(text: str, where: str) -> None:
-    """Refuse XML nested deeper than :data:`MAX_XML_DEPTH`, before it is built into a tree.
+def check_xml_depth(text: str, where: str, *, max_depth: int = MAX_XML_DEPTH) -> None:
+    """Refuse XML nested deeper than ``max_depth``, before it is built into a tree.
 
     Raises:
         SpecError: naming ``where`` and the cap. Malformed XML passes (its parser names it).
@@ -73,8 +73,8 @@ def check_xml_depth(text: str, where: str) -> None:
             parser.feed(text[start : start + (1 << 16)])
             for item in parser.read_events():
                 depth += 1 if item[0] == "start" else -1
-                if depth > MAX_XML_DEPTH:
-                    raise SpecError(f"{where}: elements nested more than {MAX_XML_DEPTH} deep")
+                if depth > max_depth:
+                    raise SpecError(f"{where}: elements nested more than {max_depth} deep")
     except ElementTree.ParseError:
         return
 

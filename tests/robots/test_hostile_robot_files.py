@@ -13,6 +13,7 @@ import pytest
 from pipeline.errors import SpecError
 from pipeline.robots import load_spec
 from pipeline.robots.caps import MAX_MESH_BYTES
+from tests.robots.test_mjcf_loader import ONE_HINGE
 from tests.robots.test_urdf_loader import THREE_JOINT
 
 SPHERE = '<sphere radius="0.03"/>'
@@ -146,4 +147,47 @@ def test_a_urdf_past_a_stated_cap_is_one_line(tmp_path, case):
     text, says = CASES[case]
     path = tmp_path / f"{case}.urdf"
     path.write_text(text)
+    _refused(path, says)
+
+
+def test_an_srdf_named_state_holding_nan_is_refused(tmp_path):
+    (tmp_path / "three.urdf").write_text(THREE_JOINT)
+    (tmp_path / "three.srdf").write_text(
+        '<robot name="three"><group_state name="ready" group="arm"><joint name="j1" value="0"/>'
+        '<joint name="j2" value="nan"/><joint name="j3" value="0"/></group_state></robot>'
+    )
+    says = r"three.srdf: group_state 'ready': joint 'j2': value 'nan'"
+    with pytest.raises(SpecError, match=says):
+        load_spec(tmp_path / "three.urdf")
+
+
+def _mjcf_chain(n: int) -> str:
+    body = '<geom size="0.02" mass="0.1"/>'
+    for i in reversed(range(n)):
+        joint = f'<joint name="j{i}" range="-1 1" actuatorfrcrange="-1 1"/>'
+        geom = '<geom size="0.02" mass="0.1"/>'
+        body = f'<body name="b{i}" pos="0 0 0.01">{joint}{geom}{body}</body>'
+    return f'<mujoco model="long"><worldbody>{body}</worldbody></mujoco>'
+
+
+MJCF_CASES: dict[str, tuple[str, str]] = {
+    "range-reversed": (ONE_HINGE.replace('name="j2" axis="0 1 0" range="-2 2"',
+                                         'name="j2" axis="0 1 0" range="2 1"'),
+                       "joint 'j2': range lower 2 is above upper 1"),
+    "pos-1e300": (ONE_HINGE.replace('pos="0 0 0.2"', 'pos="0 0 1e300"'), "body 'l2': pos"),
+    "mass-1e-12": (ONE_HINGE.replace('mass="0.5"', 'mass="1e-12"'),
+                   "body 'l2': mass 1e-12 kg is out of range"),
+    "100-joints": (_mjcf_chain(100), "100 joints, more than the cap of 64"),
+    "mesh-random": (ONE_HINGE.replace("<worldbody>", '<asset><mesh name="m" file="m.stl"/>'
+                                      "</asset><worldbody>"), "mesh 'm': mesh"),
+    "model-name": (ONE_HINGE.replace('model="arm"', 'model="my arm"'), "robot name 'my arm'"),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", list(MJCF_CASES))
+def test_an_mjcf_past_a_stated_cap_is_one_line(tmp_path, case):
+    text, says = MJCF_CASES[case]
+    path = tmp_path / f"{case}.xml"
+    path.write_text(text)
+    (tmp_path / "m.stl").write_bytes(np.random.default_rng(1).bytes(999))
     _refused(path, says)
