@@ -21,6 +21,7 @@ import numpy as np
 from pipeline.constants import FINAL_EDGE_S, FINAL_WINDOW_S
 from pipeline.errors import PipelineError
 from pipeline.fsutil import remove_stale
+from pipeline.memory import out_of_memory
 from pipeline.params import Episode
 from pipeline.planning import PlannedPath, TimedTrajectory
 from pipeline.stages.assemble import (
@@ -90,6 +91,12 @@ def run_one(
             reason = "out of memory: shorten the episode (hold_s) or log less"
         else:
             reason = str(err)
+        return failed_outcome(episode.name, reason, time.perf_counter() - wall0)
+    except Exception as err:  # an engine's allocation failure (MuJoCo's FatalError)
+        oom = out_of_memory(err)
+        if oom is None:
+            raise
+        reason = f"{oom}: shorten the episode (hold_s), log less or use fewer --jobs"
         return failed_outcome(episode.name, reason, time.perf_counter() - wall0)
     return EpisodeOutcome(**{**asdict(outcome), "wall_s": time.perf_counter() - wall0})
 
