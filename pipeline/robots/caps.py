@@ -13,6 +13,7 @@ import functools
 import math
 import os
 import struct
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree
@@ -31,8 +32,16 @@ __all__ = [
     "MAX_ORIGIN_M",
     "MAX_XML_DEPTH",
     "MIN_MASS_KG",
+    "check_count",
+    "check_inertia",
+    "check_inside_robot_folder",
+    "check_limit",
+    "check_mass",
     "check_mesh",
+    "check_mimics",
+    "check_origin",
     "check_xml_depth",
+    "robot_folder",
 ]
 
 MAX_JOINTS = 64
@@ -47,6 +56,12 @@ MAX_MIMIC_CHAIN = 8
 """Joints a mimic joint may follow through (``a`` mimics ``b`` mimics ``c`` ...)."""
 MAX_ORIGIN_M = 100.0
 """|xyz| of any origin (joint, inertial, collision) and the range of a prismatic joint [m]."""
+MAX_JOINT_RAD = 4 * math.pi
+"""|lower|, |upper| of a revolute joint: two turns each way [rad]."""
+MAX_VELOCITY_RAD_S = 100.0
+"""A joint's velocity limit [rad/s or m/s]."""
+MAX_EFFORT_NM = 1e5
+"""A joint's effort limit [N m or N]."""
 MIN_MASS_KG, MAX_MASS_KG = 1e-6, 1e5
 """A link's stated mass (0, or absent, is a massless frame) [kg]."""
 MAX_INERTIA_KG_M2 = 1e5
@@ -77,6 +92,86 @@ def check_xml_depth(text: str, where: str, *, max_depth: int = MAX_XML_DEPTH) ->
                     raise SpecError(f"{where}: elements nested more than {max_depth} deep")
     except ElementTree.ParseError:
         return
+
+
+def check_count(n: int, cap: int, what: str, where: str) -> None:
+    """Refuse more than ``cap`` of ``what`` (naming ``where``)."""
+    if n > cap:
+        raise SpecError(f"{where}: {n} {what}, more than the cap of {cap}")
+
+
+def check_origin(xyz: tuple[float, ...], where: str) -> None:
+    """Refuse an origin farther than :data:`MAX_ORIGIN_M` on any axis (``where`` names it)."""
+    if max(abs(v) for v in xyz) > MAX_ORIGIN_M:
+        raise SpecError(f"{where} is out of range, expected |value| <= {MAX_ORIGIN_M:g} m")
+
+
+def check_mass(mass_kg: float, where: str) -> None:
+    """Refuse a mass outside 0 or [:data:`MIN_MASS_KG`, :data:`MAX_MASS_KG`]."""
+    if mass_kg != 0 and not MIN_MASS_KG <= mass_kg <= MAX_MASS_KG:
+        raise SpecError(
+            f"{where}: mass {mass_kg:g} kg is out of range, expected 0 or "
+            f"[{MIN_MASS_KG:g}, {MAX_MASS_KG:g}] kg"
+        )
+
+
+def check_inertia(tensor: np.ndarray[Any, Any], where: str) -> None:
+    """Refuse an inertia entry beyond :data:`MAX_INERTIA_KG_M2`."""
+    worst = float(np.abs(tensor).max())
+    if worst > MAX_INERTIA_KG_M2:
+        raise SpecError(
+            f"{where}: inertia entry {worst:g} kg m^2 is out of range, expected |value| <= "
+            f"{MAX_INERTIA_KG_M2:g}"
+        )
+
+
+def check_limit(limit: Mapping[str, float], kind: str, where: str) -> None:
+    """Refuse limits beyond :mod:`~pipeline.robots.caps` magnitudes (NaN: not stated)."""
+    position = (MAX_ORIGIN_M, "m") if kind == "prismatic" else (MAX_JOINT_RAD, "rad")
+    if kind == "continuous":
+        position = (math.inf, "rad")  # a continuous joint's lower and upper are ignored
+    bounds = {"lower": position, "upper": position,
+              "velocity": (MAX_VELOCITY_RAD_S, "rad/s or m/s"),
+              "effort": (MAX_EFFORT_NM, "N m or N")}  # fmt: skip
+    for key, (bound, unit) in bounds.items():
+        if abs(limit[key]) > bound:
+            raise SpecError(
+                f"{where}.limit.{key}: {limit[key]!r} is out of range, expected |value| <= "
+                f'{bound:.6g} {unit} (a joint without limits is type="continuous")'
+            )
+
+
+def check_mimics(source: str, masters: Mapping[str, str | None]) -> None:
+    """Refuse a mimic cycle or a chain longer than :data:`MAX_MIMIC_CHAIN` (``masters``:
+    the joint each joint mimics, None for none)."""
+    for start in masters:
+        seen = [start]
+        name = masters[start]
+        while name is not None and name in masters:
+            if name in seen:
+                raise SpecError(f"{source}: mimic cycle: {' -> '.join([*seen, name])}")
+            seen.append(name)
+            if len(seen) > MAX_MIMIC_CHAIN:
+                raise SpecError(
+                    f"{source}: joint '{start}' mimics through more than {MAX_MIMIC_CHAIN} joints"
+                )
+            name = masters[name]
+
+
+def robot_folder(base: Path) -> Path:
+    """The folder a URDF's file paths must stay in: its own folder, or its parent when it
+    sits in a ``urdf/`` folder (a ROS description package: ``urdf/`` next to ``meshes/``)."""
+    return base.parent if base.name == "urdf" else base
+
+
+def check_inside_robot_folder(uri: str, path: Path, base: Path, where: str) -> None:
+    root = os.path.normpath(os.path.abspath(robot_folder(base)))
+    target = os.path.normpath(os.path.abspath(path))
+    if os.path.commonpath([root, target]) != root:
+        raise SpecError(
+            f"{where}: mesh {uri!r} lies outside the robot's folder {root}: keep meshes "
+            "there, or name them package://NAME/... with --package-path"
+        )
 
 
 def check_mesh(path: Path, where: str) -> None:

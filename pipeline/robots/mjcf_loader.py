@@ -206,11 +206,8 @@ def _check_before_compiling(path: Path) -> None:
     except ElementTree.ParseError:
         return  # MuJoCo's parser names the fault
     joints = root.findall(".//worldbody//joint")
-    if len(joints) > caps.MAX_JOINTS:
-        raise SpecError(f"{source}: {len(joints)} joints, more than the cap of {caps.MAX_JOINTS}")
-    bodies = len(root.findall(".//worldbody//body"))
-    if bodies > caps.MAX_LINKS:
-        raise SpecError(f"{source}: {bodies} bodies, more than the cap of {caps.MAX_LINKS}")
+    caps.check_count(len(joints), caps.MAX_JOINTS, "joints", source)
+    caps.check_count(len(root.findall(".//worldbody//body")), caps.MAX_LINKS, "bodies", source)
     for k, el in enumerate(root.iter("joint")):
         text_range = el.get("range")
         if text_range is None:
@@ -236,8 +233,6 @@ def _check_before_compiling(path: Path) -> None:
 
 def _check_magnitudes(model: mujoco.MjModel, source: str) -> None:
     """The compiled bodies' origins and masses, and the joints' ranges, within the caps."""
-    from pipeline.robots.dh_yaml import MAX_JOINT_RAD
-
     for b in range(1, model.nbody):
         where = f"{source}: body '{_name(model, mujoco.mjtObj.mjOBJ_BODY, b, 'body')}'"
         if float(np.abs(model.body_pos[b]).max()) > caps.MAX_ORIGIN_M:
@@ -245,14 +240,9 @@ def _check_magnitudes(model: mujoco.MjModel, source: str) -> None:
                 f"{where}: pos {model.body_pos[b].tolist()} is out of range, expected |value| "
                 f"<= {caps.MAX_ORIGIN_M:g} m"
             )
-        m = float(model.body_mass[b])
-        if m != 0 and not caps.MIN_MASS_KG <= m <= caps.MAX_MASS_KG:
-            raise SpecError(
-                f"{where}: mass {m:g} kg is out of range, expected 0 or "
-                f"[{caps.MIN_MASS_KG:g}, {caps.MAX_MASS_KG:g}] kg"
-            )
+        caps.check_mass(float(model.body_mass[b]), where)
     for j in range(model.njnt):
-        bound = caps.MAX_ORIGIN_M if int(model.jnt_type[j]) == SLIDE else MAX_JOINT_RAD
+        bound = caps.MAX_ORIGIN_M if int(model.jnt_type[j]) == SLIDE else caps.MAX_JOINT_RAD
         if model.jnt_limited[j] and float(np.abs(model.jnt_range[j]).max()) > bound:
             name = _name(model, mujoco.mjtObj.mjOBJ_JOINT, j, "joint")
             raise SpecError(

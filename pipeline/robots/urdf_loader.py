@@ -1,3 +1,4 @@
+# long: one format parsed, checked and walked into a spec (links, joints, tree, merge)
 """The URDF loader (+ SRDF, + a small settings sidecar): a URDF robot as a :class:`RobotSpec`.
 
 The controlled joints are the chain from the root link to a tip link: the single leaf chain
@@ -112,11 +113,7 @@ def xml_origin(el: ElementTree.Element | None, where: str) -> F64:
     if el is None:
         return np.eye(4)
     x, y, z = xml_floats(el.get("xyz"), 3, f"{where}.origin.xyz", "0 0 0")
-    if max(abs(x), abs(y), abs(z)) > caps.MAX_ORIGIN_M:
-        raise SpecError(
-            f"{where}.origin.xyz: {el.get('xyz')!r} is out of range, expected |value| <= "
-            f"{caps.MAX_ORIGIN_M:g} m"
-        )
+    caps.check_origin((x, y, z), f"{where}.origin.xyz: {el.get('xyz')!r}")
     r, p, yaw = xml_floats(el.get("rpy"), 3, f"{where}.origin.rpy", "0 0 0")
     out = np.eye(4)
     out[:3, :3] = tf.rpy_to_matrix(r, p, yaw)
@@ -177,8 +174,7 @@ def _parse_links(
 ) -> dict[str, _Link]:
     links: dict[str, _Link] = {}
     elements = root.findall("link")
-    if len(elements) > caps.MAX_LINKS:
-        raise SpecError(f"{source}: {len(elements)} links, more than the cap of {caps.MAX_LINKS}")
+    caps.check_count(len(elements), caps.MAX_LINKS, "links", source)
     for el in elements:
         name = el.get("name")
         if not name:
@@ -192,19 +188,11 @@ def _parse_links(
             mass_el = inertial.find("mass")
             mass = xml_floats(mass_el.get("value") if mass_el is not None else None, 1,
                            f"{where}.mass", "0")[0]  # fmt: skip
-            if mass != 0 and not caps.MIN_MASS_KG <= mass <= caps.MAX_MASS_KG:
-                raise SpecError(
-                    f"{where}: mass {mass} kg is out of range, expected 0 or "
-                    f"[{caps.MIN_MASS_KG:g}, {caps.MAX_MASS_KG:g}] kg"
-                )
+            caps.check_mass(mass, where)
             frame = xml_origin(inertial.find("origin"), where)
             inertia_el = inertial.find("inertia")
             tensor = _inertia(inertia_el, where) if inertia_el is not None else np.zeros((3, 3))
-            if float(np.abs(tensor).max()) > caps.MAX_INERTIA_KG_M2:
-                raise SpecError(
-                    f"{where}: inertia entry {float(np.abs(tensor).max()):g} kg m^2 is out of "
-                    f"range, expected |value| <= {caps.MAX_INERTIA_KG_M2:g}"
-                )
+            caps.check_inertia(tensor, where)
             check_physical(mass, tensor, where)
             rot = frame[:3, :3]
             link.mass, link.com, link.inertia = mass, frame[:3, 3].copy(), rot @ tensor @ rot.T
@@ -217,22 +205,6 @@ def _parse_links(
                     link.shapes.append(shape)
         links[name] = link
     return links
-
-
-def robot_folder(base: Path) -> Path:
-    """The folder a URDF's file paths must stay in: its own folder, or its parent when it
-    sits in a ``urdf/`` folder (a ROS description package: ``urdf/`` next to ``meshes/``)."""
-    return base.parent if base.name == "urdf" else base
-
-
-def _check_inside_robot_folder(uri: str, path: Path, base: Path, where: str) -> None:
-    root = os.path.normpath(os.path.abspath(robot_folder(base)))
-    target = os.path.normpath(os.path.abspath(path))
-    if os.path.commonpath([root, target]) != root:
-        raise SpecError(
-            f"{where}: mesh {uri!r} lies outside the robot's folder {root}: keep meshes "
-            "there, or name them package://NAME/... with --package-path"
-        )
 
 
 def urdf_geometry(
@@ -250,7 +222,7 @@ def urdf_geometry(
         uri = g.get("filename") or ""
         path = resolve_uri(uri, base=base, where=where, package_path=package_path)
         if not uri.startswith("package://"):
-            _check_inside_robot_folder(uri, path, base, where)
+            caps.check_inside_robot_folder(uri, path, base, where)
         if not path.is_file():
             raise SpecError(f"{where}: missing mesh {uri!r} ({path})")
         scale = xml_floats(g.get("scale"), 3, f"{where}.mesh.scale", "1 1 1")
@@ -289,10 +261,7 @@ def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link
     joints: list[_Joint] = []
     elements = root.findall("joint")
     movable = sum(el.get("type") in MOVABLE for el in elements)
-    if movable > caps.MAX_JOINTS:
-        raise SpecError(
-            f"{source}: {movable} movable joints, more than the cap of {caps.MAX_JOINTS}"
-        )
+    caps.check_count(movable, caps.MAX_JOINTS, "movable joints", source)
     seen: set[str] = set()
     for el in elements:
         name = el.get("name") or "?"
@@ -328,7 +297,7 @@ def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link
                 else math.nan
                 for k in ("lower", "upper", "velocity", "effort")
             }
-            _check_limit(limit, kind, where)
+            caps.check_limit(limit, kind, where)
         mimic_el = el.find("mimic")
         mimic = None
         if mimic_el is not None:
@@ -367,41 +336,6 @@ def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link
             )
         )
     return joints
-
-
-def _check_limit(limit: dict[str, float], kind: str, where: str) -> None:
-    """Refuse limits beyond :mod:`~pipeline.robots.caps` magnitudes (NaN: not stated)."""
-    from pipeline.robots.dh_yaml import MAX_EFFORT_NM, MAX_JOINT_RAD, MAX_VELOCITY_RAD_S
-
-    position = (caps.MAX_ORIGIN_M, "m") if kind == "prismatic" else (MAX_JOINT_RAD, "rad")
-    if kind == "continuous":
-        position = (math.inf, "rad")  # a continuous joint's lower and upper are ignored
-    bounds = {"lower": position, "upper": position,
-              "velocity": (MAX_VELOCITY_RAD_S, "rad/s or m/s"),
-              "effort": (MAX_EFFORT_NM, "N m or N")}  # fmt: skip
-    for key, (bound, unit) in bounds.items():
-        if abs(limit[key]) > bound:
-            raise SpecError(
-                f"{where}.limit.{key}: {limit[key]!r} is out of range, expected |value| <= "
-                f'{bound:.6g} {unit} (a joint without limits is type="continuous")'
-            )
-
-
-def _check_mimics(source: str, by_name: dict[str, _Joint]) -> None:
-    """Refuse a mimic cycle or a chain longer than :data:`caps.MAX_MIMIC_CHAIN`."""
-    for start in by_name.values():
-        seen = [start.name]
-        j = start
-        while j.mimic is not None and j.mimic[0] in by_name:
-            j = by_name[j.mimic[0]]
-            if j.name in seen:
-                raise SpecError(f"{source}: mimic cycle: {' -> '.join([*seen, j.name])}")
-            seen.append(j.name)
-            if len(seen) > caps.MAX_MIMIC_CHAIN:
-                raise SpecError(
-                    f"{source}: joint '{start.name}' mimics through more than "
-                    f"{caps.MAX_MIMIC_CHAIN} joints"
-                )
 
 
 def _tree(
@@ -520,7 +454,7 @@ def load_urdf(
         del parent_of[mount.child]
         root_link = mount.child
     by_name = {j.name: j for j in joints}
-    _check_mimics(source, by_name)
+    caps.check_mimics(source, {n: j.mimic[0] if j.mimic else None for n, j in by_name.items()})
     for name in opts.locked:
         if name not in by_name:
             raise SpecError(f"{settings_source}: locked: no joint '{name}' in {source}")
