@@ -27,6 +27,13 @@ def entry() -> None:
         word, code = interrupt_exit(err)
         sys.stderr.write(f"{word}\n")
         sys.exit(code)
+    except (MemoryError, ImportError) as err:
+        from pipeline.memory import OUT_OF_MEMORY_HINT, out_of_memory
+
+        if "--debug" in sys.argv[1:] or not out_of_memory(err):
+            raise
+        sys.stderr.write(f"error: {out_of_memory(err)}: {OUT_OF_MEMORY_HINT}\n")
+        sys.exit(1)
     main()
 
 

@@ -33,6 +33,7 @@ from pipeline.errors import (
     handle_sigterm,
     interrupt_exit,
 )
+from pipeline.memory import OUT_OF_MEMORY_HINT, out_of_memory, quiet_unraisable_memory_errors
 
 __all__ = ["app", "console", "controllers", "kinematics", "main", "record", "report", "teach"]
 
@@ -95,6 +96,8 @@ def main() -> None:
     # rerun-sdk's own log lines (a failing .rrd file sink prints three) would follow our
     # one-line error; RUST_LOG set by the user still wins
     os.environ.setdefault("RUST_LOG", "off")
+    if not debug:
+        quiet_unraisable_memory_errors()
     try:
         app()
     except SystemExit as exit_:
@@ -108,6 +111,8 @@ def main() -> None:
     except ImportError as err:
         # Ctrl-C inside a C extension's module init surfaces as "initialization failed"
         interrupt = _interrupt_in_chain(err)
+        if not debug and interrupt is None and out_of_memory(err):
+            _out_of_memory(err)
         if debug or interrupt is None:
             raise
         _stop(interrupt)
@@ -127,3 +132,14 @@ def main() -> None:
             sys.exit(code)
         sys.stderr.write(f"error: {err}\n")
         sys.exit(1)
+    except Exception as err:
+        if debug or not out_of_memory(err):
+            raise
+        _out_of_memory(err)
+
+
+def _out_of_memory(err: BaseException) -> NoReturn:
+    """One line for a run that ran out of memory (a MemoryError, or a library that could not
+    be loaded for lack of it), and exit 1."""
+    sys.stderr.write(f"error: {out_of_memory(err)}: {OUT_OF_MEMORY_HINT}\n")
+    sys.exit(1)

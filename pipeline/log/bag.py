@@ -466,14 +466,29 @@ def check_result(
         raise RecordingError("result.stamp_ns: expected strictly increasing times >= 0 [ns]")
     shape = (stamps.size, spec.dof)
     arrays = {}
-    for field in ("q", "qd", "q_true", "qd_true", "q_ref", "qd_ref", "qdd_ref"):
-        arrays[field] = np.asarray(getattr(result, field), dtype=np.float64)
-    arrays["tau_cmd_nm"] = np.asarray(result.tau_cmd_nm, dtype=np.float64)
-    arrays["tau_nm"] = np.asarray(result.tau_nm, dtype=np.float64)
+    for field in ("q", "qd", "q_true", "qd_true", "q_ref", "qd_ref", "qdd_ref", "tau_cmd_nm",
+                  "tau_nm"):  # fmt: skip
+        raw = np.asarray(getattr(result, field))
+        if raw.dtype.kind not in "fiu":  # complex parts would be dropped, booleans read as 0/1
+            raise RecordingError(f"result.{field}: dtype {raw.dtype}, expected real numbers")
+        arrays[field] = raw.astype(np.float64)
     for field, arr in arrays.items():
         if arr.shape != shape:
             raise RecordingError(f"result.{field}: shape {arr.shape}, expected {shape}")
     return stamps, arrays
+
+
+def _non_finite(value: Any, where: str) -> str | None:
+    """The path and value of the first non-finite number in ``value`` (nested), or None."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return f"{where} = {value}"
+    items = value.items() if isinstance(value, dict) else (
+        enumerate(value) if isinstance(value, list) else ())  # fmt: skip
+    for key, item in items:
+        inner = f"{where}.{key}" if isinstance(value, dict) else f"{where}[{key}]"
+        if found := _non_finite(item, inner):
+            return found
+    return None
 
 
 def check_metadata(metadata: Mapping[str, str]) -> dict[str, str]:
@@ -488,7 +503,11 @@ def check_metadata(metadata: Mapping[str, str]) -> dict[str, str]:
             f"metadata: missing {missing}; required keys: {list(REQUIRED_METADATA_KEYS)}"
         )
     try:
-        json.loads(metadata["settings"])
+        settings = json.loads(metadata["settings"])
     except ValueError as err:
         raise RecordingError(f"metadata['settings']: not valid JSON ({err})") from err
+    controller = settings.get("controller") if isinstance(settings, dict) else None
+    gains = controller.get("gains") if isinstance(controller, dict) else None
+    if bad_gain := _non_finite(gains, "gains"):
+        raise RecordingError(f"metadata['settings'].controller.{bad_gain}: expected finite gains")
     return {k: metadata[k] for k in sorted(metadata)}

@@ -15,9 +15,7 @@ from pathlib import Path
 from pipeline.errors import SpecError, unknown_name_message
 from pipeline.robots.dh_yaml import parse_dh_text
 from pipeline.robots.facts import with_derived_accelerations
-from pipeline.robots.spec import (
-    RobotSpec,
-)
+from pipeline.robots.spec import NAME_RULE, RobotSpec, check_name
 
 BUILTIN_SIDECAR = ".armlab.yaml"
 
@@ -96,7 +94,21 @@ def _load_file(path: str, sha256: str, package_path: tuple[str, ...]) -> RobotSp
     module, func = LOADERS[loader_suffix(Path(path)) or ""].split(":")
     loader = getattr(importlib.import_module(module), func)
     spec: RobotSpec = with_derived_accelerations(loader(Path(path), package_path=package_path))
+    _check_names(spec, path)
     return dataclasses.replace(spec, source_sha256=sha256, loaded_from=path)
+
+
+def _check_names(spec: RobotSpec, path: str) -> None:
+    """The DH files' name rule (:data:`NAME_RULE`) for every format: the names end up in
+    MJCF, URDF, /tf frames and file names."""
+    named = [("robot", spec.name)]
+    named += [("joint", j.name) for j in spec.joints] + [("link", j.link_name) for j in spec.joints]
+    named += [("link", spec.base_link)] + [("frame", f.name) for f in spec.frames]
+    for what, name in named:
+        try:
+            check_name(name)
+        except ValueError:
+            raise SpecError(f"{path}: {what} name {name!r}: {NAME_RULE}") from None
 
 
 @functools.lru_cache(maxsize=16)

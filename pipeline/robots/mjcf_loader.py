@@ -31,6 +31,7 @@ import numpy as np
 
 from pipeline.errors import SpecError
 from pipeline.model import transforms as tf
+from pipeline.robots import caps
 from pipeline.robots.link_facts import link_capsules, merged_inertial
 from pipeline.robots.sidecar import (
     SIDECAR_SUFFIX,
@@ -186,6 +187,70 @@ def _check_root(path: Path) -> None:
         raise SpecError(f"{path}: root element <{first.tag}>, expected <mujoco> (MJCF){hint}")
 
 
+MAX_MJCF_DEPTH = 2 * caps.MAX_JOINTS + 16
+"""Element nesting of an MJCF file (one level per body of the chain, and some)."""
+
+
+def _check_before_compiling(path: Path) -> None:
+    """The stated caps (:mod:`pipeline.robots.caps`) on the file as written, before MuJoCo
+    compiles it: nesting, joint and body counts, every ``range`` ordered (MuJoCo makes a
+    joint whose lower is above its upper an unlimited one), collision meshes readable."""
+    source = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise SpecError(f"{source}: cannot read it ({err})") from err
+    caps.check_xml_depth(text, source, max_depth=MAX_MJCF_DEPTH)
+    try:
+        root = ElementTree.fromstring(text)
+    except ElementTree.ParseError:
+        return  # MuJoCo's parser names the fault
+    joints = root.findall(".//worldbody//joint")
+    caps.check_count(len(joints), caps.MAX_JOINTS, "joints", source)
+    caps.check_count(len(root.findall(".//worldbody//body")), caps.MAX_LINKS, "bodies", source)
+    for k, el in enumerate(root.iter("joint")):
+        text_range = el.get("range")
+        if text_range is None:
+            continue
+        try:
+            lower, upper = (float(v) for v in text_range.split())
+        except ValueError:
+            continue  # MuJoCo's parser names the fault
+        if lower > upper:
+            name = el.get("name") or f"joint[{k}]"
+            raise SpecError(
+                f"{source}: joint '{name}': range lower {lower:g} is above upper {upper:g}"
+            )
+    compiler = root.find("compiler")
+    folder = path.parent
+    if compiler is not None:
+        folder = folder / (compiler.get("meshdir") or compiler.get("assetdir") or "")
+    for el in root.iter("mesh"):
+        file = el.get("file")
+        if file and (folder / file).is_file() and Path(file).suffix.lower() in (".stl", ".obj"):
+            caps.check_mesh(folder / file, f"{source}: mesh '{el.get('name') or file}'")
+
+
+def _check_magnitudes(model: mujoco.MjModel, source: str) -> None:
+    """The compiled bodies' origins and masses, and the joints' ranges, within the caps."""
+    for b in range(1, model.nbody):
+        where = f"{source}: body '{_name(model, mujoco.mjtObj.mjOBJ_BODY, b, 'body')}'"
+        if float(np.abs(model.body_pos[b]).max()) > caps.MAX_ORIGIN_M:
+            raise SpecError(
+                f"{where}: pos {model.body_pos[b].tolist()} is out of range, expected |value| "
+                f"<= {caps.MAX_ORIGIN_M:g} m"
+            )
+        caps.check_mass(float(model.body_mass[b]), where)
+    for j in range(model.njnt):
+        bound = caps.MAX_ORIGIN_M if int(model.jnt_type[j]) == SLIDE else caps.MAX_JOINT_RAD
+        if model.jnt_limited[j] and float(np.abs(model.jnt_range[j]).max()) > bound:
+            name = _name(model, mujoco.mjtObj.mjOBJ_JOINT, j, "joint")
+            raise SpecError(
+                f"{source}: joint '{name}': range {model.jnt_range[j].tolist()} is out of "
+                f"range, expected |value| <= {bound:.6g}"
+            )
+
+
 def load_mjcf(path: Path, *, package_path: tuple[str, ...] = ()) -> RobotSpec:
     """Load a serial arm from an MJCF file (with its sidecar ``<stem>.armlab.yaml`` if any).
 
@@ -201,12 +266,14 @@ def load_mjcf(path: Path, *, package_path: tuple[str, ...] = ()) -> RobotSpec:
     sidecar = str(sidecar_path) if has_sidecar else "defaults"
     opts = validate_sidecar(read_sidecar(sidecar_path) if has_sidecar else {}, sidecar)
     _check_root(path)
+    _check_before_compiling(path)
     try:
         model = mujoco.MjModel.from_xml_path(source)
     except ValueError as err:
         message = " ".join(str(err).split())
         raise SpecError(f"{source}: MuJoCo cannot load it ({message})") from err
     _check_supported(model, source)
+    _check_magnitudes(model, source)
     names = [_name(model, mujoco.mjtObj.mjOBJ_BODY, b, "body") for b in range(model.nbody)]
     joint_of = {int(model.jnt_bodyid[j]): j for j in range(model.njnt)}
     joint_names = {

@@ -4,6 +4,7 @@ named joint configurations (``group_state``, e.g. ``ready``)."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from xml.etree import ElementTree
@@ -50,6 +51,12 @@ def apply_srdf(spec: RobotSpec, path: Path, owner: Mapping[str, str]) -> RobotSp
                 values[j.get("name") or ""] = float(j.get("value") or "nan")
             except ValueError as err:
                 raise SpecError(f"{source}: group_state {el.get('name')!r}: bad value") from err
+            value = values[j.get("name") or ""]
+            if not math.isfinite(value) and j.get("name") in spec.joint_names:
+                raise SpecError(
+                    f"{source}: group_state {el.get('name')!r}: joint {j.get('name')!r}: value "
+                    f"{j.get('value')!r}, expected a finite number"
+                )
         if all(name in values for name in spec.joint_names):
             states.append((el.get("name") or "", tuple(values[n] for n in spec.joint_names)))
     return dataclasses.replace(

@@ -1,3 +1,4 @@
+# long: one format parsed, checked and walked into a spec (links, joints, tree, merge)
 """The URDF loader (+ SRDF, + a small settings sidecar): a URDF robot as a :class:`RobotSpec`.
 
 The controlled joints are the chain from the root link to a tip link: the single leaf chain
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,6 +30,7 @@ import numpy as np
 
 from pipeline.errors import SpecError
 from pipeline.model import transforms as tf
+from pipeline.robots import caps
 from pipeline.robots.link_facts import check_physical, link_capsules, merged_inertial
 from pipeline.robots.packages import package_search_path
 from pipeline.robots.sidecar import (
@@ -58,6 +61,7 @@ __all__ = [
 MOVABLE = ("revolute", "continuous", "prismatic")
 MESH_SUFFIXES = (".stl", ".obj")  # what MuJoCo reads as a collision mesh
 CONTINUOUS_RANGE_RAD = 2 * math.pi
+MAX_MIMIC_MULTIPLIER = 1e3
 F64 = np.ndarray
 
 
@@ -109,6 +113,7 @@ def xml_origin(el: ElementTree.Element | None, where: str) -> F64:
     if el is None:
         return np.eye(4)
     x, y, z = xml_floats(el.get("xyz"), 3, f"{where}.origin.xyz", "0 0 0")
+    caps.check_origin((x, y, z), f"{where}.origin.xyz: {el.get('xyz')!r}")
     r, p, yaw = xml_floats(el.get("rpy"), 3, f"{where}.origin.rpy", "0 0 0")
     out = np.eye(4)
     out[:3, :3] = tf.rpy_to_matrix(r, p, yaw)
@@ -120,11 +125,18 @@ def resolve_uri(uri: str, *, base: Path, where: str, package_path: tuple[str, ..
     """A URDF file reference as a path: ``package://NAME/rest`` through the search path,
     ``file://`` and relative paths from ``base`` (the URDF's folder).
 
+    A ``package://`` path that leaves its package through ``..`` is refused: a robot file
+    names files of its own package, never others on the machine.
+
     Raises:
-        SpecError: an unresolved package (named, with the folders searched).
+        SpecError: an unresolved package (named, with the folders searched), or a path
+            leaving its package.
     """
     if uri.startswith("package://"):
         package, _, rest = uri.removeprefix("package://").partition("/")
+        inside = os.path.normpath(rest or ".")
+        if os.path.isabs(rest) or inside == ".." or inside.startswith("../"):
+            raise SpecError(f"{where}: {uri!r} leaves the package '{package}'")
         folders = package_search_path(package_path)
         for folder in folders:
             for root in (folder / package, folder if folder.name == package else None):
@@ -161,10 +173,14 @@ def _parse_links(
     root: ElementTree.Element, source: str, base: Path, package_path: tuple[str, ...]
 ) -> dict[str, _Link]:
     links: dict[str, _Link] = {}
-    for el in root.findall("link"):
+    elements = root.findall("link")
+    caps.check_count(len(elements), caps.MAX_LINKS, "links", source)
+    for el in elements:
         name = el.get("name")
         if not name:
             raise SpecError(f"{source}: a <link> without a name")
+        if name in links:
+            raise SpecError(f"{source}: duplicate link name '{name}'")
         where = f"{source}: link '{name}'"
         link = _Link(name)
         inertial = el.find("inertial")
@@ -172,11 +188,11 @@ def _parse_links(
             mass_el = inertial.find("mass")
             mass = xml_floats(mass_el.get("value") if mass_el is not None else None, 1,
                            f"{where}.mass", "0")[0]  # fmt: skip
-            if mass < 0:
-                raise SpecError(f"{where}: mass {mass} kg must be > 0")
+            caps.check_mass(mass, where)
             frame = xml_origin(inertial.find("origin"), where)
             inertia_el = inertial.find("inertia")
             tensor = _inertia(inertia_el, where) if inertia_el is not None else np.zeros((3, 3))
+            caps.check_inertia(tensor, where)
             check_physical(mass, tensor, where)
             rot = frame[:3, :3]
             link.mass, link.com, link.inertia = mass, frame[:3, 3].copy(), rot @ tensor @ rot.T
@@ -186,6 +202,8 @@ def _parse_links(
         for k, geo in enumerate(el.findall("collision")):
             shape = _shape(geo, f"{where}.collision[{k}]", base, package_path)
             if shape is not None:
+                if shape[0] == "mesh" and Path(shape[3]).suffix.lower() in MESH_SUFFIXES:
+                    caps.check_mesh(Path(shape[3]), f"{where}.collision[{k}]")
                 link.shapes.append(shape)
         links[name] = link
     return links
@@ -205,6 +223,8 @@ def urdf_geometry(
     if g.tag == "mesh":
         uri = g.get("filename") or ""
         path = resolve_uri(uri, base=base, where=where, package_path=package_path)
+        if not uri.startswith("package://"):
+            caps.check_inside_robot_folder(uri, path, base, where)
         if not path.is_file():
             raise SpecError(f"{where}: missing mesh {uri!r} ({path})")
         scale = xml_floats(g.get("scale"), 3, f"{where}.mesh.scale", "1 1 1")
@@ -240,10 +260,17 @@ def _shape(
 
 
 def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link]) -> list[_Joint]:
-    joints = []
-    for el in root.findall("joint"):
+    joints: list[_Joint] = []
+    elements = root.findall("joint")
+    movable = sum(el.get("type") in MOVABLE for el in elements)
+    caps.check_count(movable, caps.MAX_JOINTS, "movable joints", source)
+    seen: set[str] = set()
+    for el in elements:
         name = el.get("name") or "?"
         where = f"{source}: joint '{name}'"
+        if name in seen:
+            raise SpecError(f"{source}: duplicate joint name '{name}'")
+        seen.add(name)
         kind = el.get("type") or ""
         if kind in ("floating", "planar"):
             raise SpecError(f"{where}: type '{kind}' (a floating base): only fixed-base arms")
@@ -272,6 +299,7 @@ def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link
                 else math.nan
                 for k in ("lower", "upper", "velocity", "effort")
             }
+            caps.check_limit(limit, kind, where)
         mimic_el = el.find("mimic")
         mimic = None
         if mimic_el is not None:
@@ -280,6 +308,12 @@ def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link
                 xml_floats(mimic_el.get("multiplier"), 1, f"{where}.mimic.multiplier", "1")[0],
                 xml_floats(mimic_el.get("offset"), 1, f"{where}.mimic.offset", "0")[0],
             )
+            if abs(mimic[1]) > MAX_MIMIC_MULTIPLIER or abs(mimic[2]) > caps.MAX_ORIGIN_M:
+                raise SpecError(
+                    f"{where}.mimic: multiplier {mimic[1]!r} or offset {mimic[2]!r} out of "
+                    f"range, expected |multiplier| <= {MAX_MIMIC_MULTIPLIER:g} and |offset| <= "
+                    f"{caps.MAX_ORIGIN_M:g}"
+                )
         dynamics_el = el.find("dynamics")
         stated = {}
         for key in ("damping", "friction"):
@@ -392,9 +426,11 @@ def load_urdf(
     opts = validate_sidecar(settings or {}, settings_source or source)
     try:
         text = path.read_text(encoding="utf-8")
-        root = ElementTree.fromstring(text)
     except (OSError, UnicodeDecodeError) as err:
         raise SpecError(f"{source}: cannot read URDF ({err})") from err
+    try:
+        caps.check_xml_depth(text, source)
+        root = ElementTree.fromstring(text)
     except ElementTree.ParseError as err:
         raise SpecError(f"{source}: not well-formed XML ({err})") from err
     if root.tag != "robot":
@@ -414,6 +450,7 @@ def load_urdf(
         del parent_of[mount.child]
         root_link = mount.child
     by_name = {j.name: j for j in joints}
+    caps.check_mimics(source, {n: j.mimic[0] if j.mimic else None for n, j in by_name.items()})
     for name in opts.locked:
         if name not in by_name:
             raise SpecError(f"{settings_source}: locked: no joint '{name}' in {source}")

@@ -22,6 +22,7 @@ import numpy as np
 from pipeline.constants import FINAL_EDGE_S, FINAL_WINDOW_S
 from pipeline.errors import PipelineError
 from pipeline.fsutil import remove_stale
+from pipeline.memory import out_of_memory
 from pipeline.params import Episode
 from pipeline.planning import PlannedPath, TimedTrajectory
 from pipeline.stages.assemble import (
@@ -105,8 +106,14 @@ def run_one(
         else:
             reason = str(err)
         return failed_outcome(episode.name, reason, time.perf_counter() - wall0)
-    except Exception as err:  # a bug: this episode fails alone, the run's others go on
-        return failed_outcome(episode.name, internal_error(err), time.perf_counter() - wall0)
+    except Exception as err:  # an engine's allocation failure (MuJoCo's FatalError), else a
+        # bug: this episode fails alone, the run's others go on
+        oom = out_of_memory(err)
+        if oom is None:
+            reason = internal_error(err)
+        else:
+            reason = f"{oom}: shorten the episode (hold_s), log less or use fewer --jobs"
+        return failed_outcome(episode.name, reason, time.perf_counter() - wall0)
     return EpisodeOutcome(**{**asdict(outcome), "wall_s": time.perf_counter() - wall0})
 
 

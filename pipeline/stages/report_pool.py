@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from pipeline.errors import ReportError
+from pipeline.memory import OUT_OF_MEMORY_HINT, out_of_memory
 from pipeline.stages.workers import WorkerPool, become_worker, ready, tasks
 
 if TYPE_CHECKING:
@@ -84,12 +85,23 @@ def _worker_main(
 ) -> None:
     """A worker: measure the recordings the parent sends (a path) until it sends None."""
     become_worker(parent_pid)
-    measured = make()  # one per worker: its caches serve every recording it measures
+    measured: Measurer | None = None
+    try:
+        measured = make()  # one per worker: its caches serve every recording it measures
+    except Exception as err:  # its imports, under a memory limit: said per recording below
+        if not out_of_memory(err):
+            raise
+        failed_start = err
     for source in tasks(conn):
         outcome: Outcome
         try:
+            if measured is None:
+                raise failed_start
             outcome = measured.measure(Path(source), options)
         except Exception as err:
+            oom = out_of_memory(err)
+            if oom:  # a MemoryError would reach the parent as a traceback
+                err = ReportError(f"{source}: {oom} while measuring it: {OUT_OF_MEMORY_HINT}")
             outcome = ("raise", _sendable(err))
         try:
             conn.send(outcome)

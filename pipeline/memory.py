@@ -1,0 +1,54 @@
+"""Out of memory, told apart from other failures: one line instead of a traceback.
+
+Python says ``MemoryError``; a C extension whose shared library cannot be mapped under an
+address-space limit (``ulimit -v``) says ``ImportError: ... failed to map segment`` or
+``cannot allocate memory``. Both mean the same to the user: the machine (or the limit) is
+too small for this run.
+"""
+
+from __future__ import annotations
+
+import os
+
+__all__ = ["OUT_OF_MEMORY_HINT", "out_of_memory", "quiet_unraisable_memory_errors"]
+
+_OOM_TEXTS = ("failed to map segment", "cannot allocate memory", "out of memory")
+_ALLOC_TEXTS = ("could not allocate memory", "cannot allocate memory")
+
+OUT_OF_MEMORY_HINT = "raise the memory limit (ulimit -v), or use fewer --jobs"
+
+
+def out_of_memory(err: BaseException) -> str | None:
+    """What ran out of memory (a short phrase) when ``err`` or its cause chain is a
+    ``MemoryError`` or an import that failed for lack of memory; None otherwise."""
+    seen: set[int] = set()
+    cause: BaseException | None = err
+    while cause is not None and id(cause) not in seen:
+        seen.add(id(cause))
+        if isinstance(cause, MemoryError):
+            return "out of memory"
+        text = str(cause).lower()
+        if isinstance(cause, ImportError) and any(t in text for t in _OOM_TEXTS):
+            library = str(cause).split(":", 1)[0].strip() if ":" in str(cause) else ""
+            return f"out of memory while loading {os.path.basename(library) or cause.name}"
+        if any(t in text for t in _ALLOC_TEXTS):  # MuJoCo's FatalError, among others
+            return f"out of memory ({type(cause).__name__}: {str(cause)[:80]})"
+        if isinstance(cause, SystemError) and "NULL without setting an exception" in str(cause):
+            return "out of memory (the interpreter failed inside an import)"
+        cause = cause.__cause__ or cause.__context__
+    return None
+
+
+def quiet_unraisable_memory_errors() -> None:
+    """Drop the "Exception ignored in ..." tracebacks of MemoryErrors a library swallowed
+    (matplotlib's font callbacks): the run then fails, or not, on its own terms, and says
+    so in one line; other unraisable exceptions are printed as before."""
+    import sys
+
+    default = sys.unraisablehook
+
+    def hook(unraisable: sys.UnraisableHookArgs) -> None:
+        if not isinstance(unraisable.exc_value, MemoryError):
+            default(unraisable)
+
+    sys.unraisablehook = hook

@@ -1,0 +1,77 @@
+"""Out of memory is one line: `report` and `record` under an address-space limit (as
+`ulimit -v` sets it) end in one `error: out of memory ...` line and exit 1, never a pyarrow
+import traceback or a worker's MemoryError. The limits are the ones measured to fail at
+different places (a library's import, a figure, the workers' start)."""
+
+from __future__ import annotations
+
+import os
+import resource
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from pipeline.memory import out_of_memory
+from tests.analysis.bagfactory import paper_like, write_bag
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _under_limit(args: list[str], limit_kb: int, cwd: Path) -> subprocess.CompletedProcess[str]:
+    def limit() -> None:  # in the child before exec, as `ulimit -v` does
+        resource.setrlimit(resource.RLIMIT_AS, (limit_kb * 1024, limit_kb * 1024))
+
+    return subprocess.run(
+        [sys.executable, "-m", "pipeline", *args],
+        preexec_fn=limit,
+        cwd=cwd,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+
+
+def _one_oom_line(done: subprocess.CompletedProcess[str]) -> None:
+    assert done.returncode == 1, done.stderr[-3000:]
+    assert done.stderr.count("\n") == 1, done.stderr[-3000:]
+    assert done.stderr.startswith("error: out of memory"), done.stderr
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("limit_kb", "jobs"), [(1_500_000, 1), (2_500_000, 1), (2_500_000, 2)])
+def test_report_out_of_memory_is_one_line(tmp_path, limit_kb, jobs):
+    for name in ("a", "b", "c"):
+        write_bag(tmp_path / "bags" / name, paper_like(name, "pid", duration_s=1.5,
+                                                       motion_end_s=1.0))  # fmt: skip
+    done = _under_limit(["report", "--recordings", "bags", "--jobs", str(jobs)], limit_kb,
+                        tmp_path)  # fmt: skip
+    _one_oom_line(done)
+    assert not (tmp_path / "reports").exists()
+
+
+@pytest.mark.slow
+def test_record_out_of_memory_is_one_line(tmp_path):
+    data = yaml.safe_load((REPO / "params.yaml").read_text())
+    data["scenarios"]["paper"]["hold_s"] = 0.3
+    data["episodes"] = {"e0": {"scenario": "paper", "controller": "pid", "seed": 0}}
+    (tmp_path / "params.yaml").write_text(yaml.safe_dump(data))
+    done = _under_limit(["record", "--params", "params.yaml", "--out", "rec"], 500_000, tmp_path)
+    _one_oom_line(done)
+
+
+def test_what_counts_as_out_of_memory():
+    mapped = ImportError("libarrow.so.2600: failed to map segment from shared object")
+    assert out_of_memory(mapped) == "out of memory while loading libarrow.so.2600"
+    try:
+        try:
+            raise MemoryError
+        except MemoryError as err:
+            raise ValueError("wrapped") from err
+    except ValueError as outer:
+        assert out_of_memory(outer) == "out of memory"
+    assert out_of_memory(ImportError("No module named 'x'")) is None
+    assert out_of_memory(ValueError("bad value")) is None
