@@ -324,6 +324,26 @@ def record_excitation(
     if out.exists() and not force:
         raise IdentificationError(f"{out}: recording already exists; use --force to overwrite it")
     spec = scenario_spec(scenario)
+    # everything the recording needs, checked before the design's work: the robot's
+    # dynamics (any description format), the mid posture, the nominal model, the controller
+    from pipeline.identify.model_file import nominal_path, nominal_spec
+    from pipeline.identify.stage import require_identifiable
+
+    require_identifiable(spec, what="an excitation")
+    if mid_posture is not None and len(mid_posture) != spec.dof:
+        raise IdentificationError(
+            f"--mid: expected {spec.dof} angles (robot '{spec.name}': "
+            f"{', '.join(spec.joint_names)}), got {len(mid_posture)}"
+        )
+    cparams = params.controllers[controller_name]
+    nominal = nominal_spec(
+        spec,
+        nominal_path(scenario.nominal, seed=seed),
+        where=f"scenarios.{scenario_name}",
+    )
+    controller = make_controller(
+        cparams.type, nominal, cparams.gains, source=f"controllers.{controller_name}"
+    )
     obstacles = tuple(Box(b.name, b.center, b.half_size) for b in scenario.obstacles)
     design = design_excitation(
         spec,
@@ -338,17 +358,6 @@ def record_excitation(
     )
     ref = design.reference
     check_excitation(spec, ref, obstacles=obstacles)
-    cparams = params.controllers[controller_name]
-    from pipeline.identify.model_file import nominal_path, nominal_spec
-
-    nominal = nominal_spec(
-        spec,
-        nominal_path(scenario.nominal, seed=seed),
-        where=f"scenarios.{scenario_name}",
-    )
-    controller = make_controller(
-        cparams.type, nominal, cparams.gains, source=f"controllers.{controller_name}"
-    )
     plant_spec, plant, plant_settings = scenario_plant(spec, scenario, seed=seed)
     sim = params.sim
     result = run_episode(
@@ -370,6 +379,7 @@ def record_excitation(
     if result.status != "ok":
         raise IdentificationError(f"excitation episode {result.status}: {result.reason}")
     from pipeline.identify.model_file import spec_document
+    from pipeline.stages.assemble import spec_as_dict
 
     excitation = {
         "variant": variant,
@@ -387,7 +397,8 @@ def record_excitation(
     name = out.name
     settings = {
         "episode": name,
-        "robot": spec_document(spec),
+        # a DH robot whole, any other by its description file and SHA-256 (as episodes)
+        "robot": spec_document(spec) if spec.dh_rows is not None else spec_as_dict(spec),
         "scenario": {"name": scenario_name, **scenario.model_dump()},
         "controller": {
             "name": controller_name,
