@@ -66,8 +66,20 @@ DEFAULT_TRANSITION_SPEED_RAD_S = 0.1
 """The sigmoid model's default transition speed (real arms: about 0.05-0.2 rad/s)."""
 
 
-def _transition_speed(friction: str, speed: float | None) -> float:
+def _transition_speed(friction: str, text: str | None) -> float:
     from pipeline.errors import IdentificationError
+    from pipeline.identify.stage import FIT_TRANSITION_SPEED
+
+    speed: float | None = None
+    if text is not None and text.strip() == "auto" and friction == "sigmoid":
+        return FIT_TRANSITION_SPEED
+    if text is not None:
+        try:
+            speed = float(text)
+        except ValueError as err:
+            raise IdentificationError(
+                f"--transition-speed: expected a speed [rad/s] or auto, got {text!r}"
+            ) from err
 
     if friction not in FRICTION_MODELS:
         raise IdentificationError(
@@ -121,10 +133,11 @@ def fit_cmd(
         ),
     ] = "coulomb",
     transition_speed: Annotated[
-        float | None,
+        str | None,
         typer.Option(
             "--transition-speed",
-            help=f"The sigmoid model's v_s \\[rad/s] (default {DEFAULT_TRANSITION_SPEED_RAD_S:g}).",
+            help="The sigmoid model's v_s \\[rad/s], or auto: the best fit of 0.01, 0.02, "
+            f"0.05, 0.1, 0.15, 0.2, 0.3, 0.5 (default {DEFAULT_TRANSITION_SPEED_RAD_S:g}).",
         ),
     ] = None,
     torque_side: Annotated[

@@ -141,6 +141,43 @@ def stacked(
     return np.concatenate(ys), np.concatenate(taus), np.concatenate(joints)
 
 
+TRANSITION_CANDIDATES_RAD_S = (0.01, 0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.5)
+"""The transition speeds a fitted sigmoid friction model chooses from [rad/s]."""
+
+
+def fitted_transition_speed(
+    spec: RobotSpec,
+    samples: Sequence[JointSamples],
+    *,
+    min_speed_rad_s: float = DEFAULT_MIN_SPEED_RAD_S,
+    candidates: Sequence[float] = TRANSITION_CANDIDATES_RAD_S,
+) -> tuple[float, dict[float, float]]:
+    """The sigmoid model's transition speed ``v_s`` the data fit best: per candidate, the
+    least-squares residual (per-joint RMS-normalized rows) with Coulomb columns
+    ``tanh(qd / v_s)``; the smallest wins (a grid search: the torque is not linear in
+    ``v_s``).
+
+    Returns:
+        The chosen speed [rad/s] and each candidate's residual sum of squares.
+    """
+    with one_thread():
+        y, tau, joint_of = stacked(spec, samples, min_speed_rad_s=min_speed_rad_s)
+        qd = np.concatenate(
+            [s.qd.ravel()[(np.abs(s.qd) >= min_speed_rad_s).ravel()] for s in samples]
+        )
+        base = base_parameters(spec)
+        scale = 1.0 / np.maximum(_per_joint_rms(tau, joint_of, spec.dof), 1e-9)[joint_of]
+        rows = np.arange(tau.size)
+        coulomb = PER_JOINT * joint_of + COULOMB
+        costs: dict[float, float] = {}
+        for v_s in candidates:
+            y[rows, coulomb] = np.tanh(qd / v_s)
+            y_b = y[:, base.columns] * scale[:, None]
+            beta = np.linalg.lstsq(y_b, tau * scale, rcond=None)[0]
+            costs[float(v_s)] = float(np.sum((tau * scale - y_b @ beta) ** 2))
+    return min(costs, key=lambda v: costs[v]), costs
+
+
 def unexcited(gram: F64, names: Sequence[str], *, max_condition: float) -> tuple[list[str], float]:
     """Base parameters the data do not excite, and the scaled condition number.
 

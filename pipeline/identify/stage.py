@@ -24,7 +24,7 @@ from pipeline.identify.defaults import (
     DEFAULT_MAX_CONDITION,
     DEFAULT_MIN_SPEED_RAD_S,
 )
-from pipeline.identify.fit import FitResult, identify, violations
+from pipeline.identify.fit import FitResult, fitted_transition_speed, identify, violations
 from pipeline.identify.model_file import (
     FORMAT,
     IdentifiedModel,
@@ -53,6 +53,10 @@ F64 = np.ndarray
 WHOLE = ReadOptions(stream_above_bytes=1 << 62, joint_states_only=True)
 """Read every recording whole (identification needs every sample, never a decimated read),
 from its joint states alone when it has no controller state (a real robot's log)."""
+
+
+FIT_TRANSITION_SPEED = -1.0
+"""``transition_speed_rad_s`` meaning: fit the sigmoid model's transition speed."""
 
 
 def read_options(topics: Mapping[str, str] | None) -> ReadOptions:
@@ -295,16 +299,30 @@ def fit_command(
 
     Args:
         topics: role -> topic remaps (``--topic joint_states=/name``).
-        transition_speed_rad_s: 0: Coulomb friction ``sign(qd)``; > 0: ``tanh(qd / v_s)``.
+        transition_speed_rad_s: 0: Coulomb friction ``sign(qd)``; > 0: ``tanh(qd / v_s)``;
+            :data:`FIT_TRANSITION_SPEED`: ``tanh`` with the best-fitting ``v_s``.
         torque_side: ``motor``, ``link`` or ``auto`` (:func:`pipeline.identify.fit.identify`).
 
     Raises:
         PipelineError: unreadable recordings, unfit data (one line), unwritable output.
     """
     wall0 = time.perf_counter()
-    check_fit_options(torque_side=torque_side, transition_speed_rad_s=transition_speed_rad_s)
+    fitted_speed = transition_speed_rad_s == FIT_TRANSITION_SPEED
+    check_fit_options(
+        torque_side=torque_side,
+        transition_speed_rad_s=0.0 if fitted_speed else transition_speed_rad_s,
+    )
     spec, samples = _read(paths, robot, cutoff_hz, topics)
     require_identifiable(spec, what="identification")
+    transition: dict[str, Any] = {}
+    if fitted_speed:
+        transition_speed_rad_s, costs = fitted_transition_speed(
+            spec, samples, min_speed_rad_s=min_speed_rad_s
+        )
+        transition = {
+            "transition_speed": "fitted: least-squares residual over candidate speeds",
+            "transition_speed_costs": {f"{k:g}": v for k, v in costs.items()},
+        }
     fit = identify(
         spec, samples, min_speed_rad_s=min_speed_rad_s, max_condition=max_condition,
         transition_speed_rad_s=transition_speed_rad_s, torque_side=torque_side,
@@ -321,6 +339,7 @@ def fit_command(
         ),
         "min_speed_rad_s": min_speed_rad_s,
         "max_condition": max_condition,
+        **transition,
     }  # fmt: skip
     write_model(out, model_document(spec, fit, samples, method=method))
     rel = np.abs(fit.std_error) / np.maximum(np.abs(fit.beta_wls), 1e-12) * 100

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
-from pipeline.identify.fit import identify
+from pipeline.identify.fit import fitted_transition_speed, identify
 from pipeline.identify.model_file import load_model
 from pipeline.identify.regressor import OFFSET, PER_JOINT, base_parameters, standard_parameters
 from pipeline.identify.samples import JointSamples, joint_samples
@@ -72,6 +72,8 @@ def test_sigmoid_friction_is_fitted_where_coulomb_is_not(exact: JointSamples) ->
     assert sigmoid.residual_rms_nm.max() < 1e-6
     coulomb = identify(spec, [smooth], min_speed_rad_s=0.0)
     assert coulomb.residual_rms_nm.max() > 1e-3
+    # the transition speed, when not stated, is the one the data fit best
+    assert fitted_transition_speed(spec, [smooth], min_speed_rad_s=0.0)[0] == v_s
 
 
 @pytest.mark.slow
