@@ -67,29 +67,29 @@ DEFAULT_TRANSITION_SPEED_RAD_S = 0.1
 
 
 def _transition_speed(friction: str, text: str | None) -> float:
+    """``--friction`` and ``--transition-speed`` -> the fit's ``transition_speed_rad_s``
+    (0: Coulomb; > 0: sigmoid; ``FIT_TRANSITION_SPEED``: sigmoid, speed fitted)."""
     from pipeline.errors import IdentificationError
     from pipeline.identify.stage import FIT_TRANSITION_SPEED
-
-    speed: float | None = None
-    if text is not None and text.strip() == "auto" and friction == "sigmoid":
-        return FIT_TRANSITION_SPEED
-    if text is not None:
-        try:
-            speed = float(text)
-        except ValueError as err:
-            raise IdentificationError(
-                f"--transition-speed: expected a speed [rad/s] or auto, got {text!r}"
-            ) from err
 
     if friction not in FRICTION_MODELS:
         raise IdentificationError(
             f"--friction: expected one of {', '.join(FRICTION_MODELS)}, got {friction!r}"
         )
     if friction == "coulomb":
-        if speed is not None:
+        if text is not None:
             raise IdentificationError("--transition-speed: only with --friction sigmoid")
         return 0.0
-    value = DEFAULT_TRANSITION_SPEED_RAD_S if speed is None else speed
+    if text is None:
+        return DEFAULT_TRANSITION_SPEED_RAD_S
+    if text.strip() == "auto":
+        return FIT_TRANSITION_SPEED
+    try:
+        value = float(text)
+    except ValueError as err:
+        raise IdentificationError(
+            f"--transition-speed: expected a speed [rad/s] or auto, got {text!r}"
+        ) from err
     if not value > 0:
         raise IdentificationError(f"--transition-speed: expected a speed > 0 rad/s, got {value!r}")
     return value

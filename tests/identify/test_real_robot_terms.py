@@ -90,3 +90,22 @@ def test_the_sigmoid_model_file_validates_with_its_own_friction(
     assert m.torque_side == "motor"
     check = validate_command(model, [ideal_bags[1]])
     assert max(check["rms_error_pct"]) < 1e-3
+
+
+def test_friction_options_are_checked_before_reading() -> None:
+    from pipeline.errors import IdentificationError
+    from pipeline.identify.cli import _transition_speed
+    from pipeline.identify.stage import FIT_TRANSITION_SPEED
+
+    assert _transition_speed("sigmoid", None) == 0.1
+    assert _transition_speed("sigmoid", "auto") == FIT_TRANSITION_SPEED
+    assert _transition_speed("sigmoid", "0.05") == 0.05
+    assert _transition_speed("coulomb", None) == 0.0
+    for friction, text, words in (
+        ("coulomb", "0.1", "only with --friction sigmoid"),
+        ("sigmoid", "0", "> 0"),
+        ("sigmoid", "fast", "or auto"),
+        ("stribeck", None, "--friction: expected one of coulomb, sigmoid"),
+    ):
+        with pytest.raises(IdentificationError, match=words):
+            _transition_speed(friction, text)
