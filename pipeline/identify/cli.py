@@ -49,6 +49,52 @@ def _row(values: list[float], fmt: str) -> str:
     return " ".join(format(v, fmt) for v in values)
 
 
+TOPIC_HELP = (
+    "ROLE=/name: the topic serving a role (joint_states, ground_truth, ...) when it is "
+    "neither ours nor the only one of its message type, as on `pipeline report`. Repeatable."
+)
+
+
+def _topics(items: list[str] | None) -> dict[str, str]:
+    from pipeline.cli.report import _remaps
+
+    return _remaps(items or [])
+
+
+FRICTION_MODELS = ("coulomb", "sigmoid")
+DEFAULT_TRANSITION_SPEED_RAD_S = 0.1
+"""The sigmoid model's default transition speed (real arms: about 0.05-0.2 rad/s)."""
+
+
+def _transition_speed(friction: str, text: str | None) -> float:
+    """``--friction`` and ``--transition-speed`` -> the fit's ``transition_speed_rad_s``
+    (0: Coulomb; > 0: sigmoid; ``FIT_TRANSITION_SPEED``: sigmoid, speed fitted)."""
+    from pipeline.errors import IdentificationError
+    from pipeline.identify.stage import FIT_TRANSITION_SPEED
+
+    if friction not in FRICTION_MODELS:
+        raise IdentificationError(
+            f"--friction: expected one of {', '.join(FRICTION_MODELS)}, got {friction!r}"
+        )
+    if friction == "coulomb":
+        if text is not None:
+            raise IdentificationError("--transition-speed: only with --friction sigmoid")
+        return 0.0
+    if text is None:
+        return DEFAULT_TRANSITION_SPEED_RAD_S
+    if text.strip() == "auto":
+        return FIT_TRANSITION_SPEED
+    try:
+        value = float(text)
+    except ValueError as err:
+        raise IdentificationError(
+            f"--transition-speed: expected a speed [rad/s] or auto, got {text!r}"
+        ) from err
+    if not value > 0:
+        raise IdentificationError(f"--transition-speed: expected a speed > 0 rad/s, got {value!r}")
+    return value
+
+
 @identify_app.command("fit")
 def fit_cmd(
     recordings: Annotated[list[Path], typer.Argument(help="Recordings (rosbag2 folders, .mcap).")],
@@ -77,9 +123,39 @@ def fit_cmd(
             "1/this of the largest (unexcited parameters).",
         ),
     ] = DEFAULT_MAX_CONDITION,
+    topic: Annotated[list[str] | None, typer.Option("--topic", help=TOPIC_HELP)] = None,
+    friction: Annotated[
+        str,
+        typer.Option(
+            "--friction",
+            help="Friction model: coulomb (fc sign(qd) + fv qd) or sigmoid (fc tanh(qd / v_s) "
+            "+ fv qd, a sign change over about v_s).",
+        ),
+    ] = "coulomb",
+    transition_speed: Annotated[
+        str | None,
+        typer.Option(
+            "--transition-speed",
+            help="The sigmoid model's v_s \\[rad/s], or auto: the best fit of 0.01, 0.02, "
+            f"0.05, 0.1, 0.15, 0.2, 0.3, 0.5 (default {DEFAULT_TRANSITION_SPEED_RAD_S:g}).",
+        ),
+    ] = None,
+    torque_side: Annotated[
+        str,
+        typer.Option(
+            "--torque-side",
+            help="Where the torque is sensed: motor (includes the rotor: armature "
+            "identified), link (after the gearbox: armature not observable, the "
+            "description's kept) or auto (link when no armature shows in the data).",
+        ),
+    ] = "motor",
     as_json: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
 ) -> None:
-    """Identify base parameters (WLS, standard errors), make them physical, write MODEL.yaml."""
+    """Identify base parameters (WLS, standard errors), make them physical, write MODEL.yaml.
+
+    A bag with /joint_states (position, velocity, effort) is enough: no controller state,
+    no metadata (pass --robot). Repeated samples are dropped, uneven stamps resampled.
+    """
     from pipeline.identify.stage import fit_command
 
     s = fit_command(
@@ -89,6 +165,9 @@ def fit_cmd(
         cutoff_hz=cutoff_hz,
         min_speed_rad_s=min_speed,
         max_condition=max_condition,
+        topics=_topics(topic),
+        transition_speed_rad_s=_transition_speed(friction, transition_speed),
+        torque_side=torque_side,
     )
     _emit(
         s,
@@ -96,11 +175,23 @@ def fit_cmd(
         lines=[
             f"identified {s['base_parameters']} base parameters of {s['robot']} from "
             f"{s['equations']} equations in {s['wall_s']:.1f} s",
+            f"samples: {s['repeated_stamps_dropped']} repeated stamps and "
+            f"{s['repeated_values_dropped']} repeated values dropped; "
+            f"{len(s['resampled'])} of {len(s['recordings'])} recording(s) resampled "
+            "(uneven stamps)",
+            f"friction {s['friction_model']}"
+            + (
+                f" (transition speed {s['transition_speed_rad_s']:g} rad/s)"
+                if s["friction_model"] == "sigmoid"
+                else ""
+            )
+            + f"; torque side {s['torque_side']} ({s['torque_side_reason']})",
             f"condition number {s['condition_number']:.4g} (unit-norm columns "
             f"{s['condition_number_scaled']:.4g}); largest relative standard error "
             f"{s['max_rel_std_error_pct']:.3g} %",
             f"residual RMS [N m]: {_row(s['residual_rms_nm'], '.3g')}",
             f"torque RMS   [N m]: {_row(s['torque_rms_nm'], '.3g')}",
+            f"sensor offset [N m]: {_row(s['offset_nm'], '.3g')}",
             f"wrote {s['model']}",
         ],
     )
@@ -114,12 +205,19 @@ def validate_cmd(
         Path | None,
         typer.Option("--figure", help="Predicted-vs-measured PNG (default: next to MODEL)."),
     ] = None,
+    topic: Annotated[list[str] | None, typer.Option("--topic", help=TOPIC_HELP)] = None,
+    robot: Annotated[
+        str | None,
+        typer.Option(
+            "--robot", help="Robot name or file the model applies to (default: the one it names)."
+        ),
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
 ) -> None:
     """Torque RMS error per joint of MODEL on other recordings, absolute and % of RMS torque."""
     from pipeline.identify.stage import validate_command
 
-    s = validate_command(model, recordings, figure=figure)
+    s = validate_command(model, recordings, figure=figure, topics=_topics(topic), robot=robot)
     lines = [f"{'joint':<22} {'RMS error [N m]':>16} {'RMS torque [N m]':>17} {'error %':>8}"]
     for name, e, t, p in zip(
         s["joints"], s["rms_error_nm"], s["rms_torque_nm"], s["rms_error_pct"], strict=True

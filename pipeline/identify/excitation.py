@@ -304,6 +304,7 @@ def record_excitation(
     from pipeline.params import load_params
     from pipeline.sim.runner import run_episode
     from pipeline.stages.assemble import scenario_spec
+    from pipeline.stages.goals import resolve_start
     from pipeline.trajectory import TrajectorySamples
 
     wall0 = time.perf_counter()
@@ -324,10 +325,34 @@ def record_excitation(
     if out.exists() and not force:
         raise IdentificationError(f"{out}: recording already exists; use --force to overwrite it")
     spec = scenario_spec(scenario)
+    # everything the recording needs, checked before the design's work: the robot's
+    # dynamics (any description format), the mid posture, the nominal model, the controller
+    from pipeline.identify.model_file import nominal_path, nominal_spec
+    from pipeline.identify.stage import require_identifiable
+
+    require_identifiable(spec, what="an excitation")
+    if mid_posture is not None and len(mid_posture) != spec.dof:
+        raise IdentificationError(
+            f"--mid: expected {spec.dof} angles (robot '{spec.name}': "
+            f"{', '.join(spec.joint_names)}), got {len(mid_posture)}"
+        )
+    cparams = params.controllers[controller_name]
+    nominal = nominal_spec(
+        spec,
+        nominal_path(scenario.nominal, seed=seed),
+        where=f"scenarios.{scenario_name}",
+    )
+    controller = make_controller(
+        cparams.type, nominal, cparams.gains, source=f"controllers.{controller_name}"
+    )
     obstacles = tuple(Box(b.name, b.center, b.half_size) for b in scenario.obstacles)
     design = design_excitation(
         spec,
-        q0=np.asarray(scenario.start if mid_posture is None else mid_posture, dtype=float),
+        q0=(
+            resolve_start(spec, scenario, name=scenario_name, source=params.source)
+            if mid_posture is None
+            else np.asarray(mid_posture, dtype=float)
+        ),
         variant=variant,
         harmonics=harmonics,
         base_frequency_hz=base_frequency_hz,
@@ -338,16 +363,10 @@ def record_excitation(
     )
     ref = design.reference
     check_excitation(spec, ref, obstacles=obstacles)
-    cparams = params.controllers[controller_name]
-    from pipeline.identify.model_file import nominal_path, nominal_spec
-
-    nominal = nominal_spec(
-        spec,
-        nominal_path(scenario.nominal, seed=seed),
-        where=f"scenarios.{scenario_name}",
-    )
     from pipeline.control.base import with_planned_path
 
+    # built again with its default gains designed along the excitation (the one built above
+    # checked the controller before the design's work)
     controller = make_controller(
         cparams.type,
         nominal,
@@ -378,6 +397,7 @@ def record_excitation(
     if result.status != "ok":
         raise IdentificationError(f"excitation episode {result.status}: {result.reason}")
     from pipeline.identify.model_file import spec_document
+    from pipeline.stages.assemble import spec_as_dict
 
     excitation = {
         "variant": variant,
@@ -395,7 +415,8 @@ def record_excitation(
     name = out.name
     settings = {
         "episode": name,
-        "robot": spec_document(spec),
+        # a DH robot whole, any other by its description file and SHA-256 (as episodes)
+        "robot": spec_document(spec) if spec.dh_rows is not None else spec_as_dict(spec),
         "scenario": {"name": scenario_name, **scenario.model_dump()},
         "controller": {
             "name": controller_name,

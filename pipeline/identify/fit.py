@@ -22,7 +22,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.linalg
@@ -85,6 +85,10 @@ class FitResult:
         projection_cost: increase of the weighted residual's sum of squares from the WLS
             estimate to the physically consistent one, as a share of the weighted
             torque's (0: the WLS estimate is physical).
+        torque_side: ``motor`` (armature identified) or ``link`` (armature columns left
+            out: the CAD armature is kept).
+        torque_side_reason: why (declared, or what the detection saw).
+        transition_speed_rad_s: the Coulomb column's ``tanh`` speed (0: ``sign``).
     """
 
     base: BaseParameters
@@ -100,13 +104,33 @@ class FitResult:
     torque_rms_nm: F64
     rows: int
     projection_cost: float
+    torque_side: str = "motor"
+    torque_side_reason: str = "declared"
+    transition_speed_rad_s: float = 0.0
+
+
+TORQUE_SIDES = ("auto", "motor", "link")
+ARMATURE_FLOOR_KG_M2 = 1e-6
+"""An armature estimate below this (or below two standard errors) is not seen."""
+
+
+class UnexcitedError(IdentificationError):
+    """The data do not excite some base parameters (``weak``: their names)."""
+
+    def __init__(self, message: str, weak: Sequence[str]) -> None:
+        super().__init__(message)
+        self.weak = tuple(weak)
 
 
 def stacked(
-    spec: RobotSpec, samples: Sequence[JointSamples], *, min_speed_rad_s: float
+    spec: RobotSpec,
+    samples: Sequence[JointSamples],
+    *,
+    min_speed_rad_s: float,
+    transition_speed_rad_s: float = 0.0,
 ) -> tuple[F64, F64, NDArray[np.intp]]:
     """Standard regressor rows, torques and each row's joint, slow rows left out."""
-    reg = Regressor(spec)
+    reg = Regressor(spec, transition_speed_rad_s=transition_speed_rad_s)
     ys, taus, joints = [], [], []
     for s in samples:
         y = reg.stacked(s.q, s.qd, s.qdd)
@@ -115,6 +139,43 @@ def stacked(
         taus.append(s.tau_nm.ravel()[keep])
         joints.append(np.tile(np.arange(spec.dof), s.q.shape[0])[keep])
     return np.concatenate(ys), np.concatenate(taus), np.concatenate(joints)
+
+
+TRANSITION_CANDIDATES_RAD_S = (0.01, 0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.5)
+"""The transition speeds a fitted sigmoid friction model chooses from [rad/s]."""
+
+
+def fitted_transition_speed(
+    spec: RobotSpec,
+    samples: Sequence[JointSamples],
+    *,
+    min_speed_rad_s: float = DEFAULT_MIN_SPEED_RAD_S,
+    candidates: Sequence[float] = TRANSITION_CANDIDATES_RAD_S,
+) -> tuple[float, dict[float, float]]:
+    """The sigmoid model's transition speed ``v_s`` the data fit best: per candidate, the
+    least-squares residual (per-joint RMS-normalized rows) with Coulomb columns
+    ``tanh(qd / v_s)``; the smallest wins (a grid search: the torque is not linear in
+    ``v_s``).
+
+    Returns:
+        The chosen speed [rad/s] and each candidate's residual sum of squares.
+    """
+    with one_thread():
+        y, tau, joint_of = stacked(spec, samples, min_speed_rad_s=min_speed_rad_s)
+        qd = np.concatenate(
+            [s.qd.ravel()[(np.abs(s.qd) >= min_speed_rad_s).ravel()] for s in samples]
+        )
+        base = base_parameters(spec)
+        scale = 1.0 / np.maximum(_per_joint_rms(tau, joint_of, spec.dof), 1e-9)[joint_of]
+        rows = np.arange(tau.size)
+        coulomb = PER_JOINT * joint_of + COULOMB
+        costs: dict[float, float] = {}
+        for v_s in candidates:
+            y[rows, coulomb] = np.tanh(qd / v_s)
+            y_b = y[:, base.columns] * scale[:, None]
+            beta = np.linalg.lstsq(y_b, tau * scale, rcond=None)[0]
+            costs[float(v_s)] = float(np.sum((tau * scale - y_b @ beta) ** 2))
+    return min(costs, key=lambda v: costs[v]), costs
 
 
 def unexcited(gram: F64, names: Sequence[str], *, max_condition: float) -> tuple[list[str], float]:
@@ -162,42 +223,100 @@ def identify(
     min_speed_rad_s: float = DEFAULT_MIN_SPEED_RAD_S,
     max_condition: float = DEFAULT_MAX_CONDITION,
     physical_fit: bool = True,
+    transition_speed_rad_s: float = 0.0,
+    torque_side: str = "motor",
 ) -> FitResult:
     """Identify ``spec``'s base parameters from ``samples`` (see the module docstring).
 
     The least squares run on per-joint Gram matrices ``Y_j^T Y_j`` (one pass over the
     data; column-scaled Cholesky solves): the weighted problem is their weighted sum.
 
+    Args:
+        transition_speed_rad_s: 0: Coulomb friction ``fc sign(qd)``; > 0: the sigmoid
+            model ``fc tanh(qd / v_s)``.
+        torque_side: ``motor`` (armature identified), ``link`` (torque sensed after the
+            gearbox: armature columns left out, the CAD armature kept) or ``auto``:
+            ``link`` when no armature is seen (every separable armature estimate below
+            two standard errors or :data:`ARMATURE_FLOOR_KG_M2`, or none excited).
+
     Raises:
         IdentificationError: too few equations for the parameters, or parameters the data
             do not excite (named).
     """
+    if torque_side not in TORQUE_SIDES:
+        raise IdentificationError(
+            f"--torque-side: expected one of {', '.join(TORQUE_SIDES)}, got {torque_side!r}"
+        )
+    v_s = transition_speed_rad_s
     with one_thread():
-        return _identify(
-            spec, samples, min_speed_rad_s=min_speed_rad_s, max_condition=max_condition,
-            physical_fit=physical_fit,
+        y_std, tau, joint_of = stacked(
+            spec, samples, min_speed_rad_s=min_speed_rad_s,
+            transition_speed_rad_s=transition_speed_rad_s,
         )  # fmt: skip
+        kw = {
+            "min_speed_rad_s": min_speed_rad_s, "max_condition": max_condition,
+            "physical_fit": physical_fit,
+        }  # fmt: skip
+        if torque_side != "link":
+            try:
+                fit = _identify(spec, samples, y_std, tau, joint_of, armature=True, **kw)  # type: ignore[arg-type]
+            except UnexcitedError as err:
+                armature_only = all(".armature" in w for w in err.weak)
+                if torque_side == "motor" or not armature_only:
+                    raise
+                reason = "detected: armature not excited (" + ", ".join(err.weak) + ")"
+            else:
+                if torque_side == "motor":
+                    return replace(fit, torque_side_reason="declared", transition_speed_rad_s=v_s)
+                seen = _armature_seen(fit)
+                if seen is None or seen:
+                    why = (
+                        "no armature separable from the link inertias"
+                        if seen is None
+                        else "armature seen (estimates above two standard errors)"
+                    )
+                    return replace(
+                        fit, torque_side_reason=f"detected: {why}", transition_speed_rad_s=v_s
+                    )
+                reason = (
+                    "detected: no armature estimate above two standard errors "
+                    f"or {ARMATURE_FLOOR_KG_M2:g} kg m^2"
+                )
+        else:
+            reason = "declared"
+        link_y = y_std.copy()
+        link_y[:, ARMATURE::PER_JOINT] = 0.0
+        fit = _identify(spec, samples, link_y, tau, joint_of, armature=False, **kw)  # type: ignore[arg-type]
+        return replace(
+            fit, torque_side="link", torque_side_reason=reason, transition_speed_rad_s=v_s
+        )
+
+
+def _armature_seen(fit: FitResult) -> bool | None:
+    """Whether the separable armature estimates show a rotor (None: none separable)."""
+    pure = [i for i, n in enumerate(fit.base.names) if n.endswith(".armature")]
+    if not pure:
+        return None
+    est, se = fit.beta_wls[pure], fit.std_error[pure]
+    return bool(np.any((est > 2 * se) & (est > ARMATURE_FLOOR_KG_M2)))
 
 
 def _identify(
     spec: RobotSpec,
     samples: Sequence[JointSamples],
+    y_std: F64,
+    tau: F64,
+    joint_of: NDArray[np.intp],
     *,
     min_speed_rad_s: float,
     max_condition: float,
     physical_fit: bool,
+    armature: bool,
 ) -> FitResult:
-    base = base_parameters(spec)
-    y_std, tau, joint_of = stacked(spec, samples, min_speed_rad_s=min_speed_rad_s)
+    base = base_parameters(spec, armature=armature)
     y_b = y_std[:, base.columns]
     where = ", ".join(s.source for s in samples)
     need = MIN_ROWS_PER_PARAMETER * base.rank
-    if tau.size < need:
-        raise IdentificationError(
-            f"{where}: {tau.size} equations (joint samples moving faster than "
-            f"{min_speed_rad_s:g} rad/s), too short for {base.rank} base parameters "
-            f"(needs {need}): record a longer excitation"
-        )
     dof = spec.dof
     grams = np.empty((dof, base.rank, base.rank))
     moments = np.empty((dof, base.rank))
@@ -206,12 +325,22 @@ def _identify(
         grams[j] = rows.T @ rows
         moments[j] = rows.T @ tau[joint_of == j]
     weak, cond_scaled = unexcited(grams.sum(axis=0), base.names, max_condition=max_condition)
+    if tau.size < need:
+        shown = ", ".join(weak[:6]) + (f" (+{len(weak) - 6} more)" if len(weak) > 6 else "")
+        raise UnexcitedError(
+            f"{where}: {tau.size} equations (joint samples moving faster than "
+            f"{min_speed_rad_s:g} rad/s), too short for {base.rank} base parameters "
+            f"(needs {need}); not excited: {shown or 'none singled out'}: record a longer "
+            "excitation",
+            weak,
+        )
     if weak:
         shown = ", ".join(weak[:6]) + (f" (+{len(weak) - 6} more)" if len(weak) > 6 else "")
-        raise IdentificationError(
+        raise UnexcitedError(
             f"{where}: regressor too ill-conditioned to identify (scaled condition number "
             f"{cond_scaled:.3g} > {max_condition:g}); not excited: {shown}; record an "
-            "excitation (pipeline identify excite)"
+            "excitation (pipeline identify excite)",
+            weak,
         )
     r_ols = _upper_factor(grams.sum(axis=0))
     beta_ols = scipy.linalg.cho_solve((r_ols, False), moments.sum(axis=0))

@@ -91,11 +91,23 @@ def link_inertial(spec: RobotSpec, joint: int, params: F64) -> Inertial:
 
 
 class Regressor:
-    """Evaluates the standard regressor of one robot (a Pinocchio model and its data)."""
+    """Evaluates the standard regressor of one robot (a Pinocchio model and its data).
 
-    def __init__(self, spec: RobotSpec) -> None:
+    Args:
+        spec: the robot.
+        transition_speed_rad_s: the Coulomb column is ``sign(qd)`` (0) or the smooth
+            ``tanh(qd / v_s)`` (``v_s`` > 0, the ``sigmoid`` friction model).
+        armature: the armature columns are ``qdd``; False: zero (torque sensed on the
+            link side of the gearbox: the rotor's inertia does not show).
+    """
+
+    def __init__(
+        self, spec: RobotSpec, *, transition_speed_rad_s: float = 0.0, armature: bool = True
+    ) -> None:
         spec.require_dynamics("identification")
         self.spec = spec
+        self.transition_speed_rad_s = transition_speed_rad_s
+        self.armature = armature
         self.dof = spec.dof
         self.n_standard = PER_JOINT * spec.dof
         self._model = build_pinocchio_model(spec)
@@ -121,8 +133,10 @@ class Regressor:
         out[:, :, self._inertial_columns] = inertial
         joints = np.arange(dof)
         base = PER_JOINT * joints
-        out[:, joints, base + ARMATURE] = qdd
-        out[:, joints, base + COULOMB] = np.sign(qd)
+        if self.armature:
+            out[:, joints, base + ARMATURE] = qdd
+        v_s = self.transition_speed_rad_s
+        out[:, joints, base + COULOMB] = np.tanh(qd / v_s) if v_s > 0 else np.sign(qd)
         out[:, joints, base + VISCOUS] = qd
         out[:, joints, base + OFFSET] = 1.0
         return out.reshape(n * dof, self.n_standard)
@@ -164,14 +178,17 @@ def random_samples(spec: RobotSpec, *, n: int, seed: int) -> tuple[F64, F64, F64
 
 
 @functools.lru_cache(maxsize=16)
-def base_parameters(spec: RobotSpec, *, samples: int = 200, seed: int = 0) -> BaseParameters:
-    """Base parameters by pivoted QR of the regressor stacked over random states.
+def base_parameters(
+    spec: RobotSpec, *, samples: int = 200, seed: int = 0, armature: bool = True
+) -> BaseParameters:
+    """Base parameters by pivoted QR of the regressor stacked over random states
+    (``armature=False``: without the armature columns, link-side torque).
 
     Raises:
         IdentificationError: the robot has no independent parameter (cannot happen for a
             robot with dynamics).
     """
-    reg = Regressor(spec)
+    reg = Regressor(spec, armature=armature)
     y = reg.stacked(*random_samples(spec, n=samples, seed=seed))
     _, r, perm = scipy.linalg.qr(y, mode="economic", pivoting=True)
     diag = np.abs(np.diag(r))

@@ -17,12 +17,19 @@ Two ways to get velocities and accelerations:
   ``qdd_k = (qd_{k+1} - qd_k) / dt``: exactly the acceleration the plant's semi-implicit
   Euler step applied with torque ``tau_k`` over ``[t_k, t_{k+1}]``, so noise-free
   simulated data satisfies the model to rounding.
+
+A real robot's log repeats samples and stamps them unevenly. Repeated samples are
+dropped: a second message with the same stamp (the first is kept), and a message whose
+positions, velocities and efforts all equal the previous one's while the joints move (a
+driver republishing a stale state). Stamps then further than :data:`JITTER_TOL` of the
+median period from it are resampled onto a grid of the median period (linear
+interpolation). :class:`JointSamples` counts each.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import polars as pl
@@ -54,6 +61,10 @@ class JointSamples:
         tau_nm: (N, dof) applied torque [N m].
         dt_s: sample period after decimation [s].
         truth: positions came from the plant's true state (simulation).
+        repeated_stamps: messages dropped for repeating an earlier message's stamp.
+        repeated_values: messages dropped for repeating the previous values while moving.
+        resampled: uneven stamps were resampled onto the median period's grid.
+        period_range_s: the shortest and longest stamp period after the drops [s].
     """
 
     source: str
@@ -64,6 +75,10 @@ class JointSamples:
     tau_nm: F64
     dt_s: float
     truth: bool
+    repeated_stamps: int = 0
+    repeated_values: int = 0
+    resampled: bool = False
+    period_range_s: tuple[float, float] = (0.0, 0.0)
 
 
 def _column(frame: pl.DataFrame, name: str, joints: tuple[str, ...], n: int) -> F64 | None:
@@ -95,9 +110,11 @@ def joint_samples(recording: Recording, spec: RobotSpec, *, cutoff_hz: float) ->
     if recording.decimation != 1:
         raise IdentificationError(f"{where}: read decimated (too large); cannot identify from it")
     frame = recording.samples.filter(pl.col("joint").is_in(list(spec.joint_names)))
+    joints = spec.joint_names
+    first_joint = frame.filter(pl.col("joint") == joints[0])["stamp_ns"].to_numpy()
     stamps = np.unique(frame["stamp_ns"].to_numpy())
     n = stamps.size
-    joints = spec.joint_names
+    repeated_stamps = int(first_joint.size - np.unique(first_joint).size)
     truth = recording.has_ground_truth and frame["true_position_rad"].null_count() == 0
     q = _column(frame, "true_position_rad" if truth else "position_rad", joints, n)
     qd = _column(frame, "true_velocity_rad_s" if truth else "velocity_rad_s", joints, n)
@@ -112,6 +129,17 @@ def joint_samples(recording: Recording, spec: RobotSpec, *, cutoff_hz: float) ->
             raise IdentificationError(f"{where}: /joint_states {name} has gaps (NaN or missing)")
     if qd is not None and not np.isfinite(qd).all():
         qd = None  # partly missing velocities: differentiate positions instead
+    same = np.all(q[1:] == q[:-1], axis=1) & np.all(tau[1:] == tau[:-1], axis=1)
+    if qd is not None:
+        same &= np.all(qd[1:] == qd[:-1], axis=1) & np.any(qd[:-1] != 0, axis=1)
+    else:  # without velocities a standing arm repeats legitimately: keep every sample
+        same = np.zeros_like(same)
+    keep = np.concatenate([[True], ~same])
+    repeated_values = int(same.sum())
+    if repeated_values:
+        stamps, q, tau = stamps[keep], q[keep], tau[keep]
+        qd = None if qd is None else qd[keep]
+        n = stamps.size
     if n < 16:
         raise IdentificationError(f"{where}: {n} samples, too short to identify from")
     t_s = (stamps - stamps[0]) * 1e-9
@@ -119,19 +147,28 @@ def joint_samples(recording: Recording, spec: RobotSpec, *, cutoff_hz: float) ->
     dt_s = float(np.median(periods))
     if not dt_s > 0:
         raise IdentificationError(f"{where}: sample stamps do not increase")
-    if np.abs(periods - dt_s).max() > JITTER_TOL * dt_s:
+    resampled = bool(np.abs(periods - dt_s).max() > JITTER_TOL * dt_s)
+    if resampled:
         grid = np.arange(0.0, t_s[-1] + 0.5 * dt_s, dt_s)
         q, tau = _resample(t_s, q, grid), _resample(t_s, tau, grid)
         qd = None if qd is None else _resample(t_s, qd, grid)
     sha = recording.sha256
+    counts = {
+        "repeated_stamps": repeated_stamps,
+        "repeated_values": repeated_values,
+        "resampled": resampled,
+        "period_range_s": (float(periods.min()), float(periods.max())),
+    }
     if cutoff_hz == 0:
         if qd is None:
             raise IdentificationError(
                 f"{where}: exact differentiation (cutoff 0) needs recorded velocities"
             )
         qdd = np.diff(qd, axis=0) / dt_s
-        return JointSamples(where, sha, q[:-1], qd[:-1], qdd, tau[:-1], dt_s, truth)
-    return _filtered(where, sha, q, qd, tau, dt_s=dt_s, cutoff_hz=cutoff_hz, truth=truth)
+        out = JointSamples(where, sha, q[:-1], qd[:-1], qdd, tau[:-1], dt_s, truth)
+    else:
+        out = _filtered(where, sha, q, qd, tau, dt_s=dt_s, cutoff_hz=cutoff_hz, truth=truth)
+    return replace(out, **counts)  # type: ignore[arg-type]
 
 
 def _resample(t_s: F64, values: F64, grid: F64) -> F64:

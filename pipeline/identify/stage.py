@@ -9,6 +9,7 @@ share of the RMS torque.
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -23,12 +24,12 @@ from pipeline.identify.defaults import (
     DEFAULT_MAX_CONDITION,
     DEFAULT_MIN_SPEED_RAD_S,
 )
-from pipeline.identify.fit import FitResult, identify, violations
+from pipeline.identify.fit import FitResult, fitted_transition_speed, identify, violations
 from pipeline.identify.model_file import (
     FORMAT,
     IdentifiedModel,
     load_model,
-    spec_document,
+    model_robot_document,
     write_model,
 )
 from pipeline.identify.regressor import (
@@ -49,8 +50,30 @@ from pipeline.robots.spec import RobotSpec
 
 F64 = np.ndarray
 
-WHOLE = ReadOptions(stream_above_bytes=1 << 62)
-"""Read every recording whole: identification needs every sample, never a decimated read."""
+WHOLE = ReadOptions(stream_above_bytes=1 << 62, joint_states_only=True)
+"""Read every recording whole (identification needs every sample, never a decimated read),
+from its joint states alone when it has no controller state (a real robot's log)."""
+
+
+FIT_TRANSITION_SPEED = -1.0
+"""``transition_speed_rad_s`` meaning: fit the sigmoid model's transition speed."""
+
+
+def read_options(topics: Mapping[str, str] | None) -> ReadOptions:
+    """:data:`WHOLE` with ``--topic ROLE=/name`` remaps."""
+    return replace(WHOLE, topics=dict(topics or {}))
+
+
+def require_identifiable(spec: RobotSpec, *, what: str) -> None:
+    """Refuse, before any work, a robot identification cannot handle (one line).
+
+    Raises:
+        IdentificationError: a joint without link inertial (any description format works).
+    """
+    try:
+        spec.require_dynamics(what)
+    except PipelineError as err:
+        raise IdentificationError(str(err)) from err
 
 
 def recording_spec(recording: Recording, robot: str | None) -> RobotSpec:
@@ -61,6 +84,9 @@ def recording_spec(recording: Recording, robot: str | None) -> RobotSpec:
     """
     if robot:
         return load_spec(robot)
+    described = _described_robot(recording)
+    if described is not None:
+        return described
     facts = robot_facts(recording)
     if facts.spec is not None and facts.source != "urdf":
         return facts.spec
@@ -72,16 +98,43 @@ def recording_spec(recording: Recording, robot: str | None) -> RobotSpec:
     )
 
 
-def _read(paths: Sequence[Path], robot: str | None, cutoff_hz: float) -> tuple[
-    RobotSpec, list[JointSamples]
-]:  # fmt: skip
+def _described_robot(recording: Recording) -> RobotSpec | None:
+    """The robot file (URDF, MJCF) an excitation's raw settings name, when it still has the
+    recorded SHA-256 (an excitation's settings are not an episode's: read them raw)."""
+    if not recording.armlab_metadata:
+        return None
+    try:
+        data = json.loads(recording.metadata.get("settings") or "{}").get("robot")
+    except (ValueError, AttributeError):
+        return None
+    if not isinstance(data, dict) or data.get("format") in (None, "dh-yaml"):
+        return None
+    ref = data.get("robot") or data.get("source")
+    if not isinstance(ref, str) or not ref:
+        return None
+    try:
+        spec = load_spec(ref)
+    except PipelineError:
+        return None
+    return spec if spec.source_sha256 == data.get("sha256") else None
+
+
+def _read(
+    paths: Sequence[Path],
+    robot: str | None,
+    cutoff_hz: float,
+    topics: Mapping[str, str] | None = None,
+) -> tuple[RobotSpec, list[JointSamples]]:
     if not paths:
         raise IdentificationError("no recordings given")
+    given = load_spec(robot) if robot else None
+    if given is not None:  # before reading anything
+        require_identifiable(given, what="identification")
     spec: RobotSpec | None = None
     samples = []
     for path in paths:
-        recording = read_recording(Path(path), WHOLE)
-        this = recording_spec(recording, robot)
+        recording = read_recording(Path(path), read_options(topics))
+        this = given if given is not None else recording_spec(recording, None)
         if spec is None:
             spec = this
         elif this.joint_names != spec.joint_names or this.name != spec.name:
@@ -94,8 +147,11 @@ def _read(paths: Sequence[Path], robot: str | None, cutoff_hz: float) -> tuple[
     return spec, samples
 
 
-def identified_spec(spec: RobotSpec, theta: np.ndarray) -> RobotSpec:
-    """``spec`` with the inertials and armature of standard parameters ``theta``."""
+def identified_spec(
+    spec: RobotSpec, theta: np.ndarray, *, identified_armature: bool = True
+) -> RobotSpec:
+    """``spec`` with the inertials and armature of standard parameters ``theta``
+    (``identified_armature=False``: the description's armature kept)."""
     joints = tuple(
         replace(
             joint,
@@ -104,13 +160,39 @@ def identified_spec(spec: RobotSpec, theta: np.ndarray) -> RobotSpec:
         )
         for j, joint in enumerate(spec.joints)
     )
-    return replace(
-        spec, joints=joints, armature_source="identified from recordings (pipeline identify fit)"
+    source = (
+        "identified from recordings (pipeline identify fit)"
+        if identified_armature
+        else spec.armature_source or "the description's (link-side torque: not observable)"
     )
+    return replace(spec, joints=joints, armature_source=source)
 
 
 def _floats(values: np.ndarray | Sequence[float]) -> list[float]:
     return [float(x) for x in values]
+
+
+def sample_counts(s: JointSamples) -> dict[str, Any]:
+    """What a recording's samples needed: repeats dropped, resampling (see :mod:`.samples`)."""
+    return {
+        "repeated_stamps_dropped": s.repeated_stamps,
+        "repeated_values_dropped": s.repeated_values,
+        "resampled": s.resampled,
+        "stamp_period_ms": [round(x * 1e3, 6) for x in s.period_range_s],
+    }
+
+
+def friction_document(fit: FitResult) -> dict[str, Any]:
+    """The model file's ``friction`` of an identification."""
+    theta = fit.theta
+    v_s = fit.transition_speed_rad_s
+    return {
+        "model": "sigmoid" if v_s > 0 else "coulomb",
+        "transition_speed_rad_s": v_s,
+        "coulomb_nm": _floats(theta[COULOMB::PER_JOINT]),
+        "viscous_nm_s_rad": _floats(theta[VISCOUS::PER_JOINT]),
+        "offset_nm": _floats(theta[OFFSET::PER_JOINT]),
+    }
 
 
 def model_document(
@@ -130,23 +212,40 @@ def model_document(
     """
     theta = fit.theta
     rel = np.abs(fit.std_error) / np.maximum(np.abs(fit.beta_wls), 1e-12) * 100
+    link = fit.torque_side == "link"
     return {
         "format": FORMAT,
-        "robot": spec_document(identified_spec(spec, theta)),
-        "friction": {
-            "coulomb_nm": _floats(theta[COULOMB::PER_JOINT]),
-            "viscous_nm_s_rad": _floats(theta[VISCOUS::PER_JOINT]),
-            "offset_nm": _floats(theta[OFFSET::PER_JOINT]),
-        },
+        **model_robot_document(identified_spec(spec, theta, identified_armature=not link)),
+        "friction": friction_document(fit),
+        "torque_side": fit.torque_side,
         "identification": {
             "robot": spec.name,
             "robot_source": spec.source,
+            "robot_format": spec.format,
+            "torque_side": {
+                "assumed": fit.torque_side,
+                "why": fit.torque_side_reason,
+                "armature": (
+                    "not observable (torque sensed on the link side): the description's "
+                    "value is kept"
+                    if link
+                    else "identified (torque includes the rotor's inertia)"
+                ),
+            },
             "recordings": [
-                {"path": s.source, "sha256": s.sha256, "ground_truth": s.truth} for s in samples
+                {"path": s.source, "sha256": s.sha256, "ground_truth": s.truth, **sample_counts(s)}
+                for s in samples
             ],
             "method": {
-                "regressor": "pinocchio computeJointTorqueRegressor + armature (qdd) + "
-                "friction (Coulomb sign(qd), viscous qd, offset 1) per joint",
+                "regressor": "pinocchio computeJointTorqueRegressor + armature (qdd"
+                + (", left out: link-side torque" if link else "")
+                + ") + friction (Coulomb "
+                + (
+                    f"tanh(qd / {fit.transition_speed_rad_s:g} rad/s)"
+                    if fit.transition_speed_rad_s > 0
+                    else "sign(qd)"
+                )
+                + ", viscous qd, sensor offset 1) per joint",
                 "base_parameters": "QR with column pivoting of the regressor stacked over "
                 "random states",
                 "estimator": "weighted least squares, weights 1/sigma_j from an OLS residual",
@@ -192,16 +291,42 @@ def fit_command(
     cutoff_hz: float = DEFAULT_CUTOFF_HZ,
     min_speed_rad_s: float = DEFAULT_MIN_SPEED_RAD_S,
     max_condition: float = DEFAULT_MAX_CONDITION,
+    topics: Mapping[str, str] | None = None,
+    transition_speed_rad_s: float = 0.0,
+    torque_side: str = "motor",
 ) -> dict[str, Any]:
     """Identify from ``paths``, write ``out`` (MODEL.yaml); the JSON summary.
+
+    Args:
+        topics: role -> topic remaps (``--topic joint_states=/name``).
+        transition_speed_rad_s: 0: Coulomb friction ``sign(qd)``; > 0: ``tanh(qd / v_s)``;
+            :data:`FIT_TRANSITION_SPEED`: ``tanh`` with the best-fitting ``v_s``.
+        torque_side: ``motor``, ``link`` or ``auto`` (:func:`pipeline.identify.fit.identify`).
 
     Raises:
         PipelineError: unreadable recordings, unfit data (one line), unwritable output.
     """
     wall0 = time.perf_counter()
-    spec, samples = _read(paths, robot, cutoff_hz)
-    spec.require_dynamics("identification")
-    fit = identify(spec, samples, min_speed_rad_s=min_speed_rad_s, max_condition=max_condition)
+    fitted_speed = transition_speed_rad_s == FIT_TRANSITION_SPEED
+    check_fit_options(
+        torque_side=torque_side,
+        transition_speed_rad_s=0.0 if fitted_speed else transition_speed_rad_s,
+    )
+    spec, samples = _read(paths, robot, cutoff_hz, topics)
+    require_identifiable(spec, what="identification")
+    transition: dict[str, Any] = {}
+    if fitted_speed:
+        transition_speed_rad_s, costs = fitted_transition_speed(
+            spec, samples, min_speed_rad_s=min_speed_rad_s
+        )
+        transition = {
+            "transition_speed": "fitted: least-squares residual over candidate speeds",
+            "transition_speed_costs": {f"{k:g}": v for k, v in costs.items()},
+        }
+    fit = identify(
+        spec, samples, min_speed_rad_s=min_speed_rad_s, max_condition=max_condition,
+        transition_speed_rad_s=transition_speed_rad_s, torque_side=torque_side,
+    )  # fmt: skip
     bad = violations(spec, fit.theta)
     if bad:  # cannot happen by construction; a guard against a solver returning nonsense
         raise IdentificationError(f"the identified model is not physical: {bad[0]}")
@@ -214,6 +339,7 @@ def fit_command(
         ),
         "min_speed_rad_s": min_speed_rad_s,
         "max_condition": max_condition,
+        **transition,
     }  # fmt: skip
     write_model(out, model_document(spec, fit, samples, method=method))
     rel = np.abs(fit.std_error) / np.maximum(np.abs(fit.beta_wls), 1e-12) * 100
@@ -230,8 +356,30 @@ def fit_command(
         "residual_rms_nm": [float(x) for x in fit.residual_rms_nm],
         "torque_rms_nm": [float(x) for x in fit.torque_rms_nm],
         "joints": list(spec.joint_names),
+        "torque_side": fit.torque_side,
+        "torque_side_reason": fit.torque_side_reason,
+        "friction_model": "sigmoid" if transition_speed_rad_s > 0 else "coulomb",
+        "transition_speed_rad_s": transition_speed_rad_s,
+        "repeated_stamps_dropped": sum(s.repeated_stamps for s in samples),
+        "repeated_values_dropped": sum(s.repeated_values for s in samples),
+        "resampled": [s.source for s in samples if s.resampled],
+        "offset_nm": _floats(fit.theta[OFFSET::PER_JOINT]),
         "wall_s": time.perf_counter() - wall0,
     }
+
+
+def check_fit_options(*, torque_side: str, transition_speed_rad_s: float) -> None:
+    """Refuse bad ``--torque-side`` / ``--friction`` values before reading anything."""
+    from pipeline.identify.fit import TORQUE_SIDES
+
+    if torque_side not in TORQUE_SIDES:
+        raise IdentificationError(
+            f"--torque-side: expected one of {', '.join(TORQUE_SIDES)}, got {torque_side!r}"
+        )
+    if not (np.isfinite(transition_speed_rad_s) and transition_speed_rad_s >= 0):
+        raise IdentificationError(
+            f"--transition-speed: expected a speed >= 0 rad/s, got {transition_speed_rad_s!r}"
+        )
 
 
 @dataclass(frozen=True)
@@ -247,7 +395,7 @@ class Prediction:
 def model_parameters(model: IdentifiedModel) -> F64:
     """The standard parameter vector of a model file (inertials, armature, friction)."""
     f = model.friction
-    return standard_parameters(
+    return standard_parameters(  # the armature is left out of a link-side model's regressor
         model.spec,
         coulomb_nm=np.asarray(f.coulomb_nm),
         viscous_nm_s_rad=np.asarray(f.viscous_nm_s_rad),
@@ -259,9 +407,12 @@ def predict(model: IdentifiedModel, samples: JointSamples, *, min_speed_rad_s: f
     """The model's torque on a recording's samples (slow joint samples set to NaN)."""
     theta = model_parameters(model)
     n, dof = samples.q.shape
-    predicted = (Regressor(model.spec).stacked(samples.q, samples.qd, samples.qdd) @ theta).reshape(
-        n, dof
+    reg = Regressor(
+        model.spec,
+        transition_speed_rad_s=model.friction.transition_speed_rad_s,
+        armature=model.torque_side == "motor",
     )
+    predicted = (reg.stacked(samples.q, samples.qd, samples.qdd) @ theta).reshape(n, dof)
     slow = np.abs(samples.qd) < min_speed_rad_s
     measured = samples.tau_nm.copy()
     measured[slow] = np.nan
@@ -276,15 +427,21 @@ def validate_command(
     figure: Path | None = None,
     cutoff_hz: float | None = None,
     min_speed_rad_s: float | None = None,
+    topics: Mapping[str, str] | None = None,
+    robot: str | None = None,
 ) -> dict[str, Any]:
     """Torque RMS error per joint of ``model_path`` on ``paths``; a figure; the summary.
 
     The filter and speed threshold default to the model's own (its ``identification``).
 
+    Args:
+        topics: role -> topic remaps (``--topic joint_states=/name``).
+        robot: the robot the model applies to (default: the description it names).
+
     Raises:
         PipelineError: a bad model file, unreadable recordings, a recording of another robot.
     """
-    model = load_model(model_path)
+    model = load_model(model_path, robot=load_spec(robot) if robot else None)
     method = model.identification.get("method", {})
     if cutoff_hz is None:
         filt = method.get("filter", {}) if isinstance(method, dict) else {}
@@ -295,11 +452,11 @@ def validate_command(
         raise IdentificationError("no recordings given")
     predictions = []
     for path in paths:
-        recording = read_recording(Path(path), WHOLE)
-        robot = recording.metadata.get("robot") if recording.armlab_metadata else None
-        if robot and robot != model.spec.name:
+        recording = read_recording(Path(path), read_options(topics))
+        recorded = recording.metadata.get("robot") if recording.armlab_metadata else None
+        if recorded and recorded != model.spec.name:
             raise IdentificationError(
-                f"{path}: a recording of robot '{robot}', the model is of '{model.spec.name}'"
+                f"{path}: a recording of robot '{recorded}', the model is of '{model.spec.name}'"
             )
         samples = joint_samples(recording, model.spec, cutoff_hz=cutoff_hz)
         predictions.append(predict(model, samples, min_speed_rad_s=min_speed_rad_s))

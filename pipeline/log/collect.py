@@ -421,10 +421,21 @@ def pick_roles(
     present: dict[str, str],
     mcap_path: Path,
     salvaged: Sequence[tuple[Path, Salvage]] = (),
+    *,
+    joint_states_only: bool = False,
 ) -> Roles:
-    """Pick each role's topic and the joint lists to analyse (from the groups' counts)."""
+    """Pick each role's topic and the joint lists to analyse (from the groups' counts).
+
+    With ``joint_states_only`` a recording without controller state is read from its joint
+    states alone: the controller-state role is the joint-state topic itself (its joints are
+    the most frequent joint list's; the reader fills the controller columns with nulls).
+    """
     chosen = {name: _pick(name, collector, present) for name in ROLES}
-    for name in ("joint_states", "controller_state"):
+    cs_missing = chosen["controller_state"] is None or (
+        str(chosen["controller_state"]) not in collector.decoders
+    )
+    js_only = joint_states_only and cs_missing and not salvaged
+    for name in ("joint_states",) if js_only else ("joint_states", "controller_state"):
         picked = chosen[name]
         if picked is None or picked not in collector.decoders:
             for path, s in salvaged:  # the damage took every message of the role with it
@@ -440,8 +451,10 @@ def pick_roles(
                 f"{mcap_path}: {what} for {name} (default {role.name}; topics "
                 f"present: {shown}); remap with --topic {name}=/name"
             )
-    cs_dec = collector.decoders[str(chosen["controller_state"])]
     js_dec = collector.decoders[str(chosen["joint_states"])]
+    if js_only:
+        chosen["controller_state"] = None
+    cs_dec = js_dec if js_only else collector.decoders[str(chosen["controller_state"])]
     cs_group = cs_dec.largest()
     assert cs_group is not None
     cs_names = cs_group.names

@@ -85,6 +85,10 @@ class ReadOptions:
         stream_above_bytes: storage files larger than this in all are read in windows
             (:mod:`pipeline.log.windowed`); None: :data:`STREAM_ABOVE_BYTES`.
         window_steps: control steps per window of a windowed read (0: the default).
+        joint_states_only: a recording without a controller-state topic is read from its
+            joint states alone (identification: positions, velocities, efforts); its
+            controller-state columns are null. The report never sets it (it needs the
+            controller's reference and error).
     """
 
     topics: Mapping[str, str] = field(default_factory=dict)
@@ -94,6 +98,7 @@ class ReadOptions:
     labels: Mapping[str, str] = field(default_factory=dict)
     stream_above_bytes: int | None = None
     window_steps: int = 0
+    joint_states_only: bool = False
 
 
 @dataclass(frozen=True)

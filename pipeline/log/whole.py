@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.log.collect import Collector, pick_roles, planned_trajectory, scan_storage
+from pipeline.constants import TYPE_CONTROLLER_STATE
+from pipeline.log.collect import WANT, Collector, pick_roles, planned_trajectory, scan_storage
 from pipeline.log.labels import (
     Labels,
     check_trajectory_duration,
@@ -97,9 +98,17 @@ def read_whole(
     mcap_path = files[0]
     collector = Collector(options.topics)
     scanned = scan_storage(files, collector, salvage=options.salvage, copies=copies, source=source)
-    roles = pick_roles(collector, scanned.present, mcap_path, scanned.salvaged)
+    roles = pick_roles(
+        collector, scanned.present, mcap_path, scanned.salvaged,
+        joint_states_only=options.joint_states_only,
+    )  # fmt: skip
     js_t, js_all = roles.js_group.concat()
-    cs_t, cs_a = roles.cs_group.concat()
+    if roles.cs_dec is roles.js_dec:  # joint states only: no controller columns
+        cs_t = js_t
+        nulls = np.full_like(js_all["position"], np.nan, dtype=float)
+        cs_a = dict.fromkeys(WANT[TYPE_CONTROLLER_STATE].arrays, nulls)
+    else:
+        cs_t, cs_a = roles.cs_group.concat()
     js_cols = roles.js_cols
     js_a = js_all if js_cols is None else {k: v[:, js_cols] for k, v in js_all.items()}
     notes, lost_pct = read_notes(scanned, roles)
@@ -127,7 +136,7 @@ def read_whole(
             planned_topic=str(roles.chosen["planned_trajectory"]),
             topic_counts=dict(collector.topic_counts),
             decoded_messages=roles.js_group.count
-            + roles.cs_group.count
+            + (roles.cs_group.count if roles.cs_dec is not roles.js_dec else 0)
             + (truth.count if truth else 0),
         )
     )

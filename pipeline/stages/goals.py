@@ -45,18 +45,25 @@ def _named(spec: RobotSpec, name: str, *, source: str, path: str) -> list[float]
     return list(states[name])
 
 
-def resolve_goal(
+def resolve_start(
     spec: RobotSpec, scenario: ScenarioParams, *, name: str, source: str
-) -> tuple[np.ndarray, np.ndarray]:
-    """Start and goal joint vectors; a named state (``start: ready``) comes from the robot's
-    SRDF, a Cartesian goal is solved by IK, nearest the start."""
+) -> np.ndarray:
+    """The start joint vector [rad]: the listed joints, or the SRDF named state it names."""
     start_path = f"scenarios.{name}.start"
     start_q = (
         _named(spec, scenario.start, source=source, path=start_path)
         if isinstance(scenario.start, str)
         else scenario.start
     )
-    start = _joint_vector(start_q, spec, source=source, path=start_path)
+    return _joint_vector(start_q, spec, source=source, path=start_path)
+
+
+def resolve_goal(
+    spec: RobotSpec, scenario: ScenarioParams, *, name: str, source: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """Start and goal joint vectors; a named state (``start: ready``) comes from the robot's
+    SRDF, a Cartesian goal is solved by IK, nearest the start."""
+    start = resolve_start(spec, scenario, name=name, source=source)
     if scenario.goal.state is not None:
         goal_path = f"scenarios.{name}.goal"
         goal_q = _named(spec, scenario.goal.state, source=source, path=goal_path)
