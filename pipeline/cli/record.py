@@ -203,6 +203,11 @@ def _run_campaign(
     if run.skipped:
         err.print(f"{name}: {len(run.skipped)} of {len(run.episodes)} episode(s) already "
                   f"recorded with these settings and code; running {len(run.pending)}")  # fmt: skip
+    if run.changed:
+        more = f" (and {len(run.changed) - 1} more)" if len(run.changed) > 1 else ""
+        err.print(f"warning: {run.out_dir}: {run.changed[0]}{more}: the recording does not "
+                  "match its completion mark (replaced or altered); recording it again",
+                  markup=False, highlight=False)  # fmt: skip
     if run.stray:
         more = f" (and {len(run.stray) - 1} more)" if len(run.stray) > 1 else ""
         err.print(f"warning: {run.out_dir}: {run.stray[0]}{more} is not an episode of "
