@@ -9,6 +9,7 @@ share of the RMS torque.
 
 from __future__ import annotations
 
+import io
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -198,7 +199,10 @@ def fit_command(
     Raises:
         PipelineError: unreadable recordings, unfit data (one line), unwritable output.
     """
+    from pipeline.fileio import check_output_file
+
     wall0 = time.perf_counter()
+    check_output_file(Path(out))  # a device, FIFO or folder: refused before the fit
     spec, samples = _read(paths, robot, cutoff_hz)
     spec.require_dynamics("identification")
     fit = identify(spec, samples, min_speed_rad_s=min_speed_rad_s, max_condition=max_condition)
@@ -284,7 +288,10 @@ def validate_command(
     Raises:
         PipelineError: a bad model file, unreadable recordings, a recording of another robot.
     """
+    from pipeline.fileio import check_output_file
+
     model = load_model(model_path)
+    check_output_file(figure or Path(model_path).with_suffix(".validation.png"))
     method = model.identification.get("method", {})
     if cutoff_hz is None:
         filt = method.get("filter", {}) if isinstance(method, dict) else {}
@@ -344,9 +351,13 @@ def write_figure(path: Path, spec: RobotSpec, prediction: Prediction) -> None:
     axes[-1, 0].set_xlabel("time [s]")
     fig.suptitle(f"torque: identified model vs {Path(prediction.source).name}", fontsize=9)
     fig.tight_layout()
+    from pipeline.fileio import atomic_write_bytes
+
     try:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=110)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=110)
+        atomic_write_bytes(Path(path), buf.getvalue())
     except OSError as err:
         raise PipelineError(f"{path}: cannot write the figure ({err.strerror or err})") from err
     finally:
