@@ -48,6 +48,7 @@ from pipeline.identify.regressor import (
     standard_parameters,
 )
 from pipeline.identify.samples import JointSamples
+from pipeline.pathlist import summarise_paths
 from pipeline.robots.spec import RobotSpec
 
 F64 = NDArray[np.float64]
@@ -190,7 +191,7 @@ def _identify(
     base = base_parameters(spec)
     y_std, tau, joint_of = stacked(spec, samples, min_speed_rad_s=min_speed_rad_s)
     y_b = y_std[:, base.columns]
-    where = ", ".join(s.source for s in samples)
+    where = summarise_paths([s.source for s in samples], what="recording")
     need = MIN_ROWS_PER_PARAMETER * base.rank
     if tau.size < need:
         raise IdentificationError(

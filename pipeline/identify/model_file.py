@@ -171,11 +171,28 @@ def nominal_spec(spec: RobotSpec, path: str | None, *, where: str = "nominal") -
     """
     if path is None:
         return spec
+    from pipeline.identify.identity import kinematics_mismatch, robot_file_sha256
+
     model = load_model(path)
     if model.spec.joint_names != spec.joint_names:
         raise IdentificationError(
             f"{where}.nominal: {path} is a model of joints {', '.join(model.spec.joint_names)}, "
             f"the scenario's robot '{spec.name}' has {', '.join(spec.joint_names)}"
+        )
+    fitted_on = str(model.identification.get("robot", model.spec.name))
+    why = kinematics_mismatch(model.spec, spec)
+    if why is not None:
+        raise IdentificationError(
+            f"{where}.nominal: {path} is a model of robot '{fitted_on}', not of the "
+            f"scenario's robot '{spec.name}' ({why}); identify this robot (pipeline identify fit)"
+        )
+    held = model.identification.get("robot_sha256")
+    now = robot_file_sha256(spec)
+    if isinstance(held, str) and held and now and held != now:
+        raise IdentificationError(
+            f"{where}.nominal: {path} was identified on robot file sha256 {held[:12]}, the "
+            f"scenario's robot '{spec.name}' ({spec.source}) is now {now[:12]}; identify it "
+            "again (pipeline identify fit)"
         )
     return model.spec
 

@@ -25,6 +25,7 @@ from pipeline.identify.defaults import (
     DEFAULT_MIN_SPEED_RAD_S,
 )
 from pipeline.identify.fit import FitResult, identify, violations
+from pipeline.identify.identity import kinematics_mismatch, robot_file_sha256
 from pipeline.identify.model_file import (
     FORMAT,
     IdentifiedModel,
@@ -45,6 +46,7 @@ from pipeline.identify.regressor import (
 from pipeline.identify.samples import FILTER_ORDER, JointSamples, joint_samples
 from pipeline.log.reader import ReadOptions, Recording, read_recording
 from pipeline.log.robot_facts import robot_facts
+from pipeline.pathlist import summarise_paths
 from pipeline.robots.loaders import load_spec
 from pipeline.robots.spec import RobotSpec
 
@@ -83,6 +85,8 @@ def _read(paths: Sequence[Path], robot: str | None, cutoff_hz: float) -> tuple[
     for path in paths:
         recording = read_recording(Path(path), WHOLE)
         this = recording_spec(recording, robot)
+        if robot:
+            _check_recorded_robot(recording, this, robot)
         if spec is None:
             spec = this
         elif this.joint_names != spec.joint_names or this.name != spec.name:
@@ -93,6 +97,40 @@ def _read(paths: Sequence[Path], robot: str | None, cutoff_hz: float) -> tuple[
         samples.append(joint_samples(recording, spec, cutoff_hz=cutoff_hz))
     assert spec is not None
     return spec, samples
+
+
+def _check_recorded_robot(recording: Recording, spec: RobotSpec, robot: str) -> None:
+    """Refuse ``--robot`` when the recording names a robot of other kinematics (a UR5 bag
+    fitted as a UR10: the pair ``validate`` refuses)."""
+    facts = robot_facts(recording)
+    recorded = facts.spec if facts.source != "urdf" else None
+    if recorded is None:
+        return  # a foreign bag: --robot is the only word on its robot
+    why = kinematics_mismatch(recorded, spec)
+    if why is not None:
+        raise IdentificationError(
+            f"{recording.source}: recorded on robot '{recorded.name}', not on --robot "
+            f"{robot} ('{spec.name}': {why}); fit it as the robot it recorded (omit --robot)"
+        )
+
+
+def _check_efforts(spec: RobotSpec, samples: Sequence[JointSamples]) -> None:
+    """Refuse efforts that never change on some joint over all recordings (all zero, or
+    a constant: a driver that measures no torque fills in a fixed value)."""
+    tau = np.vstack([s.tau_nm for s in samples])
+    flat = [j for j in range(spec.dof) if float(np.ptp(tau[:, j])) == 0.0]
+    if not flat:
+        return
+    names = ", ".join(spec.joint_names[j] for j in flat)
+    values = sorted({float(tau[0, j]) for j in flat})
+    what = (
+        "all zero" if values == [0.0] else f"constant ({', '.join(f'{v:g}' for v in values)} N m)"
+    )
+    where = summarise_paths([s.source for s in samples], what="recording")
+    raise IdentificationError(
+        f"{where}: /joint_states effort of {names} is {what} in every sample: no torque "
+        "was measured there; identification needs the applied torque"
+    )
 
 
 def identified_spec(spec: RobotSpec, theta: np.ndarray) -> RobotSpec:
@@ -142,6 +180,7 @@ def model_document(
         "identification": {
             "robot": spec.name,
             "robot_source": spec.source,
+            "robot_sha256": robot_file_sha256(spec),
             "recordings": [
                 {"path": s.source, "sha256": s.sha256, "ground_truth": s.truth} for s in samples
             ],
@@ -205,6 +244,7 @@ def fit_command(
     check_output_file(Path(out))  # a device, FIFO or folder: refused before the fit
     spec, samples = _read(paths, robot, cutoff_hz)
     spec.require_dynamics("identification")
+    _check_efforts(spec, samples)
     fit = identify(spec, samples, min_speed_rad_s=min_speed_rad_s, max_condition=max_condition)
     bad = violations(spec, fit.theta)
     if bad:  # cannot happen by construction; a guard against a solver returning nonsense
