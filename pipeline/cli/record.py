@@ -17,6 +17,33 @@ from pipeline.errors import (
 )
 
 
+def check_params(params: str) -> None:
+    """What ``record`` refuses before any work, for every hand-listed episode and every
+    campaign of the DVC stages (``extra_campaigns`` are left to their own runs).
+
+    DVC deletes a stage's outputs before running its command, so a mistyped
+    ``dvc exp run -S`` value used to cost the committed recording; the ``check-params``
+    stage, which every record stage depends on, fails first and DVC stops there.
+
+    Raises:
+        PipelineError: the first bad value (one line naming the field).
+    """
+    from pathlib import Path
+
+    from pipeline.params import load_params
+    from pipeline.stages.campaign import expand
+    from pipeline.stages.campaign_run import check_campaign_count, distinct_settings
+    from pipeline.stages.record import validate_episodes
+
+    loaded = load_params(params)
+    validate_episodes(loaded, distinct_settings(loaded.episodes))
+    for name in loaded.campaigns:
+        if name in loaded.extra_campaigns:
+            continue
+        check_campaign_count(loaded, name, out=Path("recordings"), jobs=1)
+        validate_episodes(loaded, distinct_settings(expand(loaded, name)))
+
+
 @app.command("record")
 def record_cmd(
     params: Annotated[
@@ -74,6 +101,15 @@ def record_cmd(
         str | None,
         typer.Option("--address", help="Ray cluster to join (e.g. auto); default: start one."),
     ] = None,
+    check: Annotated[
+        bool,
+        typer.Option(
+            "--check",
+            help="Only validate PARAMS (every hand-listed episode and DVC campaign, as a "
+            "record does before any work), print 'params valid' and exit: the DVC stage "
+            "check-params, run before DVC removes any recording.",
+        ),
+    ] = False,
 ) -> None:
     """Plan, simulate and record every episode in PARAMS as a ROS 2 bag (MCAP).
 
@@ -89,6 +125,10 @@ def record_cmd(
     """
     from pathlib import Path
 
+    if check:
+        check_params(params)
+        console.print("params valid", markup=False, highlight=False)
+        return
     if ros_distro is not None:
         _ros_distro(ros_distro)  # refused before any work
     from pipeline.stages.executors import EXECUTORS
