@@ -84,14 +84,15 @@ def _differences(group: str, rows: Sequence[tuple[str, Mapping[str, Any]]], *,
 
 def mixed_settings(groups: Mapping[str, Sequence[Recording]]) -> list[MixedSetting]:
     """Every setting with more than one value within a group (see the module doc); empty
-    when each group's episodes agree. Recordings without our settings are left out."""
+    when each group's episodes agree. Recordings without our settings, and failed episodes
+    (which take no part in the comparisons), are left out."""
     found: list[MixedSetting] = []
     for group, recs in groups.items():
         scenario_rows = []
         gains_rows: dict[str, list[tuple[str, dict[str, Any]]]] = {}
         for rec in recs:
             s = rec.settings
-            if s is None:
+            if s is None or rec.status != "ok":  # a failed episode is compared with nothing
                 continue
             scenario = {k: v for k, v in s.scenario.items() if k != "name"}
             scenario_rows.append((rec.episode, dict(_flat(scenario))))
