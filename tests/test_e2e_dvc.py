@@ -43,8 +43,8 @@ def test_fresh_clone_dvc_repro_runs_once_then_only_what_a_gain_change_touches(tm
         out = []
         for change in changes:
             for path, what in change.get("changed deps", {}).items():
-                # upstream outputs (recordings/) are absent in a clone: expected
-                if not path.startswith("recordings"):
+                # upstream outputs (recordings/, params.checked) are absent in a clone
+                if not path.startswith(("recordings", "params.checked")):
                     out.append(f"{path}: {what}")
         return out
 
@@ -63,7 +63,8 @@ def test_fresh_clone_dvc_repro_runs_once_then_only_what_a_gain_change_touches(tm
     first = _run([*dvc, "repro"], clone, env)
     ran = set(re.findall(r"Running stage '([^']+)'", first))
     assert ran == {f"record@{e}" for e in episodes} | {f"campaign@{c}" for c in campaigns} | {
-        "report"
+        "check-params",
+        "report",
     }, first
     reports = clone / "reports"
     for name in ("report.md", "metrics.json", "recording.rrd"):
@@ -87,15 +88,16 @@ def test_fresh_clone_dvc_repro_runs_once_then_only_what_a_gain_change_touches(tm
     params.write_text(text.replace("gains: {kp: 1600.0, kd: 80.0}", "gains: {kp: 900.0, kd: 60.0}"))
     status = _run([*dvc, "status", "--json"], clone, env)
     changed = set(json.loads(status))
-    # the hand-listed CTC episode and the campaign that runs CTC; not paper-pid
-    assert changed == {"record@paper-ctc", "campaign@paper-realistic"}, status
+    # the hand-listed CTC episode and the campaign that runs CTC; not paper-pid (the params
+    # check runs on every change, and its unchanged output re-runs nothing)
+    assert changed == {"check-params", "record@paper-ctc", "campaign@paper-realistic"}, status
     third = _run([*dvc, "repro"], clone, env)
     assert set(re.findall(r"Running stage '([^']+)'", third)) == {
-        "record@paper-ctc", "campaign@paper-realistic", "report",
+        "check-params", "record@paper-ctc", "campaign@paper-realistic", "report",
     }  # fmt: skip
     # a campaign's own change re-runs that campaign alone
     text = params.read_text()
     assert "    seeds: 5\n" in text
     params.write_text(text.replace("    seeds: 5\n", "    seeds: 6\n", 1))
     status = _run([*dvc, "status", "--json"], clone, env)
-    assert set(json.loads(status)) == {"campaign@paper-realistic"}, status
+    assert set(json.loads(status)) == {"check-params", "campaign@paper-realistic"}, status

@@ -21,6 +21,33 @@ if TYPE_CHECKING:
     from pipeline.params import Episode
 
 
+def check_params(params: str) -> None:
+    """What ``record`` refuses before any work, for every hand-listed episode and every
+    campaign of the DVC stages (``extra_campaigns`` are left to their own runs).
+
+    DVC deletes a stage's outputs before running its command, so a mistyped
+    ``dvc exp run -S`` value used to cost the committed recording; the ``check-params``
+    stage, which every record stage depends on, fails first and DVC stops there.
+
+    Raises:
+        PipelineError: the first bad value (one line naming the field).
+    """
+    from pathlib import Path
+
+    from pipeline.params import load_params
+    from pipeline.stages.campaign import expand
+    from pipeline.stages.campaign_run import check_campaign_count, distinct_settings
+    from pipeline.stages.record import validate_episodes
+
+    loaded = load_params(params)
+    validate_episodes(loaded, distinct_settings(loaded.episodes))
+    for name in loaded.campaigns:
+        if name in loaded.extra_campaigns:
+            continue
+        check_campaign_count(loaded, name, out=Path("recordings"), jobs=1)
+        validate_episodes(loaded, distinct_settings(expand(loaded, name)))
+
+
 @app.command("record")
 def record_cmd(
     params: Annotated[
@@ -96,6 +123,15 @@ def record_cmd(
             "Default: 600 (or $ARMLAB_PLUGIN_EPISODE_BUDGET_S).",
         ),
     ] = None,
+    check: Annotated[
+        bool,
+        typer.Option(
+            "--check",
+            help="Only validate PARAMS (every hand-listed episode and DVC campaign, as a "
+            "record does before any work), print 'params valid' and exit: the DVC stage "
+            "check-params, run before DVC removes any recording.",
+        ),
+    ] = False,
 ) -> None:
     """Plan, simulate and record every episode in PARAMS as a ROS 2 bag (MCAP).
 
@@ -123,6 +159,10 @@ def record_cmd(
 
     set_budget_env(call_s=plugin_call_budget_s, episode_s=plugin_episode_budget_s)
 
+    if check:
+        check_params(params)
+        console.print("params valid", markup=False, highlight=False)
+        return
     if ros_distro is not None:
         _ros_distro(ros_distro)  # refused before any work
     from pipeline.stages.executors import EXECUTORS
@@ -238,6 +278,11 @@ def _run_campaign(
     if run.skipped:
         err.print(f"{name}: {len(run.skipped)} of {len(run.episodes)} episode(s) already "
                   f"recorded with these settings and code; running {len(run.pending)}")  # fmt: skip
+    if run.changed:
+        more = f" (and {len(run.changed) - 1} more)" if len(run.changed) > 1 else ""
+        err.print(f"warning: {run.out_dir}: {run.changed[0]}{more}: the recording does not "
+                  "match its completion mark (replaced or altered); recording it again",
+                  markup=False, highlight=False)  # fmt: skip
     if run.stray:
         more = f" (and {len(run.stray) - 1} more)" if len(run.stray) > 1 else ""
         err.print(f"warning: {run.out_dir}: {run.stray[0]}{more} is not an episode of "

@@ -308,6 +308,10 @@ def record_excitation(
     from pipeline.trajectory import TrajectorySamples
 
     wall0 = time.perf_counter()
+    if export is not None:
+        from pipeline.fileio import check_output_file
+
+        check_output_file(Path(export))  # refused before the design and the run
     params = load_params(params_path)
     if scenario_name not in params.scenarios:
         raise ParamsError(

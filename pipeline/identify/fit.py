@@ -48,6 +48,7 @@ from pipeline.identify.regressor import (
     standard_parameters,
 )
 from pipeline.identify.samples import JointSamples
+from pipeline.pathlist import summarise_paths
 from pipeline.robots.spec import RobotSpec
 
 F64 = NDArray[np.float64]
@@ -315,7 +316,7 @@ def _identify(
 ) -> FitResult:
     base = base_parameters(spec, armature=armature)
     y_b = y_std[:, base.columns]
-    where = ", ".join(s.source for s in samples)
+    where = summarise_paths([s.source for s in samples], what="recording")
     need = MIN_ROWS_PER_PARAMETER * base.rank
     dof = spec.dof
     grams = np.empty((dof, base.rank, base.rank))

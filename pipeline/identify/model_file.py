@@ -386,6 +386,8 @@ def nominal_spec(spec: RobotSpec, path: str | None, *, where: str = "nominal") -
     """
     if path is None:
         return spec
+    from pipeline.identify.identity import kinematics_mismatch, robot_file_sha256
+
     try:
         model = load_model(path, robot=spec)
     except ModelJointsError as err:
@@ -394,6 +396,25 @@ def nominal_spec(spec: RobotSpec, path: str | None, *, where: str = "nominal") -
         raise IdentificationError(
             f"{where}.nominal: {path} is a model of joints {', '.join(model.spec.joint_names)}, "
             f"the scenario's robot '{spec.name}' has {', '.join(spec.joint_names)}"
+        )
+    fitted_on = str(model.identification.get("robot", model.spec.name))
+    try:  # the robot it was fitted on, as the file describes it (``model`` is ``spec``'s)
+        own: RobotSpec | None = load_model(path).spec
+    except IdentificationError:  # its description's file is not here: the hash below decides
+        own = None
+    why = kinematics_mismatch(own, spec) if own is not None else None
+    if why is not None:
+        raise IdentificationError(
+            f"{where}.nominal: {path} is a model of robot '{fitted_on}', not of the "
+            f"scenario's robot '{spec.name}' ({why}); identify this robot (pipeline identify fit)"
+        )
+    held = model.identification.get("robot_sha256")
+    now = robot_file_sha256(spec)
+    if isinstance(held, str) and held and now and held != now:
+        raise IdentificationError(
+            f"{where}.nominal: {path} was identified on robot file sha256 {held[:12]}, the "
+            f"scenario's robot '{spec.name}' ({spec.source}) is now {now[:12]}; identify it "
+            "again (pipeline identify fit)"
         )
     return model.spec
 

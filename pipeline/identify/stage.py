@@ -9,6 +9,7 @@ share of the RMS torque.
 
 from __future__ import annotations
 
+import io
 import json
 import time
 from collections.abc import Mapping, Sequence
@@ -25,6 +26,7 @@ from pipeline.identify.defaults import (
     DEFAULT_MIN_SPEED_RAD_S,
 )
 from pipeline.identify.fit import FitResult, fitted_transition_speed, identify, violations
+from pipeline.identify.identity import kinematics_mismatch, robot_file_sha256
 from pipeline.identify.model_file import (
     FORMAT,
     IdentifiedModel,
@@ -45,6 +47,7 @@ from pipeline.identify.regressor import (
 from pipeline.identify.samples import FILTER_ORDER, JointSamples, joint_samples
 from pipeline.log.reader import ReadOptions, Recording, read_recording
 from pipeline.log.robot_facts import robot_facts
+from pipeline.pathlist import summarise_paths
 from pipeline.robots.loaders import load_spec
 from pipeline.robots.spec import RobotSpec
 
@@ -135,6 +138,8 @@ def _read(
     for path in paths:
         recording = read_recording(Path(path), read_options(topics))
         this = given if given is not None else recording_spec(recording, None)
+        if given is not None:
+            _check_recorded_robot(recording, given, str(robot))
         if spec is None:
             spec = this
         elif this.joint_names != spec.joint_names or this.name != spec.name:
@@ -145,6 +150,40 @@ def _read(
         samples.append(joint_samples(recording, spec, cutoff_hz=cutoff_hz))
     assert spec is not None
     return spec, samples
+
+
+def _check_recorded_robot(recording: Recording, spec: RobotSpec, robot: str) -> None:
+    """Refuse ``--robot`` when the recording names a robot of other kinematics (a UR5 bag
+    fitted as a UR10: the pair ``validate`` refuses)."""
+    facts = robot_facts(recording)
+    recorded = facts.spec if facts.source != "urdf" else None
+    if recorded is None:
+        return  # a foreign bag: --robot is the only word on its robot
+    why = kinematics_mismatch(recorded, spec)
+    if why is not None:
+        raise IdentificationError(
+            f"{recording.source}: recorded on robot '{recorded.name}', not on --robot "
+            f"{robot} ('{spec.name}': {why}); fit it as the robot it recorded (omit --robot)"
+        )
+
+
+def _check_efforts(spec: RobotSpec, samples: Sequence[JointSamples]) -> None:
+    """Refuse efforts that never change on some joint over all recordings (all zero, or
+    a constant: a driver that measures no torque fills in a fixed value)."""
+    tau = np.vstack([s.tau_nm for s in samples])
+    flat = [j for j in range(spec.dof) if float(np.ptp(tau[:, j])) == 0.0]
+    if not flat:
+        return
+    names = ", ".join(spec.joint_names[j] for j in flat)
+    values = sorted({float(tau[0, j]) for j in flat})
+    what = (
+        "all zero" if values == [0.0] else f"constant ({', '.join(f'{v:g}' for v in values)} N m)"
+    )
+    where = summarise_paths([s.source for s in samples], what="recording")
+    raise IdentificationError(
+        f"{where}: /joint_states effort of {names} is {what} in every sample: no torque "
+        "was measured there; identification needs the applied torque"
+    )
 
 
 def identified_spec(
@@ -232,6 +271,7 @@ def model_document(
                     else "identified (torque includes the rotor's inertia)"
                 ),
             },
+            "robot_sha256": robot_file_sha256(spec),
             "recordings": [
                 {"path": s.source, "sha256": s.sha256, "ground_truth": s.truth, **sample_counts(s)}
                 for s in samples
@@ -306,7 +346,10 @@ def fit_command(
     Raises:
         PipelineError: unreadable recordings, unfit data (one line), unwritable output.
     """
+    from pipeline.fileio import check_output_file
+
     wall0 = time.perf_counter()
+    check_output_file(Path(out))  # a device, FIFO or folder: refused before the fit
     fitted_speed = transition_speed_rad_s == FIT_TRANSITION_SPEED
     check_fit_options(
         torque_side=torque_side,
@@ -314,6 +357,7 @@ def fit_command(
     )
     spec, samples = _read(paths, robot, cutoff_hz, topics)
     require_identifiable(spec, what="identification")
+    _check_efforts(spec, samples)
     transition: dict[str, Any] = {}
     if fitted_speed:
         transition_speed_rad_s, costs = fitted_transition_speed(
@@ -441,7 +485,10 @@ def validate_command(
     Raises:
         PipelineError: a bad model file, unreadable recordings, a recording of another robot.
     """
+    from pipeline.fileio import check_output_file
+
     model = load_model(model_path, robot=load_spec(robot) if robot else None)
+    check_output_file(figure or Path(model_path).with_suffix(".validation.png"))
     method = model.identification.get("method", {})
     if cutoff_hz is None:
         filt = method.get("filter", {}) if isinstance(method, dict) else {}
@@ -501,9 +548,13 @@ def write_figure(path: Path, spec: RobotSpec, prediction: Prediction) -> None:
     axes[-1, 0].set_xlabel("time [s]")
     fig.suptitle(f"torque: identified model vs {Path(prediction.source).name}", fontsize=9)
     fig.tight_layout()
+    from pipeline.fileio import atomic_write_bytes
+
     try:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=110)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=110)
+        atomic_write_bytes(Path(path), buf.getvalue())
     except OSError as err:
         raise PipelineError(f"{path}: cannot write the figure ({err.strerror or err})") from err
     finally:

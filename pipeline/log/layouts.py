@@ -374,10 +374,13 @@ def _pj_snippets(joints: tuple[str, ...]) -> list[str]:
 def write_layouts(folder: Path) -> list[Path]:
     """Write both layouts into ``folder``; return their paths."""
     folder.mkdir(parents=True, exist_ok=True)
+    from pipeline.fileio import atomic_write_bytes
+
     fox = folder / FOXGLOVE_FILE
-    fox.write_text(json.dumps(foxglove_layout(), indent=2, ensure_ascii=False) + "\n", "utf-8")
+    text = json.dumps(foxglove_layout(), indent=2, ensure_ascii=False) + "\n"
+    atomic_write_bytes(fox, text.encode("utf-8"))
     pj = folder / PLOTJUGGLER_FILE
-    pj.write_text(plotjuggler_layout(), encoding="utf-8")
+    atomic_write_bytes(pj, plotjuggler_layout().encode("utf-8"))
     return [fox, pj]
 
 

@@ -17,6 +17,7 @@ from pipeline.analysis.aggregate import (
     runs_per_controller,
 )
 from pipeline.analysis.checks import duplicate_stamp_notes
+from pipeline.analysis.consistency import MixedSetting, mixed_settings
 from pipeline.analysis.episodes import comparable
 from pipeline.analysis.protocol import ProtocolView
 from pipeline.analysis.task_space import TaskSpace, tcp_errors
@@ -139,12 +140,21 @@ class ReportData:
         return any(n > 1 for (sc, _), n in self.runs.items() if sc == scenario)
 
     def warnings(self) -> list[tuple[str, str]]:
-        """(episode, note) for every non-fatal oddity the reader or the frame checks noted."""
+        """(episode, note) for every non-fatal oddity the reader or the frame checks noted,
+        then (group, note) for each setting that differs within a group."""
         return [
             (rec.episode, note)
             for rec in self.recordings
             for note in (*rec.notes, *duplicate_stamp_notes(rec))
+        ] + [
+            (m.group, f"settings differ within the group: {m.note()}") for m in self.mixed_settings
         ]
+
+    @cached_property
+    def mixed_settings(self) -> list[MixedSetting]:
+        """Settings recorded with more than one value within a group
+        (:func:`pipeline.analysis.consistency.mixed_settings`)."""
+        return mixed_settings({g: self.in_group(g) for g in self.groups()})
 
     @cached_property
     def _metric_rows(self) -> dict[tuple[str, str], dict[str, Any]]:

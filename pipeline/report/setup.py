@@ -166,6 +166,7 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
     """The ``### Setup`` section of a scenario (or campaign condition): its first
     episode's settings, and one row per episode (per controller and gains when many)."""
     recs = data.in_group(scenario)
+    mixed = [m for m in data.mixed_settings if m.group == scenario]
     exact = nominal_plant(recs, data.protocol)
     first = recs[0]
     s = first.settings
@@ -185,7 +186,8 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
         f"{', '.join(first.joint_names)}), {_robot_source(s.robot if s is not None else None)}.",
         f"- Start [rad]: {pose('start')}; goal [rad]: {pose('goal')}; "
         f"obstacles: {len(obstacles) if isinstance(obstacles, list) else md.NA}; "
-        f"hold after the motion: {md.value(_given(sc, 'hold_s'))} s.",
+        f"hold after the motion: {md.value(_given(sc, 'hold_s'))} s"
+        + (f" (in {first.episode}; settings differ, below)." if mixed else "."),
         f"- Planner: {_planner_line(planner)}.",
         *_armature_lines(s.robot if s is not None else None, plant, sc),
         *_friction_lines(s.robot if s is not None else None),
@@ -201,6 +203,16 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
             else "."
         ),
         *_loop_lines(s.loop if s is not None else None),
+        *(
+            [
+                f"- **Settings differ within this group** (these episodes are not one set-up; "
+                f"the lines above are {first.episode}'s): "
+                + "; ".join(m.note() for m in mixed)
+                + "."
+            ]
+            if mixed
+            else []
+        ),
         "",
         "Controllers:",
         "",

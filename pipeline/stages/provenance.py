@@ -25,6 +25,7 @@ RECORD_CODE = (
     "identify/__init__.py",  # cli's sub-app, and a scenario's `nominal:` model file
     "identify/cli.py",
     "identify/defaults.py",
+    "identify/identity.py",
     "identify/model_file.py",
     "robots",
     "model",
