@@ -33,7 +33,7 @@ def check_controller_cmd(
     budget_s: Annotated[
         float,
         typer.Option(
-            "--budget-s", min=0.001, help="Wall-clock budget of the whole check of a plug-in [s]."
+            "--budget-s", min=0.001, help="Wall-clock budget of the whole check of a plug-in \\[s]."
         ),
     ] = 60.0,
 ) -> None:

@@ -110,7 +110,7 @@ def record_cmd(
         typer.Option(
             "--plugin-call-budget-s",
             help="Wall-clock budget of one call of a plug-in controller (import, __init__, "
-            "reset, compute) [s]; past it the episode fails. Default: 1 "
+            "reset, compute) \\[s]; past it the episode fails. Default: 1 "
             "(or $ARMLAB_PLUGIN_CALL_BUDGET_S).",
         ),
     ] = None,
@@ -119,7 +119,7 @@ def record_cmd(
         typer.Option(
             "--plugin-episode-budget-s",
             help="Wall-clock budget of one episode with a plug-in controller (its import to its "
-            "last call, the simulation included) [s]. "
+            "last call, the simulation included) \\[s]. "
             "Default: 600 (or $ARMLAB_PLUGIN_EPISODE_BUDGET_S).",
         ),
     ] = None,
