@@ -97,7 +97,23 @@ class DeadBandFinding:
         return self.friction_nm / self.stiffness_nm_per_rad
 
 
-Finding = ContactFinding | SaturationFinding | GoalMissFinding | DeadBandFinding
+@dataclass(frozen=True)
+class UnsettledStartFinding:
+    """An episode whose pre-roll reached its cap (``preroll_s``) without settling
+    (``pipeline.sim.settling``): its metrics start from an unsettled state.
+
+    Attributes:
+        episode: the episode.
+        preroll_s: the pre-roll it ran, the cap [s].
+    """
+
+    episode: str
+    preroll_s: float
+
+
+Finding = (
+    ContactFinding | SaturationFinding | GoalMissFinding | DeadBandFinding | UnsettledStartFinding
+)
 
 
 @dataclass(frozen=True)
@@ -143,6 +159,8 @@ def physical_checks(
                 )
                 for c in st.safety.contacts
             ]
+            if not st.protocol.preroll_settled:
+                found.append(UnsettledStartFinding(rec.episode, start))
         stiffness = stiffness_nm_per_rad(st, robot_facts(rec).spec) if st is not None else None
         for j, joint in enumerate(rec.joint_names):
             m = rows.get((rec.episode, joint), {})

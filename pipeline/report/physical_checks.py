@@ -14,6 +14,7 @@ from pipeline.analysis.findings import (
     GoalMissFinding,
     PhysicalChecks,
     SaturationFinding,
+    UnsettledStartFinding,
 )
 from pipeline.report.md import MAX_ROWS, NA, NOT_IN_BAG
 from pipeline.report.md import table as md_table
@@ -34,6 +35,9 @@ def _short(fs: list[Finding], n: int) -> list[str]:
         elif kind is GoalMissFinding:
             miss = max(f.final_error_rad for f in group if isinstance(f, GoalMissFinding))
             out.append(f"goal missed by {miss:.2g} rad{share}")
+        elif kind is UnsettledStartFinding:
+            cap = max(f.preroll_s for f in group if isinstance(f, UnsettledStartFinding))
+            out.append(f"start not settled in {cap:g} s{share}")
         elif kind is DeadBandFinding:
             width = max(f.width_rad for f in group if isinstance(f, DeadBandFinding))
             out.append(f"dead band {width:.2g} rad{share}")
@@ -76,7 +80,9 @@ def physical_checks_section(checks: PhysicalChecks, grid: tuple[CheckCell, ...] 
         "",
         f"{checks.stable} of {checks.episodes} episodes stable (not diverged). A cell is *ok* "
         f"when, over the controller's episodes (k/n: in how many), no contact happened "
-        f"during execution, no joint sat at its effort limit more than "
+        f"during execution, every pre-roll settled before its cap (`preroll_s`; *start not "
+        f"settled*: the metrics start from an unsettled state), no joint sat at its "
+        f"effort limit more than "
         f"{SATURATION_WARN_FRACTION * 100:.0f} % of the time, every completed episode "
         f"reached its goal within {GOAL_MISS_RAD:g} rad and no proportional gain leaves a "
         f"friction dead band (friction / stiffness) wider than the "

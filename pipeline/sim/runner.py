@@ -42,6 +42,7 @@ from pipeline.settings import LoopSettings
 from pipeline.sim.loop import Actuator, Sensor, check_loop
 from pipeline.sim.plant import plant_model
 from pipeline.sim.result import F64, EpisodeResult, Reference
+from pipeline.sim.settling import SETTLING, integral_state, settled
 
 DIVERGENCE_SPEED_FACTOR = 10.0
 """A joint faster than this many times its velocity limit is out of control."""
@@ -159,17 +160,22 @@ def run_episode(
     duration_s = _reference_duration(reference)
     control_dt_s = physics_dt_s * control_period_steps
     period_ns = round(physics_dt_s * 1e9) * control_period_steps
-    start_row = round(preroll_s / control_dt_s)
-    motion_start_s = start_row * control_dt_s
-    n = start_row + math.ceil((duration_s + hold_s) / control_dt_s - 1e-9) + 1
+    # rows: the pre-roll (at most cap_rows, in windows of the settling criterion), then the
+    # motion and the hold (motion_rows, the last one recorded but not stepped); n bounds
+    # them all, so the noise and the jitter draws do not depend on where the pre-roll ends
+    cap_rows = round(preroll_s / control_dt_s)
+    window_rows = max(1, round(SETTLING.window_s / control_dt_s))
+    motion_rows = math.ceil((duration_s + hold_s) / control_dt_s - 1e-9) + 1
+    n = cap_rows + motion_rows
     stamp_ns = np.arange(n, dtype=np.int64) * period_ns
     times_s: F64 = np.arange(n, dtype=np.float64) * control_dt_s
-    q_ref, qd_ref, qdd_ref = _sample_reference(
-        reference, np.maximum(times_s - motion_start_s, 0.0), spec
-    )
-    # pre-roll: hold the start pose exactly (no velocity or acceleration feed-forward)
-    qd_ref[:start_row] = 0.0
-    qdd_ref[:start_row] = 0.0
+    motion_q, motion_qd, motion_qdd = _sample_reference(reference, times_s[:motion_rows], spec)
+    # pre-roll: hold the start pose exactly (no velocity or acceleration feed-forward);
+    # the motion's samples are put in place once the pre-roll has ended
+    q_ref = np.empty((n, dof))
+    q_ref[:] = motion_q[0]
+    qd_ref = np.zeros((n, dof))
+    qdd_ref = np.zeros((n, dof))
 
     rng = np.random.default_rng(seed)
     noisy = position_noise_std_rad > 0 or velocity_noise_std_rad_s > 0
@@ -216,13 +222,27 @@ def run_episode(
         sensor=sensor,
         actuator=actuator,
     )
-    with _captured_mujoco_warnings() as warning_texts:
-        rows, reason = control_loop.run(
+
+    def run_rows(first: int, stop: int, *, final: bool) -> tuple[int, str]:
+        return control_loop.run(
             q_true, qd_true, q_meas, qd_meas, noise_q, noise_qd if noisy else None,
             q_ref, qd_ref, qdd_ref, tau_cmd, tau_app, progress or _no_progress,
+            first=first, stop=stop, final=final,
         )  # fmt: skip
+
+    with _captured_mujoco_warnings() as warning_texts:
+        start_row, preroll_settled, rows, reason = _preroll(
+            run_rows, controller, q_true, qd_true, q_ref, cap_rows, window_rows
+        )
+        if not reason:
+            end = start_row + motion_rows
+            q_ref[start_row:end] = motion_q
+            qd_ref[start_row:end] = motion_qd
+            qdd_ref[start_row:end] = motion_qdd
+            rows, reason = run_rows(start_row, end, final=True)
         if reason and warning_texts and "MuJoCo warning" in reason:
             reason += f': "{warning_texts[0]}"'
+    motion_start_s = start_row * control_dt_s
 
     # A non-finite command is the controller's failure, whatever MuJoCo made of it
     # (it zeroes a NaN ctrl and warns one step later; the last row is never stepped).
@@ -261,6 +281,7 @@ def run_episode(
         "preroll_s": float(preroll_s),
         "motion_start_s": float(motion_start_s),
         "motion_start_row": int(start_row),
+        "preroll_settled": bool(preroll_settled),
         "position_noise_std_rad": float(position_noise_std_rad),
         "velocity_noise_std_rad_s": float(velocity_noise_std_rad_s),
         "divergence_speed_factor": float(divergence_speed_factor),
@@ -268,7 +289,7 @@ def run_episode(
         "plant": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(plant).items()},
         "obstacles": [asdict(b) for b in obstacles],
         "saturation_counts": saturated.sum(axis=0).astype(int).tolist(),
-        "rows_planned": int(n),
+        "rows_planned": int(start_row + motion_rows),
     }
     arrays: dict[str, Any] = {
         "stamp_ns": stamp_ns[:rows],
@@ -297,6 +318,44 @@ def run_episode(
 
 def _no_progress(fraction: float) -> None:
     """Default progress callback: nothing to draw."""
+
+
+RunRows = Callable[..., tuple[int, str]]
+
+
+def _preroll(
+    run_rows: RunRows,
+    controller: Controller,
+    q_true: F64,
+    qd_true: F64,
+    q_ref: F64,
+    cap_rows: int,
+    window_rows: int,
+) -> tuple[int, bool, int, str]:
+    """Hold the start pose in windows until one is settled (``pipeline.sim.settling``)
+    or ``cap_rows`` have passed.
+
+    Returns:
+        (the motion's first row, settled before the cap, rows recorded, divergence
+        reason or ""). With no pre-roll (``cap_rows`` 0) the start counts as settled:
+        the episode starts at rest at the start pose.
+    """
+    row = 0
+    while row < cap_rows:
+        stop = min(row + window_rows, cap_rows)
+        before = integral_state(controller)
+        rows, reason = run_rows(row, stop, final=False)
+        if reason:
+            return row, False, rows, reason
+        if stop - row == window_rows and settled(
+            q_ref[row:stop] - q_true[row:stop],
+            qd_true[row:stop],
+            integral_before=before,
+            integral_after=integral_state(controller),
+        ):
+            return stop, True, stop, ""
+        row = stop
+    return cap_rows, cap_rows == 0, cap_rows, ""
 
 
 class _Loop:
@@ -342,8 +401,14 @@ class _Loop:
         tau_cmd: F64,
         tau_app: F64,
         progress: ProgressFn,
+        *,
+        first: int = 0,
+        stop: int | None = None,
+        final: bool = True,
     ) -> tuple[int, str]:
-        """Fill the arrays row by row; return (rows recorded, divergence reason or "").
+        """Fill rows ``first`` to ``stop`` (default: all) row by row; return (rows recorded,
+        divergence reason or ""). The physics steps after every row but a ``final`` run's
+        last one (the episode's end: its torque is recorded, never applied).
 
         ``q_meas`` and ``qd_meas`` may be ``q_true`` and ``qd_true`` themselves (no noise,
         ideal loop): the controller then reads the plant's state rows.
@@ -365,10 +430,12 @@ class _Loop:
         slowest = float(np.min(self.speed_limits, initial=np.inf))
         bound = 0.99 * self.speed_factor * slowest if math.isfinite(slowest) else 0.0
         hypot = math.hypot
-        n = q_true.shape[0]
-        last = n - 1
-        tick = max(1, n // 100)
-        next_tick = tick
+        total = q_true.shape[0]
+        n = total if stop is None else stop
+        last = n - 1 if final else -1
+        span = max(1, total - 1)
+        tick = max(1, total // 100)
+        next_tick = (first // tick + 1) * tick
         noisy = noise_qd is not None
         shape = (self.spec.dof,)
         sensor, actuator = self.sensor, self.actuator
@@ -382,7 +449,11 @@ class _Loop:
         measured = (q_meas, qd_meas) if sensor is not None or noisy else (unused, unused)
         noises = (noise_q, noise_qd) if noisy and sensor is None else (unused, unused)
         arrays = (q_true, qd_true, *measured, *noises, q_ref, qd_ref, qdd_ref, tau_cmd)
-        rows = zip(range(n), *arrays, strict=False)  # (the repeated None is endless)
+        rows = zip(
+            range(first, n),
+            *(a if a is unused else a[first:n] for a in arrays),
+            strict=False,  # (the repeated None is endless)
+        )
         for k, qt, vt, qm, vm, nq, nv, qr, vr, ar, tc_row in rows:
             qt[:] = qpos
             vt[:] = qvel
@@ -419,7 +490,7 @@ class _Loop:
             else:
                 actuator.advance(k, tau_cmd, ctrl, physics)
             if k == next_tick:
-                progress(k / last)
+                progress(k / span)
                 next_tick += tick
         return n, ""
 

@@ -301,6 +301,7 @@ def episode_settings(
             if result.stamp_ns.size
             else (),
             reproduces_paper=scenario.reproduces_paper,
+            preroll_settled=bool(result.extra.get("preroll_settled", True)),
         ),
         safety=safety,
         seed=episode.seed,
