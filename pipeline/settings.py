@@ -31,6 +31,7 @@ from pipeline.contract import (
     CountFromOne,
     Finite,
     Flag,
+    MaybeFlag,
     Names,
     NonNegative,
     NonNegatives,
@@ -242,10 +243,14 @@ class ProtocolSettings(Contract):
         preroll_settled: the pre-roll ended settled, before its cap (``preroll_s``);
             False: the motion started from an unsettled state (a finding in the report).
             Absent in bags written before the settled pre-roll (a fixed pre-roll): True.
+        hold_settled: the hold's last window is settled (``pipeline.sim.settling``, the
+            same criterion), so the error at the target is a steady state; False: it
+            is "not settled" (the hold reached ``hold_max_s``, or ``hold_s`` without
+            one). None: not recorded (bags written before the criterion).
     """
 
     _where = "protocol"
-    _may_be_absent = frozenset({"preroll_settled"})
+    _may_be_absent = frozenset({"preroll_settled", "hold_settled"})
 
     motion_start_s: NonNegative
     hold_s: NonNegative
@@ -253,6 +258,7 @@ class ProtocolSettings(Contract):
     start_effort_nm: Numbers
     reproduces_paper: Flag = False
     preroll_settled: Flag = True
+    hold_settled: MaybeFlag = None
 
 
 @dataclass(frozen=True)

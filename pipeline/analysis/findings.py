@@ -236,11 +236,20 @@ def _mass_diagonal(spec: RobotSpec, q: tuple[float, ...]) -> tuple[float, ...]:
     return tuple(float(mass[j, j]) for j in range(len(q)))
 
 
-def unsettled_joints(metrics: pl.DataFrame) -> dict[str, str]:
-    """Per episode, "settled" or "not settled: <joints>" (joints whose error at the target
-    still moves in its last windows, ``catalog.not_settled``); none where unknown."""
+def unsettled_joints(
+    metrics: pl.DataFrame, views: Mapping[str, ProtocolView] | None = None
+) -> dict[str, str]:
+    """Per episode, "settled" or "not settled ...": by the hold's recorded settling
+    (``protocol.hold_settled``, ``pipeline.sim.settling``) where the bag has it, else the
+    joints whose error at the target still moves in its last windows
+    (``catalog.not_settled``); none where unknown."""
+    recorded: dict[str, str] = {}
+    for episode, view in (views or {}).items():
+        flag = view.settings.protocol.hold_settled if view.settings is not None else None
+        if flag is not None:
+            recorded[episode] = "settled" if flag else "not settled (hold capped)"
     if not {"final_error", "final_drift"} <= set(metrics.columns):
-        return {}
+        return recorded
     flagged = metrics.with_columns(
         flag=not_settled(pl.col("final_error"), pl.col("final_drift"))
     ).filter(pl.col("flag").is_not_null())
@@ -252,7 +261,7 @@ def unsettled_joints(metrics: pl.DataFrame) -> dict[str, str]:
     ):
         joints = row["joint"]
         out[row["episode"]] = "settled" if not joints else "not settled: " + ", ".join(joints)
-    return out
+    return out | recorded
 
 
 # The checks a cell of :func:`check_grid` reports on.

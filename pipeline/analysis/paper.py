@@ -22,6 +22,7 @@ from typing import Any, Literal
 import polars as pl
 
 from pipeline.analysis.aggregate import MeanCI, mean_ci
+from pipeline.analysis.catalog import DRIFT_FLOOR_RAD, FINAL_DRIFT_REL
 from pipeline.analysis.findings import nominal_plant
 from pipeline.analysis.metrics import ERROR_FLOOR_RAD, pairs
 from pipeline.analysis.protocol import ProtocolView
@@ -85,7 +86,7 @@ PAPER_FINAL_ERROR_REDUCTION_BY_BASELINE_PCT = tuple(
     )
 )
 
-Verdict = Literal["holds", "does not hold", "inconclusive", "n/a"]
+Verdict = Literal["holds", "does not hold", "inconclusive", "n/a", "not settled"]
 
 
 def verdict(ci: MeanCI) -> Verdict:
@@ -114,16 +115,22 @@ class JointComparison:
         candidate: mean ± CI over the candidate runs.
         by_baseline: (baseline - candidate) / baseline x 100 of each pair, summarised.
         by_candidate: (baseline - candidate) / candidate x 100 of each pair, summarised.
+        settled: every run's value is a settled one (:func:`final_error_settled`; always
+            True for metrics other than the error at the target).
     """
 
     baseline: MeanCI = _EMPTY
     candidate: MeanCI = _EMPTY
     by_baseline: MeanCI = _EMPTY
     by_candidate: MeanCI = _EMPTY
+    settled: bool = True
 
     @property
     def verdict(self) -> Verdict:
-        """Whether "candidate below baseline" holds (:func:`verdict` of ``by_baseline``)."""
+        """Whether "candidate below baseline" holds (:func:`verdict` of ``by_baseline``);
+        "not settled" when a run's value is not a steady state: no verdict from it."""
+        if not self.settled:
+            return "not settled"
         return verdict(self.by_baseline)
 
 
@@ -172,6 +179,22 @@ class PaperComparison:
         for k in range(min(PAPER_CLAIM_JOINTS, len(self.joints))):
             groups.setdefault(self.at(metric, k).verdict, []).append(k + 1)
         return groups
+
+
+def final_error_settled(
+    episode: str, joint: str, view: ProtocolView | None, row: Mapping[str, Any]
+) -> bool:
+    """Whether ``episode``'s error at the target on ``joint`` is a steady state: its hold
+    ended settled (``protocol.hold_settled``: the settling criterion of
+    ``pipeline.sim.settling``, the pre-roll's) or, in a bag that does not record it, the
+    error no longer drifts over the final window (``catalog.not_settled``)."""
+    recorded = view.settings.protocol.hold_settled if view and view.settings else None
+    if recorded is not None:
+        return recorded
+    final, drift = row.get("final_error"), row.get("final_drift")
+    if final is None or drift is None:
+        return True  # nothing says otherwise (the value is n/a then, or a legacy bag)
+    return not abs(drift) > max(abs(final) * FINAL_DRIFT_REL, DRIFT_FLOOR_RAD)
 
 
 def paper_groups(
@@ -234,11 +257,16 @@ def paper_comparison(
 
     def compare(joint: str, metric: str) -> JointComparison:
         per_pair = [(value(b, joint, metric), value(c, joint, metric)) for b, c in chosen]
+        settled = metric != "final_error" or all(
+            final_error_settled(e, joint, views.get(e), rows.get((e, joint), {}))
+            for e in (*bases, *cands)
+        )
         return JointComparison(
             baseline=mean_ci(value(e, joint, metric) for e in bases),
             candidate=mean_ci(value(e, joint, metric) for e in cands),
             by_baseline=mean_ci(reduction_pct(vb, vc, vb) for vb, vc in per_pair),
             by_candidate=mean_ci(reduction_pct(vb, vc, vc) for vb, vc in per_pair),
+            settled=settled,
         )
 
     seeds = sorted({by_episode[c].meta("seed") for c in cands}, key=lambda x: (len(x), x))

@@ -78,6 +78,7 @@ def run_episode(
     integrator: str = PLANT_INTEGRATOR,
     hold_s: float = 1.0,
     preroll_s: float = 0.0,
+    hold_max_s: float | None = None,
     plant_spec: RobotSpec | None = None,
     position_noise_std_rad: float = 0.0,
     velocity_noise_std_rad_s: float = 0.0,
@@ -87,10 +88,11 @@ def run_episode(
 ) -> EpisodeResult:
     """Run ``controller`` on the MuJoCo plant along ``reference``, then hold the goal.
 
-    Starts at rest at ``reference.sample(0)``, holds it for ``preroll_s`` under the
-    same controller (the settled start: a ros2_control controller holding the start
-    pose before a goal arrives), then runs the reference for ``reference.duration_s``
-    and holds the goal for ``hold_s``. Row k of the result is control instant ``k *
+    Starts at rest at ``reference.sample(0)``, holds it under the same controller until
+    settled, for at most ``preroll_s`` (the settled start: a ros2_control controller
+    holding the start pose before a goal arrives), then runs the reference for
+    ``reference.duration_s`` and holds the goal for ``hold_s`` (longer, up to
+    ``hold_max_s``, until settled). Row k of the result is control instant ``k *
     physics_dt_s * control_period_steps`` from the pre-roll's start (the last row is the
     state at the end, with the torque that would be applied next); the motion starts
     at row ``extra["motion_start_row"]``, time ``extra["motion_start_s"]`` (the
@@ -107,7 +109,13 @@ def run_episode(
         control_period_steps: physics steps per control update (torque held between).
         integrator: MuJoCo's integrator ("RK4", "Euler", "implicit", "implicitfast").
         hold_s: time kept at the goal after the reference ends [s].
-        preroll_s: time the start pose is held before the reference starts [s].
+        preroll_s: the longest the start pose is held before the reference starts [s]:
+            the pre-roll ends at the first settled window (``pipeline.sim.settling``);
+            ``extra["preroll_settled"]`` says whether it did before this cap.
+        hold_max_s: the longest the goal is held [s]: after ``hold_s`` the hold goes on,
+            a settling window at a time, until settled; None (or <= ``hold_s``): exactly
+            ``hold_s``. ``extra["hold_settled"]`` says whether the hold's last window is
+            settled either way.
         plant_spec: the plant's robot (drawn link parameters, armature); None = ``spec``.
             The controller keeps its own nominal model either way.
         position_noise_std_rad: Gaussian noise on measured position [rad].
@@ -130,6 +138,7 @@ def run_episode(
         integrator=integrator,
         hold_s=hold_s,
         preroll_s=preroll_s,
+        hold_max_s=hold_max_s,
         position_noise_std_rad=position_noise_std_rad,
         velocity_noise_std_rad_s=velocity_noise_std_rad_s,
         divergence_speed_factor=divergence_speed_factor,
@@ -161,15 +170,18 @@ def run_episode(
     control_dt_s = physics_dt_s * control_period_steps
     period_ns = round(physics_dt_s * 1e9) * control_period_steps
     # rows: the pre-roll (at most cap_rows, in windows of the settling criterion), then the
-    # motion and the hold (motion_rows, the last one recorded but not stepped); n bounds
-    # them all, so the noise and the jitter draws do not depend on where the pre-roll ends
+    # motion and the hold (motion_rows, the last one recorded but not stepped; up to
+    # max_motion_rows while the hold is not settled); n bounds them all, so the noise and
+    # the jitter draws do not depend on where the pre-roll or the hold ends
     cap_rows = round(preroll_s / control_dt_s)
     window_rows = max(1, round(SETTLING.window_s / control_dt_s))
     motion_rows = math.ceil((duration_s + hold_s) / control_dt_s - 1e-9) + 1
-    n = cap_rows + motion_rows
+    longest_hold_s = max(hold_s, hold_max_s or 0.0)
+    max_motion_rows = math.ceil((duration_s + longest_hold_s) / control_dt_s - 1e-9) + 1
+    n = cap_rows + max_motion_rows
     stamp_ns = np.arange(n, dtype=np.int64) * period_ns
     times_s: F64 = np.arange(n, dtype=np.float64) * control_dt_s
-    motion_q, motion_qd, motion_qdd = _sample_reference(reference, times_s[:motion_rows], spec)
+    motion_q, motion_qd, motion_qdd = _sample_reference(reference, times_s[:max_motion_rows], spec)
     # pre-roll: hold the start pose exactly (no velocity or acceleration feed-forward);
     # the motion's samples are put in place once the pre-roll has ended
     q_ref = np.empty((n, dof))
@@ -234,12 +246,18 @@ def run_episode(
         start_row, preroll_settled, rows, reason = _preroll(
             run_rows, controller, q_true, qd_true, q_ref, cap_rows, window_rows
         )
+        hold_settled = False
         if not reason:
-            end = start_row + motion_rows
+            end = start_row + max_motion_rows
             q_ref[start_row:end] = motion_q
             qd_ref[start_row:end] = motion_qd
             qdd_ref[start_row:end] = motion_qdd
-            rows, reason = run_rows(start_row, end, final=True)
+            last, hold_settled, rows, reason = _hold(
+                run_rows, controller, q_true, qd_true, q_ref,
+                start_row, start_row + motion_rows - 1, end - 1, window_rows,
+            )  # fmt: skip
+            if not reason:
+                rows, reason = run_rows(last, last + 1, final=True)
         if reason and warning_texts and "MuJoCo warning" in reason:
             reason += f': "{warning_texts[0]}"'
     motion_start_s = start_row * control_dt_s
@@ -282,6 +300,8 @@ def run_episode(
         "motion_start_s": float(motion_start_s),
         "motion_start_row": int(start_row),
         "preroll_settled": bool(preroll_settled),
+        "hold_max_s": float(longest_hold_s),
+        "hold_settled": bool(hold_settled),
         "position_noise_std_rad": float(position_noise_std_rad),
         "velocity_noise_std_rad_s": float(velocity_noise_std_rad_s),
         "divergence_speed_factor": float(divergence_speed_factor),
@@ -289,7 +309,7 @@ def run_episode(
         "plant": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(plant).items()},
         "obstacles": [asdict(b) for b in obstacles],
         "saturation_counts": saturated.sum(axis=0).astype(int).tolist(),
-        "rows_planned": int(start_row + motion_rows),
+        "rows_planned": int(rows if not reason else start_row + motion_rows),
     }
     arrays: dict[str, Any] = {
         "stamp_ns": stamp_ns[:rows],
@@ -356,6 +376,46 @@ def _preroll(
             return stop, True, stop, ""
         row = stop
     return cap_rows, cap_rows == 0, cap_rows, ""
+
+
+def _hold(
+    run_rows: RunRows,
+    controller: Controller,
+    q_true: F64,
+    qd_true: F64,
+    q_ref: F64,
+    start: int,
+    last: int,
+    cap: int,
+    window_rows: int,
+) -> tuple[int, bool, int, str]:
+    """Run the motion and the hold from row ``start`` up to (not including) row ``last``,
+    then, while the last window (``window_rows``, or what the episode has) is not settled,
+    one more window at a time up to row ``cap``.
+
+    Returns:
+        (the episode's final row, the hold's last window settled, rows recorded,
+        divergence reason or "").
+    """
+    row = max(start, last - window_rows)
+    rows, reason = run_rows(start, row, final=False) if row > start else (row, "")
+    if reason:
+        return rows, False, rows, reason
+    while True:
+        before = integral_state(controller)
+        rows, reason = run_rows(row, last, final=False)
+        if reason:
+            return rows, False, rows, reason
+        if settled(
+            q_ref[row:last] - q_true[row:last],
+            qd_true[row:last],
+            integral_before=before,
+            integral_after=integral_state(controller),
+        ):
+            return last, True, last, ""
+        if last + window_rows > cap:
+            return last, False, last, ""
+        row, last = last, last + window_rows
 
 
 class _Loop:
@@ -546,6 +606,7 @@ def _check_settings(
     integrator: str,
     hold_s: float,
     preroll_s: float,
+    hold_max_s: float | None,
     position_noise_std_rad: float,
     velocity_noise_std_rad_s: float,
     divergence_speed_factor: float,
@@ -580,6 +641,8 @@ def _check_settings(
     ):
         if not (number(value) and math.isfinite(value) and value >= 0):
             raise SimulationError(f"{name}: expected a finite number >= 0, got {value!r}")
+    if hold_max_s is not None and not (number(hold_max_s) and math.isfinite(hold_max_s)):
+        raise SimulationError(f"hold_max_s: expected a finite time [s] or None, got {hold_max_s!r}")
     if not (
         number(divergence_speed_factor)
         and math.isfinite(divergence_speed_factor)

@@ -302,6 +302,7 @@ def episode_settings(
             else (),
             reproduces_paper=scenario.reproduces_paper,
             preroll_settled=bool(result.extra.get("preroll_settled", True)),
+            hold_settled=result.extra.get("hold_settled") if result.ok else None,
         ),
         safety=safety,
         seed=episode.seed,

@@ -135,6 +135,7 @@ def _run_and_write(
         integrator=sim.integrator,
         hold_s=scenario.hold_s,
         preroll_s=scenario.preroll_s,
+        hold_max_s=scenario.hold_max_s,
         position_noise_std_rad=p.position_noise_std_rad,
         velocity_noise_std_rad_s=p.velocity_noise_std_rad_s,
         loop=loop_settings(scenario),
