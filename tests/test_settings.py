@@ -174,5 +174,6 @@ def test_the_settling_flags_read_back_and_default_for_older_bags() -> None:
     assert older.protocol.preroll_settled is True
     assert older.protocol.hold_settled is None
     data["protocol"]["hold_settled"] = "yes"
-    with pytest.raises(SettingsError, match="protocol.hold_settled: expected true, false or null"):
+    expected = r"protocol\.hold_settled: expected true, false or null"
+    with pytest.raises(SettingsError, match=expected):
         EpisodeSettings.from_dict(data)
