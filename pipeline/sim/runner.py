@@ -79,6 +79,7 @@ def run_episode(
     hold_s: float = 1.0,
     preroll_s: float = 0.0,
     hold_max_s: float | None = None,
+    settle: bool = True,
     plant_spec: RobotSpec | None = None,
     position_noise_std_rad: float = 0.0,
     velocity_noise_std_rad_s: float = 0.0,
@@ -112,6 +113,8 @@ def run_episode(
         preroll_s: the longest the start pose is held before the reference starts [s]:
             the pre-roll ends at the first settled window (``pipeline.sim.settling``);
             ``extra["preroll_settled"]`` says whether it did before this cap.
+        settle: end the pre-roll when settled; False: hold the start pose for the
+            whole ``preroll_s`` (identification's excitation, whose data is not a metric).
         hold_max_s: the longest the goal is held [s]: after ``hold_s`` the hold goes on,
             a settling window at a time, until settled; None (or <= ``hold_s``): exactly
             ``hold_s``. ``extra["hold_settled"]`` says whether the hold's last window is
@@ -244,7 +247,7 @@ def run_episode(
 
     with _captured_mujoco_warnings() as warning_texts:
         start_row, preroll_settled, rows, reason = _preroll(
-            run_rows, controller, q_true, qd_true, q_ref, cap_rows, window_rows
+            run_rows, controller, q_true, qd_true, q_ref, cap_rows, window_rows, check=settle
         )
         hold_settled = False
         if not reason:
@@ -351,15 +354,24 @@ def _preroll(
     q_ref: F64,
     cap_rows: int,
     window_rows: int,
+    *,
+    check: bool = True,
 ) -> tuple[int, bool, int, str]:
     """Hold the start pose in windows until one is settled (``pipeline.sim.settling``)
-    or ``cap_rows`` have passed.
+    or ``cap_rows`` have passed (``check`` False: all of them, in one run; the flag then
+    says whether the last window is settled, its integral not judged).
 
     Returns:
         (the motion's first row, settled before the cap, rows recorded, divergence
         reason or ""). With no pre-roll (``cap_rows`` 0) the start counts as settled:
         the episode starts at rest at the start pose.
     """
+    if not check and cap_rows:
+        rows, reason = run_rows(0, cap_rows, final=False)
+        if reason:
+            return 0, False, rows, reason
+        last = slice(max(0, cap_rows - window_rows), cap_rows)
+        return cap_rows, settled(q_ref[last] - q_true[last], qd_true[last]), cap_rows, ""
     row = 0
     while row < cap_rows:
         stop = min(row + window_rows, cap_rows)

@@ -118,3 +118,17 @@ def test_the_hold_goes_on_until_settled_by_the_same_criterion_up_to_its_cap(ur5)
     capped = _episode(ur5, "pid", {"omega_n_rad_s": 5.0}, preroll_s=0.0, hold_max_s=0.4)
     assert capped.extra["hold_settled"] is False
     assert len(capped.stamp_ns) == len(short.stamp_ns) + round(0.2 / 0.001)
+
+
+def test_settle_false_holds_the_whole_pre_roll_and_still_reports_the_last_window(ur5):
+    fixed = run_episode(
+        ur5,
+        reference=QuinticReference.between(PAPER_START_RAD, PAPER_GOAL_RAD, duration_s=0.5),
+        controller=make_controller("ctc", ur5),
+        hold_s=0.2,
+        preroll_s=0.5,
+        settle=False,
+        seed=0,
+    )
+    assert fixed.extra["motion_start_s"] == pytest.approx(0.5)
+    assert fixed.extra["preroll_settled"] is True  # a perfect-model CTC rests at once
