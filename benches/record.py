@@ -66,37 +66,45 @@ class LoopProbe:
         self._run = runner._Loop.run
         probe = self
 
-        def run(loop: Any, *args: Any) -> tuple[int, str]:
-            return probe.timed(loop, *args)
+        def run(loop: Any, *args: Any, **kwargs: Any) -> tuple[int, str]:
+            return probe.timed(loop, *args, **kwargs)
 
         runner._Loop.run = run  # type: ignore[method-assign]
 
-    def timed(self, loop: Any, *args: Any) -> tuple[int, str]:
+    def timed(
+        self, loop: Any, *args: Any, first: int = 0, stop: int | None = None, final: bool = True
+    ) -> tuple[int, str]:
+        """One run of rows (an episode runs several since issue 31: the pre-roll's
+        windows, the motion, the hold's); the figures add up over an episode."""
         import mujoco
 
+        if first == 0:  # an episode's first run
+            self.wall_s = self.cpu_s = self.physics_wall_s = self.physics_cpu_s = 0.0
         start = mujoco.MjData(loop.model)
         start.qpos[:] = loop.data.qpos
         start.qvel[:] = loop.data.qvel
         mujoco.mj_forward(loop.model, start)
         c0, w0 = time.thread_time(), time.perf_counter()
-        rows, reason = self._run(loop, *args)
-        self.wall_s, self.cpu_s = time.perf_counter() - w0, time.thread_time() - c0
+        rows, reason = self._run(loop, *args, first=first, stop=stop, final=final)
+        self.wall_s += time.perf_counter() - w0
+        self.cpu_s += time.thread_time() - c0
         if loop.actuator is None and not reason:
-            self._replay(loop, start, q_true=args[0], tau_cmd=args[9], rows=rows)
+            steps = rows - first - (1 if final else 0)
+            self._replay(loop, start, tau_cmd=args[9], first=first, steps=steps)
         return rows, reason
 
-    def _replay(self, loop: Any, data: Any, *, q_true: Any, tau_cmd: Any, rows: int) -> None:
+    def _replay(self, loop: Any, data: Any, *, tau_cmd: Any, first: int, steps: int) -> None:
         """The same torques on the same plant from the same start: ``mj_step`` alone."""
         import mujoco
 
         model, step, ctrl, nstep = loop.model, mujoco.mj_step, data.ctrl, loop.nstep
         c0, w0 = time.thread_time(), time.perf_counter()
-        for k in range(rows - 1):
+        for k in range(first, first + steps):
             ctrl[:] = tau_cmd[k]
             step(model, data, nstep)
-        self.physics_wall_s = time.perf_counter() - w0
-        self.physics_cpu_s = time.thread_time() - c0
-        if not (data.qpos == q_true[rows - 1]).all():
+        self.physics_wall_s += time.perf_counter() - w0
+        self.physics_cpu_s += time.thread_time() - c0
+        if not (data.qpos == loop.data.qpos).all():
             raise RuntimeError("the physics replay left the episode's trajectory")
 
 

@@ -107,6 +107,9 @@ Count = Annotated[int, integer(0)]
 CountFromOne = Annotated[int, integer(1)]
 Text = Annotated[str, rule("a string", lambda v: isinstance(v, str))]
 Flag = Annotated[bool, rule("true or false", lambda v: isinstance(v, bool))]
+MaybeFlag = Annotated[
+    bool | None, rule("true, false or null", lambda v: v is None or isinstance(v, bool))
+]
 Numbers = Annotated[tuple[Finite, ...], listed("a list of numbers")]
 NonNegatives = Annotated[tuple[NonNegative, ...], listed("a list of numbers")]
 Names = Annotated[tuple[Text, Text], listed("two names", length=2)]

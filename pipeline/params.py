@@ -167,8 +167,12 @@ class ScenarioParams(_Strict):
     plant: PlantParams = PlantParams()
     loop: LoopParams = LoopParams()
     hold_s: float = Field(default=1.0, ge=0, le=MAX_HOLD_S)
-    # the controller holds the start pose this long before the motion (settled start)
+    # the longest the controller holds the start pose before the motion: the pre-roll ends
+    # once settled (pipeline.sim.settling); an episode still unsettled here is flagged
     preroll_s: float = Field(default=2.0, ge=0, le=MAX_PREROLL_S)
+    # the longest the goal is held: after hold_s the hold goes on until settled (the error
+    # at the target is then a steady state, or flagged "not settled"); None: hold_s exactly
+    hold_max_s: float | None = Field(default=None, ge=0, le=MAX_HOLD_S)
     # compare with the paper's numbers in the report (only the paper's experiment)
     reproduces_paper: bool = False
     # the controllers' nominal model: an identified MODEL.yaml (`pipeline identify fit`);

@@ -31,6 +31,7 @@ from pipeline.contract import (
     CountFromOne,
     Finite,
     Flag,
+    MaybeFlag,
     Names,
     NonNegative,
     NonNegatives,
@@ -232,21 +233,32 @@ class ProtocolSettings(Contract):
 
     Attributes:
         motion_start_s: when the motion starts, from the recording's first sample [s]: the
-            pre-roll before it holds the start pose under the episode's own controller.
+            pre-roll before it holds the start pose under the episode's own controller,
+            until settled (``pipeline.sim.settling``) or for the scenario's ``preroll_s``.
         hold_s: time kept at the goal after the motion ends [s].
         start_abs_error_rad: |reference - true position| per joint at the motion start.
         start_effort_nm: applied effort per joint at the motion start [N m].
         reproduces_paper: the scenario is the paper's experiment (the report compares it
             with the paper's numbers only then).
+        preroll_settled: the pre-roll ended settled, before its cap (``preroll_s``);
+            False: the motion started from an unsettled state (a finding in the report).
+            Absent in bags written before the settled pre-roll (a fixed pre-roll): True.
+        hold_settled: the hold's last window is settled (``pipeline.sim.settling``, the
+            same criterion), so the error at the target is a steady state; False: it
+            is "not settled" (the hold reached ``hold_max_s``, or ``hold_s`` without
+            one). None: not recorded (bags written before the criterion).
     """
 
     _where = "protocol"
+    _may_be_absent = frozenset({"preroll_settled", "hold_settled"})
 
     motion_start_s: NonNegative
     hold_s: NonNegative
     start_abs_error_rad: NonNegatives
     start_effort_nm: Numbers
     reproduces_paper: Flag = False
+    preroll_settled: Flag = True
+    hold_settled: MaybeFlag = None
 
 
 DESIGN_MODES = ("path", "start", "given", "zero")

@@ -158,3 +158,22 @@ def test_a_loop_with_delay_or_encoder_is_not_ideal_but_a_cutoff_alone_is() -> No
 def test_a_part_validated_alone_names_the_path_given() -> None:
     with pytest.raises(SettingsError, match=r"^links\[4\]\.mass: expected a finite number > 0"):
         LinkInertial.from_dict({"mass": 0, "com": [0, 0, 0], "inertia": [1] * 6}, "links[4]")
+
+
+def test_the_settling_flags_read_back_and_default_for_older_bags() -> None:
+    data = _settings()
+    data["protocol"]["preroll_settled"] = False
+    data["protocol"]["hold_settled"] = False
+    settings = EpisodeSettings.from_dict(data)
+    assert settings.protocol.preroll_settled is False
+    assert settings.protocol.hold_settled is False
+    # a bag written before the settled pre-roll: a fixed pre-roll, hold not judged
+    for key in ("preroll_settled", "hold_settled"):
+        del data["protocol"][key]
+    older = EpisodeSettings.from_dict(data)
+    assert older.protocol.preroll_settled is True
+    assert older.protocol.hold_settled is None
+    data["protocol"]["hold_settled"] = "yes"
+    expected = r"protocol\.hold_settled: expected true, false or null"
+    with pytest.raises(SettingsError, match=expected):
+        EpisodeSettings.from_dict(data)

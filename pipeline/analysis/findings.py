@@ -97,7 +97,23 @@ class DeadBandFinding:
         return self.friction_nm / self.stiffness_nm_per_rad
 
 
-Finding = ContactFinding | SaturationFinding | GoalMissFinding | DeadBandFinding
+@dataclass(frozen=True)
+class UnsettledStartFinding:
+    """An episode whose pre-roll reached its cap (``preroll_s``) without settling
+    (``pipeline.sim.settling``): its metrics start from an unsettled state.
+
+    Attributes:
+        episode: the episode.
+        preroll_s: the pre-roll it ran, the cap [s].
+    """
+
+    episode: str
+    preroll_s: float
+
+
+Finding = (
+    ContactFinding | SaturationFinding | GoalMissFinding | DeadBandFinding | UnsettledStartFinding
+)
 
 
 @dataclass(frozen=True)
@@ -143,6 +159,8 @@ def physical_checks(
                 )
                 for c in st.safety.contacts
             ]
+            if not st.protocol.preroll_settled:
+                found.append(UnsettledStartFinding(rec.episode, start))
         stiffness = stiffness_nm_per_rad(st, robot_facts(rec).spec) if st is not None else None
         for j, joint in enumerate(rec.joint_names):
             m = rows.get((rec.episode, joint), {})
@@ -218,11 +236,20 @@ def _mass_diagonal(spec: RobotSpec, q: tuple[float, ...]) -> tuple[float, ...]:
     return tuple(float(mass[j, j]) for j in range(len(q)))
 
 
-def unsettled_joints(metrics: pl.DataFrame) -> dict[str, str]:
-    """Per episode, "settled" or "not settled: <joints>" (joints whose error at the target
-    still moves in its last windows, ``catalog.not_settled``); none where unknown."""
+def unsettled_joints(
+    metrics: pl.DataFrame, views: Mapping[str, ProtocolView] | None = None
+) -> dict[str, str]:
+    """Per episode, "settled" or "not settled ...": by the hold's recorded settling
+    (``protocol.hold_settled``, ``pipeline.sim.settling``) where the bag has it, else the
+    joints whose error at the target still moves in its last windows
+    (``catalog.not_settled``); none where unknown."""
+    recorded: dict[str, str] = {}
+    for episode, view in (views or {}).items():
+        flag = view.settings.protocol.hold_settled if view.settings is not None else None
+        if flag is not None:
+            recorded[episode] = "settled" if flag else "not settled (hold capped)"
     if not {"final_error", "final_drift"} <= set(metrics.columns):
-        return {}
+        return recorded
     flagged = metrics.with_columns(
         flag=not_settled(pl.col("final_error"), pl.col("final_drift"))
     ).filter(pl.col("flag").is_not_null())
@@ -234,11 +261,12 @@ def unsettled_joints(metrics: pl.DataFrame) -> dict[str, str]:
     ):
         joints = row["joint"]
         out[row["episode"]] = "settled" if not joints else "not settled: " + ", ".join(joints)
-    return out
+    return out | recorded
 
 
 # The checks a cell of :func:`check_grid` reports on.
 CONTACTS, SATURATION, GOAL, DEAD_BAND = "contacts", "saturation", "goal", "dead band"
+UNSETTLED = "start not settled"
 
 
 @dataclass(frozen=True)
@@ -316,11 +344,12 @@ class CheckAlert:
     One alert per check and set of joints; the controllers failing it with those joints.
 
     Attributes:
-        check: :data:`CONTACTS`, :data:`SATURATION`, :data:`GOAL` or :data:`DEAD_BAND`.
+        check: :data:`CONTACTS`, :data:`SATURATION`, :data:`GOAL`, :data:`DEAD_BAND` or
+            :data:`UNSETTLED`.
         controllers: the controllers that fail it (first-seen order).
         joints: the joints ((), for contacts: the whole arm).
         worst: the worst value: dead band width [rad], goal miss [rad], share of samples
-            saturated [0-1], deepest contact [m].
+            saturated [0-1], deepest contact [m], the pre-roll cap reached unsettled [s].
         episodes: in how many of those controllers' episodes it happened.
         of: how many episodes those controllers have.
         every_controller: every controller of the report fails it on these joints: there
@@ -341,6 +370,7 @@ def _worst(fs: Sequence[Finding]) -> float:
         f.width_rad if isinstance(f, DeadBandFinding)
         else f.final_error_rad if isinstance(f, GoalMissFinding)
         else f.fraction if isinstance(f, SaturationFinding)
+        else f.preroll_s if isinstance(f, UnsettledStartFinding)
         else f.max_depth_m
         for f in fs
     ]  # fmt: skip
@@ -355,6 +385,7 @@ def check_alerts(grid: Sequence[CheckCell]) -> tuple[CheckAlert, ...]:
     kinds = (
         (DEAD_BAND, DeadBandFinding), (GOAL, GoalMissFinding),
         (SATURATION, SaturationFinding), (CONTACTS, ContactFinding),
+        (UNSETTLED, UnsettledStartFinding),
     )  # fmt: skip
     controllers = list(dict.fromkeys(c.controller for c in grid))
     runs = {c.controller: c.episodes for c in grid if c.joint == ""}
@@ -372,11 +403,11 @@ def check_alerts(grid: Sequence[CheckCell]) -> tuple[CheckAlert, ...]:
             groups.setdefault(names, []).append(joint)
         alerts = []
         for names, joints in groups.items():
-            fs = [f for j in joints for c in names for f in by_joint[j][c]]
+            failed: list[Finding] = [f for j in joints for c in names for f in by_joint[j][c]]
             every = len(controllers) > 1 and len(names) == len(controllers)
-            episodes = len({f.episode for f in fs})
+            episodes = len({f.episode for f in failed})
             total = sum(runs.get(c, 0) for c in names)
             shown = tuple(j for j in joints if j)
-            alerts.append(CheckAlert(check, names, shown, _worst(fs), episodes, total, every))
+            alerts.append(CheckAlert(check, names, shown, _worst(failed), episodes, total, every))
         out += sorted(alerts, key=lambda a: (not a.every_controller, -len(a.controllers)))
     return tuple(out)

@@ -22,7 +22,7 @@ from typing import Any, Literal
 import polars as pl
 
 from pipeline.analysis.aggregate import MeanCI, mean_ci
-from pipeline.analysis.catalog import BY_NAME
+from pipeline.analysis.catalog import BY_NAME, DRIFT_FLOOR_RAD, FINAL_DRIFT_REL
 from pipeline.analysis.findings import nominal_plant
 from pipeline.analysis.metrics import ERROR_FLOOR_RAD, pairs
 from pipeline.analysis.protocol import ProtocolView
@@ -97,12 +97,14 @@ Verdict = Literal[
     "does not hold (one pair, no test)",
     "too few pairs for a test",
     "n/a",
+    "not settled",
 ]
 """A claim "the candidate is below the baseline" by the report's one rule
 (:func:`pipeline.analysis.verdict.compare`): tested (holds, does not hold,
 inconclusive) from :data:`pipeline.analysis.verdict.MIN_PAIRS` pairs; *equivalent*
 within the practical margin; the single (deterministic) pair's sign said as one pair
-without a test; else too few pairs for a test."""
+without a test; else too few pairs for a test; *not settled* when a run's error at the
+target is not a steady state (no verdict from it)."""
 
 
 def verdict(rule: RuleVerdict | None) -> Verdict:
@@ -142,6 +144,8 @@ class JointComparison:
         by_candidate: (baseline - candidate) / candidate x 100 of each pair, summarised.
         rule: the report's one rule on the pairs' values
             (:func:`pipeline.analysis.verdict.compare`).
+        settled: every run's value is a settled one (:func:`final_error_settled`; always
+            True for metrics other than the error at the target).
     """
 
     baseline: MeanCI = _EMPTY
@@ -149,10 +153,14 @@ class JointComparison:
     by_baseline: MeanCI = _EMPTY
     by_candidate: MeanCI = _EMPTY
     rule: RuleVerdict | None = None
+    settled: bool = True
 
     @property
     def verdict(self) -> Verdict:
-        """Whether "candidate below baseline" holds, by the report's one rule."""
+        """Whether "candidate below baseline" holds, by the report's one rule; "not settled"
+        when a run's value is not a steady state: no verdict from it."""
+        if not self.settled:
+            return "not settled"
         return verdict(self.rule)
 
 
@@ -201,6 +209,22 @@ class PaperComparison:
         for k in range(min(PAPER_CLAIM_JOINTS, len(self.joints))):
             groups.setdefault(self.at(metric, k).verdict, []).append(k + 1)
         return groups
+
+
+def final_error_settled(
+    episode: str, joint: str, view: ProtocolView | None, row: Mapping[str, Any]
+) -> bool:
+    """Whether ``episode``'s error at the target on ``joint`` is a steady state: its hold
+    ended settled (``protocol.hold_settled``: the settling criterion of
+    ``pipeline.sim.settling``, the pre-roll's) or, in a bag that does not record it, the
+    error no longer drifts over the final window (``catalog.not_settled``)."""
+    recorded = view.settings.protocol.hold_settled if view and view.settings else None
+    if recorded is not None:
+        return recorded
+    final, drift = row.get("final_error"), row.get("final_drift")
+    if final is None or drift is None:
+        return True  # nothing says otherwise (the value is n/a then, or a legacy bag)
+    return not abs(drift) > max(abs(final) * FINAL_DRIFT_REL, DRIFT_FLOOR_RAD)
 
 
 def paper_groups(
@@ -273,12 +297,17 @@ def paper_comparison(
 
     def compare_one(joint: str, metric: str) -> JointComparison:
         per_pair = [(value(b, joint, metric), value(c, joint, metric)) for b, c in chosen]
+        settled = metric != "final_error" or all(
+            final_error_settled(e, joint, views.get(e), rows.get((e, joint), {}))
+            for e in (*bases, *cands)
+        )
         return JointComparison(
             baseline=mean_ci(value(e, joint, metric) for e in bases),
             candidate=mean_ci(value(e, joint, metric) for e in cands),
             by_baseline=mean_ci(reduction_pct(vb, vc, vb) for vb, vc in per_pair),
             by_candidate=mean_ci(reduction_pct(vb, vc, vc) for vb, vc in per_pair),
             rule=rule(joint, metric),
+            settled=settled,
         )
 
     seeds = sorted({by_episode[c].meta("seed") for c in cands}, key=lambda x: (len(x), x))

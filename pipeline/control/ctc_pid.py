@@ -109,6 +109,14 @@ class ComputedTorquePidController(NominalPDController):
         """A copy of the (clamped) integral of the position error [rad s]."""
         return self._integral.copy()
 
+    @property
+    def integral_rad(self) -> F64:
+        """The integral term as the position error it stands for: its torque (or, for
+        computed torque, its acceleration) over ``kp`` [rad] (0 where ``kp`` is 0). The
+        settling criterion (``pipeline.sim.settling``) waits for it to stop moving."""
+        a = self._ki * self._integral
+        return np.divide(a, self._kp, out=np.zeros_like(a), where=self._kp != 0)
+
     def reset(self) -> None:
         """Forget the integral."""
         self._integral[:] = 0.0

@@ -127,6 +127,14 @@ class PidController:
     def gains_in_effect(self) -> dict[str, Any]:
         return {**self._tuning.knobs_in_effect(), **gains_as_json(self._gains)}
 
+    @property
+    def integral_rad(self) -> F64:
+        """The integral term as the position error it stands for: its torque (or, for
+        computed torque, its acceleration) over ``kp`` [rad] (0 where ``kp`` is 0). The
+        settling criterion (``pipeline.sim.settling``) waits for it to stop moving."""
+        i_out = np.clip(self._i_term, self._i_min, self._i_max)
+        return np.divide(i_out, self._kp, out=np.zeros_like(i_out), where=self._kp != 0)
+
     def reset(self) -> None:
         self._i_term[:] = 0.0
 

@@ -124,6 +124,14 @@ class PidHumbleController:
             out["warning"] = self._warning
         return out
 
+    @property
+    def integral_rad(self) -> F64:
+        """The integral term as the position error it stands for: its torque (or, for
+        computed torque, its acceleration) over ``kp`` [rad] (0 where ``kp`` is 0). The
+        settling criterion (``pipeline.sim.settling``) waits for it to stop moving."""
+        i_term = np.clip(self._ki * self._i_error, -self._i_clamp, self._i_clamp)
+        return np.divide(i_term, self._kp, out=np.zeros_like(i_term), where=self._kp != 0)
+
     def reset(self) -> None:
         self._i_error[:] = 0.0
 

@@ -394,6 +394,7 @@ def record_excitation(
         control_period_steps=sim.control_period_steps,
         hold_s=scenario.hold_s,
         preroll_s=scenario.preroll_s,
+        settle=False,  # identification data, not a metric: the whole pre-roll, as before
         position_noise_std_rad=scenario.plant.position_noise_std_rad,
         velocity_noise_std_rad_s=scenario.plant.velocity_noise_std_rad_s,
         seed=seed,

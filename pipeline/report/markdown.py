@@ -44,6 +44,7 @@ from pipeline.report.paper import versus_paper
 from pipeline.report.physical_checks import check_banner, physical_checks_section
 from pipeline.report.setup import setup_section
 from pipeline.report.summary import summary_section
+from pipeline.sim.settling import SETTLING
 
 REPORT_FILE = "report.md"
 # A campaign's mean ± CI tables are written for at most this many conditions.
@@ -172,7 +173,7 @@ def _intro(data: ReportData) -> list[str]:
     ]
     rows = []
     worst_sat = worst_saturation(data.metrics)
-    unsettled = unsettled_joints(data.metrics)
+    unsettled = unsettled_joints(data.metrics, data.protocol)
     listed = {r.episode for r in data.listed}
     table_rows = [r for r in data.episodes.iter_rows(named=True) if r["episode"] in listed]
     for row in table_rows[:MAX_ROWS]:
@@ -230,7 +231,8 @@ def _intro(data: ReportData) -> list[str]:
     lines += [
         "",
         "Times count from the **motion start**: every episode first holds its start pose "
-        "under its own controller (the pre-roll, recorded in the bag before the planned "
+        "under its own controller until settled, at most the scenario's `preroll_s` (the "
+        "pre-roll, recorded in the bag before the planned "
         "trajectory's stamp), so metrics measure tracking, not a cold start. *Error from*: "
         "the plant's true state (`/ground_truth/joint_states`, simulation) or the measured "
         "one (a real robot's bag). *At start*: the worst joint at the motion start. "
@@ -238,11 +240,16 @@ def _intro(data: ReportData) -> list[str]:
         f"{SATURATION_WARN_FRACTION * 100:.0f} %); *status* ok = stable (not diverged); "
         "*salvaged*: read with `--salvage` from a damaged file up to the damage (the share "
         "of the file, or of a `.db3`'s messages, not read); cut before its motion end, "
-        "such an episode takes no part in comparisons. *Error at the target*: **not "
-        "settled** on the joints whose mean |e| changes between the two halves of the "
-        f"final window by more than {catalog.FINAL_DRIFT_REL:g} x it (and "
-        f"{catalog.DRIFT_FLOOR_RAD:g} rad): a transient, not a steady state (a longer "
-        "`hold_s` measures the steady state).",
+        "such an episode takes no part in comparisons. *Error at the target*: **settled** "
+        "when the hold's last window meets the settling criterion the pre-roll ends on "
+        f"(on every joint, e moves less than {SETTLING.error_change_rad:g} rad, |qd| < "
+        f"{SETTLING.velocity_rad_s:g} rad/s, the integral term moving less than "
+        f"{SETTLING.integral_rad:g} rad, for {SETTLING.window_s:g} s); the hold goes on "
+        "until then, up to the scenario's `hold_max_s`. **Not settled (hold capped)**: a "
+        "transient, not a steady state: it takes part in no verdict. In bags that do not "
+        "record it: not settled on the joints whose mean |e| changes between the two "
+        f"halves of the final window by more than {catalog.FINAL_DRIFT_REL:g} x it (and "
+        f"{catalog.DRIFT_FLOOR_RAD:g} rad).",
     ]
     lines += physical_checks_section(checks, grid)
     failed = [r for r in recs if r.status != "ok"]

@@ -155,6 +155,7 @@ def _versus_paper_one(cmp: PaperComparison) -> list[str]:
     rows = []
     for k in range(len(paper.PAPER_FINAL_ERROR_REDUCTION_PCT)):
         final: JointComparison = cmp.at("final_error", k)
+        unsettled = "" if final.settled else " (not settled: no verdict)"
         rows.append(
             [
                 str(k + 1),
@@ -164,8 +165,8 @@ def _versus_paper_one(cmp: PaperComparison) -> list[str]:
                 md.pct(paper.PAPER_FINAL_ERROR_REDUCTION_BY_BASELINE_PCT[k]),
                 val(final.candidate, e5),
                 val(final.baseline, e5),
-                pct(final.by_candidate, by_candidate=True),
-                pct(final.by_baseline),
+                pct(final.by_candidate, by_candidate=True) + unsettled,
+                pct(final.by_baseline) + unsettled,
             ]
         )
     lines += [

@@ -10,6 +10,7 @@ from pipeline.analysis.findings import (
     GOAL,
     GOAL_MISS_RAD,
     SATURATION_WARN_FRACTION,
+    UNSETTLED,
     CheckAlert,
     CheckCell,
     ContactFinding,
@@ -18,6 +19,7 @@ from pipeline.analysis.findings import (
     GoalMissFinding,
     PhysicalChecks,
     SaturationFinding,
+    UnsettledStartFinding,
 )
 from pipeline.report.md import MAX_ROWS, NA, NOT_IN_BAG
 from pipeline.report.md import table as md_table
@@ -38,6 +40,9 @@ def _short(fs: list[Finding], n: int) -> list[str]:
         elif kind is GoalMissFinding:
             miss = max(f.final_error_rad for f in group if isinstance(f, GoalMissFinding))
             out.append(f"goal missed by {miss:.2g} rad{share}")
+        elif kind is UnsettledStartFinding:
+            cap = max(f.preroll_s for f in group if isinstance(f, UnsettledStartFinding))
+            out.append(f"start not settled in {cap:g} s{share}")
         elif kind is DeadBandFinding:
             width = max(f.width_rad for f in group if isinstance(f, DeadBandFinding))
             out.append(f"dead band {width:.2g} rad{share}")
@@ -80,7 +85,9 @@ def physical_checks_section(checks: PhysicalChecks, grid: tuple[CheckCell, ...] 
         "",
         f"{checks.stable} of {checks.episodes} episodes stable (not diverged). A cell is *ok* "
         f"when, over the controller's episodes (k/n: in how many), no contact happened "
-        f"during execution, no joint sat at its effort limit more than "
+        f"during execution, every pre-roll settled before its cap (`preroll_s`; *start not "
+        f"settled*: the metrics start from an unsettled state), no joint sat at its "
+        f"effort limit more than "
         f"{SATURATION_WARN_FRACTION * 100:.0f} % of the time, every completed episode "
         f"reached its goal within {GOAL_MISS_RAD:g} rad and no proportional gain leaves a "
         f"friction dead band (friction / stiffness) wider than the "
@@ -100,6 +107,7 @@ _WHAT = {
     GOAL: lambda a: f"goal missed by {a.worst:.2g} rad",
     "saturation": lambda a: f"effort at its limit {a.worst * 100:.0f} % of the time",
     CONTACTS: lambda a: f"contact during execution, {a.worst * 1e3:.2f} mm deep",
+    UNSETTLED: lambda a: f"start not settled within the {a.worst:g} s pre-roll",
 }
 _MEANS = {
     DEAD_BAND: "the joint may stop anywhere within that band, so its error and settling "
@@ -108,6 +116,8 @@ _MEANS = {
     "saturation": "the law asked for more torque than the joint has: its numbers measure the "
     "effort limit as much as the law",
     CONTACTS: "the arm touched something: its errors include the collision",
+    UNSETTLED: "its motion started from a state still moving, so its errors include the "
+    "start's transient",
 }
 _EVERY = (
     "every controller shows it: on {where} the comparison measures the setup (friction, "

@@ -42,6 +42,7 @@ from pipeline.settings import LoopSettings
 from pipeline.sim.loop import Actuator, Sensor, check_loop
 from pipeline.sim.plant import plant_model
 from pipeline.sim.result import F64, EpisodeResult, Reference
+from pipeline.sim.settling import SETTLING, integral_state, settled
 
 DIVERGENCE_SPEED_FACTOR = 10.0
 """A joint faster than this many times its velocity limit is out of control."""
@@ -77,6 +78,8 @@ def run_episode(
     integrator: str = PLANT_INTEGRATOR,
     hold_s: float = 1.0,
     preroll_s: float = 0.0,
+    hold_max_s: float | None = None,
+    settle: bool = True,
     plant_spec: RobotSpec | None = None,
     position_noise_std_rad: float = 0.0,
     velocity_noise_std_rad_s: float = 0.0,
@@ -86,10 +89,11 @@ def run_episode(
 ) -> EpisodeResult:
     """Run ``controller`` on the MuJoCo plant along ``reference``, then hold the goal.
 
-    Starts at rest at ``reference.sample(0)``, holds it for ``preroll_s`` under the
-    same controller (the settled start: a ros2_control controller holding the start
-    pose before a goal arrives), then runs the reference for ``reference.duration_s``
-    and holds the goal for ``hold_s``. Row k of the result is control instant ``k *
+    Starts at rest at ``reference.sample(0)``, holds it under the same controller until
+    settled, for at most ``preroll_s`` (the settled start: a ros2_control controller
+    holding the start pose before a goal arrives), then runs the reference for
+    ``reference.duration_s`` and holds the goal for ``hold_s`` (longer, up to
+    ``hold_max_s``, until settled). Row k of the result is control instant ``k *
     physics_dt_s * control_period_steps`` from the pre-roll's start (the last row is the
     state at the end, with the torque that would be applied next); the motion starts
     at row ``extra["motion_start_row"]``, time ``extra["motion_start_s"]`` (the
@@ -106,7 +110,15 @@ def run_episode(
         control_period_steps: physics steps per control update (torque held between).
         integrator: MuJoCo's integrator ("RK4", "Euler", "implicit", "implicitfast").
         hold_s: time kept at the goal after the reference ends [s].
-        preroll_s: time the start pose is held before the reference starts [s].
+        preroll_s: the longest the start pose is held before the reference starts [s]:
+            the pre-roll ends at the first settled window (``pipeline.sim.settling``);
+            ``extra["preroll_settled"]`` says whether it did before this cap.
+        settle: end the pre-roll when settled; False: hold the start pose for the
+            whole ``preroll_s`` (identification's excitation, whose data is not a metric).
+        hold_max_s: the longest the goal is held [s]: after ``hold_s`` the hold goes on,
+            a settling window at a time, until settled; None (or <= ``hold_s``): exactly
+            ``hold_s``. ``extra["hold_settled"]`` says whether the hold's last window is
+            settled either way.
         plant_spec: the plant's robot (drawn link parameters, armature); None = ``spec``.
             The controller keeps its own nominal model either way.
         position_noise_std_rad: Gaussian noise on measured position [rad].
@@ -129,6 +141,7 @@ def run_episode(
         integrator=integrator,
         hold_s=hold_s,
         preroll_s=preroll_s,
+        hold_max_s=hold_max_s,
         position_noise_std_rad=position_noise_std_rad,
         velocity_noise_std_rad_s=velocity_noise_std_rad_s,
         divergence_speed_factor=divergence_speed_factor,
@@ -159,17 +172,25 @@ def run_episode(
     duration_s = _reference_duration(reference)
     control_dt_s = physics_dt_s * control_period_steps
     period_ns = round(physics_dt_s * 1e9) * control_period_steps
-    start_row = round(preroll_s / control_dt_s)
-    motion_start_s = start_row * control_dt_s
-    n = start_row + math.ceil((duration_s + hold_s) / control_dt_s - 1e-9) + 1
+    # rows: the pre-roll (at most cap_rows, in windows of the settling criterion), then the
+    # motion and the hold (motion_rows, the last one recorded but not stepped; up to
+    # max_motion_rows while the hold is not settled); n bounds them all, so the noise and
+    # the jitter draws do not depend on where the pre-roll or the hold ends
+    cap_rows = round(preroll_s / control_dt_s)
+    window_rows = max(1, round(SETTLING.window_s / control_dt_s))
+    motion_rows = math.ceil((duration_s + hold_s) / control_dt_s - 1e-9) + 1
+    longest_hold_s = max(hold_s, hold_max_s or 0.0)
+    max_motion_rows = math.ceil((duration_s + longest_hold_s) / control_dt_s - 1e-9) + 1
+    n = cap_rows + max_motion_rows
     stamp_ns = np.arange(n, dtype=np.int64) * period_ns
     times_s: F64 = np.arange(n, dtype=np.float64) * control_dt_s
-    q_ref, qd_ref, qdd_ref = _sample_reference(
-        reference, np.maximum(times_s - motion_start_s, 0.0), spec
-    )
-    # pre-roll: hold the start pose exactly (no velocity or acceleration feed-forward)
-    qd_ref[:start_row] = 0.0
-    qdd_ref[:start_row] = 0.0
+    motion_q, motion_qd, motion_qdd = _sample_reference(reference, times_s[:max_motion_rows], spec)
+    # pre-roll: hold the start pose exactly (no velocity or acceleration feed-forward);
+    # the motion's samples are put in place once the pre-roll has ended
+    q_ref = np.empty((n, dof))
+    q_ref[:] = motion_q[0]
+    qd_ref = np.zeros((n, dof))
+    qdd_ref = np.zeros((n, dof))
 
     rng = np.random.default_rng(seed)
     noisy = position_noise_std_rad > 0 or velocity_noise_std_rad_s > 0
@@ -216,13 +237,33 @@ def run_episode(
         sensor=sensor,
         actuator=actuator,
     )
-    with _captured_mujoco_warnings() as warning_texts:
-        rows, reason = control_loop.run(
+
+    def run_rows(first: int, stop: int, *, final: bool) -> tuple[int, str]:
+        return control_loop.run(
             q_true, qd_true, q_meas, qd_meas, noise_q, noise_qd if noisy else None,
             q_ref, qd_ref, qdd_ref, tau_cmd, tau_app, progress or _no_progress,
+            first=first, stop=stop, final=final,
         )  # fmt: skip
+
+    with _captured_mujoco_warnings() as warning_texts:
+        start_row, preroll_settled, rows, reason = _preroll(
+            run_rows, controller, q_true, qd_true, q_ref, cap_rows, window_rows, check=settle
+        )
+        hold_settled = False
+        if not reason:
+            end = start_row + max_motion_rows
+            q_ref[start_row:end] = motion_q
+            qd_ref[start_row:end] = motion_qd
+            qdd_ref[start_row:end] = motion_qdd
+            last, hold_settled, rows, reason = _hold(
+                run_rows, controller, q_true, qd_true, q_ref,
+                start_row, start_row + motion_rows - 1, end - 1, window_rows,
+            )  # fmt: skip
+            if not reason:
+                rows, reason = run_rows(last, last + 1, final=True)
         if reason and warning_texts and "MuJoCo warning" in reason:
             reason += f': "{warning_texts[0]}"'
+    motion_start_s = start_row * control_dt_s
 
     # A non-finite command is the controller's failure, whatever MuJoCo made of it
     # (it zeroes a NaN ctrl and warns one step later; the last row is never stepped).
@@ -261,6 +302,9 @@ def run_episode(
         "preroll_s": float(preroll_s),
         "motion_start_s": float(motion_start_s),
         "motion_start_row": int(start_row),
+        "preroll_settled": bool(preroll_settled),
+        "hold_max_s": float(longest_hold_s),
+        "hold_settled": bool(hold_settled),
         "position_noise_std_rad": float(position_noise_std_rad),
         "velocity_noise_std_rad_s": float(velocity_noise_std_rad_s),
         "divergence_speed_factor": float(divergence_speed_factor),
@@ -268,7 +312,7 @@ def run_episode(
         "plant": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(plant).items()},
         "obstacles": [asdict(b) for b in obstacles],
         "saturation_counts": saturated.sum(axis=0).astype(int).tolist(),
-        "rows_planned": int(n),
+        "rows_planned": int(rows if not reason else start_row + motion_rows),
     }
     arrays: dict[str, Any] = {
         "stamp_ns": stamp_ns[:rows],
@@ -297,6 +341,93 @@ def run_episode(
 
 def _no_progress(fraction: float) -> None:
     """Default progress callback: nothing to draw."""
+
+
+RunRows = Callable[..., tuple[int, str]]
+
+
+def _preroll(
+    run_rows: RunRows,
+    controller: Controller,
+    q_true: F64,
+    qd_true: F64,
+    q_ref: F64,
+    cap_rows: int,
+    window_rows: int,
+    *,
+    check: bool = True,
+) -> tuple[int, bool, int, str]:
+    """Hold the start pose in windows until one is settled (``pipeline.sim.settling``)
+    or ``cap_rows`` have passed (``check`` False: all of them, in one run; the flag then
+    says whether the last window is settled, its integral not judged).
+
+    Returns:
+        (the motion's first row, settled before the cap, rows recorded, divergence
+        reason or ""). With no pre-roll (``cap_rows`` 0) the start counts as settled:
+        the episode starts at rest at the start pose.
+    """
+    if not check and cap_rows:
+        rows, reason = run_rows(0, cap_rows, final=False)
+        if reason:
+            return 0, False, rows, reason
+        last = slice(max(0, cap_rows - window_rows), cap_rows)
+        return cap_rows, settled(q_ref[last] - q_true[last], qd_true[last]), cap_rows, ""
+    row = 0
+    while row < cap_rows:
+        stop = min(row + window_rows, cap_rows)
+        before = integral_state(controller)
+        rows, reason = run_rows(row, stop, final=False)
+        if reason:
+            return row, False, rows, reason
+        if stop - row == window_rows and settled(
+            q_ref[row:stop] - q_true[row:stop],
+            qd_true[row:stop],
+            integral_before=before,
+            integral_after=integral_state(controller),
+        ):
+            return stop, True, stop, ""
+        row = stop
+    return cap_rows, cap_rows == 0, cap_rows, ""
+
+
+def _hold(
+    run_rows: RunRows,
+    controller: Controller,
+    q_true: F64,
+    qd_true: F64,
+    q_ref: F64,
+    start: int,
+    last: int,
+    cap: int,
+    window_rows: int,
+) -> tuple[int, bool, int, str]:
+    """Run the motion and the hold from row ``start`` up to (not including) row ``last``,
+    then, while the last window (``window_rows``, or what the episode has) is not settled,
+    one more window at a time up to row ``cap``.
+
+    Returns:
+        (the episode's final row, the hold's last window settled, rows recorded,
+        divergence reason or "").
+    """
+    row = max(start, last - window_rows)
+    rows, reason = run_rows(start, row, final=False) if row > start else (row, "")
+    if reason:
+        return rows, False, rows, reason
+    while True:
+        before = integral_state(controller)
+        rows, reason = run_rows(row, last, final=False)
+        if reason:
+            return rows, False, rows, reason
+        if settled(
+            q_ref[row:last] - q_true[row:last],
+            qd_true[row:last],
+            integral_before=before,
+            integral_after=integral_state(controller),
+        ):
+            return last, True, last, ""
+        if last + window_rows > cap:
+            return last, False, last, ""
+        row, last = last, last + window_rows
 
 
 class _Loop:
@@ -342,8 +473,14 @@ class _Loop:
         tau_cmd: F64,
         tau_app: F64,
         progress: ProgressFn,
+        *,
+        first: int = 0,
+        stop: int | None = None,
+        final: bool = True,
     ) -> tuple[int, str]:
-        """Fill the arrays row by row; return (rows recorded, divergence reason or "").
+        """Fill rows ``first`` to ``stop`` (default: all) row by row; return (rows recorded,
+        divergence reason or ""). The physics steps after every row but a ``final`` run's
+        last one (the episode's end: its torque is recorded, never applied).
 
         ``q_meas`` and ``qd_meas`` may be ``q_true`` and ``qd_true`` themselves (no noise,
         ideal loop): the controller then reads the plant's state rows.
@@ -365,10 +502,12 @@ class _Loop:
         slowest = float(np.min(self.speed_limits, initial=np.inf))
         bound = 0.99 * self.speed_factor * slowest if math.isfinite(slowest) else 0.0
         hypot = math.hypot
-        n = q_true.shape[0]
-        last = n - 1
-        tick = max(1, n // 100)
-        next_tick = tick
+        total = q_true.shape[0]
+        n = total if stop is None else stop
+        last = n - 1 if final else -1
+        span = max(1, total - 1)
+        tick = max(1, total // 100)
+        next_tick = (first // tick + 1) * tick
         noisy = noise_qd is not None
         shape = (self.spec.dof,)
         sensor, actuator = self.sensor, self.actuator
@@ -382,7 +521,11 @@ class _Loop:
         measured = (q_meas, qd_meas) if sensor is not None or noisy else (unused, unused)
         noises = (noise_q, noise_qd) if noisy and sensor is None else (unused, unused)
         arrays = (q_true, qd_true, *measured, *noises, q_ref, qd_ref, qdd_ref, tau_cmd)
-        rows = zip(range(n), *arrays, strict=False)  # (the repeated None is endless)
+        rows = zip(
+            range(first, n),
+            *(a if a is unused else a[first:n] for a in arrays),
+            strict=False,  # (the repeated None is endless)
+        )
         for k, qt, vt, qm, vm, nq, nv, qr, vr, ar, tc_row in rows:
             qt[:] = qpos
             vt[:] = qvel
@@ -419,7 +562,7 @@ class _Loop:
             else:
                 actuator.advance(k, tau_cmd, ctrl, physics)
             if k == next_tick:
-                progress(k / last)
+                progress(k / span)
                 next_tick += tick
         return n, ""
 
@@ -475,6 +618,7 @@ def _check_settings(
     integrator: str,
     hold_s: float,
     preroll_s: float,
+    hold_max_s: float | None,
     position_noise_std_rad: float,
     velocity_noise_std_rad_s: float,
     divergence_speed_factor: float,
@@ -509,6 +653,8 @@ def _check_settings(
     ):
         if not (number(value) and math.isfinite(value) and value >= 0):
             raise SimulationError(f"{name}: expected a finite number >= 0, got {value!r}")
+    if hold_max_s is not None and not (number(hold_max_s) and math.isfinite(hold_max_s)):
+        raise SimulationError(f"hold_max_s: expected a finite time [s] or None, got {hold_max_s!r}")
     if not (
         number(divergence_speed_factor)
         and math.isfinite(divergence_speed_factor)

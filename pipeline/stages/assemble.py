@@ -304,6 +304,8 @@ def episode_settings(
             if result.stamp_ns.size
             else (),
             reproduces_paper=scenario.reproduces_paper,
+            preroll_settled=bool(result.extra.get("preroll_settled", True)),
+            hold_settled=result.extra.get("hold_settled") if result.ok else None,
         ),
         safety=safety,
         seed=episode.seed,

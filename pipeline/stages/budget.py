@@ -46,7 +46,9 @@ class EpisodeEstimate:
 def estimate_episode(episode: Episode, *, dof: int, motion_s: float) -> EpisodeEstimate:
     """Estimate one episode's memory and time (``motion_s``: the reference's duration)."""
     sim = episode.sim
-    duration_s = episode.scenario.preroll_s + motion_s + episode.scenario.hold_s
+    # the longest it can run: the pre-roll's cap, the hold's (pipeline.sim.settling)
+    scenario = episode.scenario
+    duration_s = scenario.preroll_s + motion_s + max(scenario.hold_s, scenario.hold_max_s or 0.0)
     control_s = sim.physics_dt_s * sim.control_period_steps
     control_steps = int(duration_s / control_s) + 1
     physics_steps = control_steps * sim.control_period_steps

@@ -479,7 +479,8 @@ def check_campaign_size(
         dof = dofs.get(e.scenario.robot)
         if dof is None:
             dof = dofs[e.scenario.robot] = load_spec(e.scenario.robot).dof
-        duration_s = e.scenario.preroll_s + motion_s + e.scenario.hold_s
+        hold_s = max(e.scenario.hold_s, e.scenario.hold_max_s or 0.0)  # the longest
+        duration_s = e.scenario.preroll_s + motion_s + hold_s
         b, w = _episode_cost(dof=dof, duration_s=duration_s, sim=e.sim)
         n_bytes += PARTIAL_BYTES if e.drop_bag else b
         wall_s += w

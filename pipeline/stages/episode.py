@@ -182,6 +182,7 @@ def _simulate(
         integrator=sim.integrator,
         hold_s=scenario.hold_s,
         preroll_s=scenario.preroll_s,
+        hold_max_s=scenario.hold_max_s,
         position_noise_std_rad=p.position_noise_std_rad,
         velocity_noise_std_rad_s=p.velocity_noise_std_rad_s,
         loop=loop_settings(scenario),

@@ -50,3 +50,18 @@ def test_an_empty_comparison_has_no_joint_values() -> None:
 def test_dead_band_is_friction_over_stiffness() -> None:
     f = DeadBandFinding("e", "j", "pid", stiffness_nm_per_rad=200.0, friction_nm=1.0)
     assert f.width_rad == 0.005
+
+
+def test_an_unsettled_error_at_the_target_gives_no_verdict() -> None:
+    clear = mean_ci([10.0, 11.0, 12.0])
+    assert paper.JointComparison(by_baseline=clear).verdict == "holds"
+    assert paper.JointComparison(by_baseline=clear, settled=False).verdict == "not settled"
+
+
+def test_without_a_recorded_hold_flag_the_drift_decides_settled() -> None:
+    # 1.6e-4 rad still falling by 20 % across the final window: a transient
+    moving = {"final_error": 1.6e-4, "final_drift": -3.2e-5}
+    steady = {"final_error": 1.6e-4, "final_drift": -1e-9}
+    assert not paper.final_error_settled("e", "j", None, moving)
+    assert paper.final_error_settled("e", "j", None, steady)
+    assert paper.final_error_settled("e", "j", None, {})  # n/a: nothing to flag

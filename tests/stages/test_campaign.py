@@ -231,8 +231,9 @@ def test_a_campaign_too_large_is_refused_before_any_work(tmp_path, monkeypatch):
     assert "\n" not in str(info.value)
     monkeypatch.setattr(shutil, "disk_usage", lambda _: usage(10**13, 0, 10**13))
     n_bytes, wall_s = campaign_run.check_campaign_size(params, run, motion_s=1.0, jobs=2)
-    # 16 episodes of (2 s pre-roll + 1 s motion + 1 s hold) at 1 kHz, 6 joints
-    assert n_bytes == 16 * 4001 * 6 * campaign_run.BAG_BYTES_PER_JOINT_STEP
+    # 16 episodes of at most (2 s pre-roll + 1 s motion + 2 s hold: the caps) at 1 kHz,
+    # 6 joints (the pre-roll ends when settled, the hold goes on until settled)
+    assert n_bytes == 16 * 5001 * 6 * campaign_run.BAG_BYTES_PER_JOINT_STEP
     assert wall_s > 0
 
 
