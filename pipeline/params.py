@@ -1,3 +1,4 @@
+# long: every params knob at one edge: pydantic models, cross-field checks, file-relative paths
 """``params.yaml``: scenarios, controllers and episodes, validated once at the edge.
 
 An episode is scenario x controller x seed, keyed by a name (``paper-ctc``) that

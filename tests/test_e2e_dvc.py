@@ -97,7 +97,7 @@ def test_fresh_clone_dvc_repro_runs_once_then_only_what_a_gain_change_touches(tm
     }  # fmt: skip
     # a campaign's own change re-runs that campaign alone
     text = params.read_text()
-    assert "    seeds: 5\n" in text
-    params.write_text(text.replace("    seeds: 5\n", "    seeds: 6\n", 1))
+    assert "    seeds: 10\n" in text
+    params.write_text(text.replace("    seeds: 10\n", "    seeds: 11\n", 1))
     status = _run([*dvc, "status", "--json"], clone, env)
     assert set(json.loads(status)) == {"check-params", "campaign@paper-realistic"}, status

@@ -9,16 +9,16 @@ same way, so a seed-to-seed spread that both controllers share cancels out.
 
 from __future__ import annotations
 
-import math
-from collections.abc import Iterable, Sequence
-from typing import Any, NamedTuple
+from collections.abc import Sequence
+from typing import Any
 
 import polars as pl
 
 from pipeline.analysis.catalog import BY_NAME, COMPARED_METRICS
 from pipeline.analysis.episodes import comparable
-
-CONFIDENCE = 0.95
+from pipeline.analysis.intervals import CONFIDENCE as CONFIDENCE
+from pipeline.analysis.intervals import MeanCI as MeanCI
+from pipeline.analysis.intervals import mean_ci as mean_ci
 
 AGGREGATE_SCHEMA: dict[str, pl.DataType | type[pl.DataType]] = {
     "scenario": pl.String,
@@ -45,46 +45,6 @@ REDUCTION_SCHEMA: dict[str, pl.DataType | type[pl.DataType]] = {
     "verdict": pl.String,
     "equivalence_margin": pl.Float64,
 }
-
-
-class MeanCI(NamedTuple):
-    """Mean of n values with a two-sided Student-t confidence interval.
-
-    Attributes:
-        n: finite values used.
-        mean: their mean (None when n = 0).
-        std: sample standard deviation, ddof = 1 (None when n < 2).
-        half_width: t(1 - (1 - confidence) / 2, n - 1) * std / sqrt(n) (None when n < 2).
-    """
-
-    n: int
-    mean: float | None
-    std: float | None
-    half_width: float | None
-
-    @property
-    def low(self) -> float | None:
-        return None if self.mean is None or self.half_width is None else self.mean - self.half_width
-
-    @property
-    def high(self) -> float | None:
-        return None if self.mean is None or self.half_width is None else self.mean + self.half_width
-
-
-def mean_ci(values: Iterable[Any], *, confidence: float = CONFIDENCE) -> MeanCI:
-    """Mean and Student-t confidence interval of the finite values (None/NaN skipped)."""
-    xs = [float(v) for v in values if v is not None and math.isfinite(float(v))]
-    n = len(xs)
-    if n == 0:
-        return MeanCI(0, None, None, None)
-    mean = math.fsum(xs) / n
-    if n < 2:
-        return MeanCI(n, mean, None, None)
-    from scipy import stats  # SciPy loads when a statistic is asked for (~1 s)
-
-    std = math.sqrt(math.fsum((x - mean) ** 2 for x in xs) / (n - 1))
-    t = float(stats.t.ppf(1.0 - (1.0 - confidence) / 2.0, n - 1))
-    return MeanCI(n, mean, std, t * std / math.sqrt(n))
 
 
 def _ok(episodes: pl.DataFrame) -> pl.DataFrame:

@@ -27,7 +27,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any, Literal
 
-from pipeline.analysis.aggregate import mean_ci
+from pipeline.analysis.intervals import mean_ci
 
 ALPHA = 0.05
 MIN_PAIRS = 6

@@ -25,7 +25,7 @@ def _labels(items: list[str]) -> dict[str, str]:
     return out
 
 
-def _remaps(items: list[str]) -> dict[str, str]:
+def topic_remaps(items: list[str]) -> dict[str, str]:
     """``ROLE=/name`` options -> {role: topic}."""
     from pipeline.errors import RecordingError
     from pipeline.log.reader import ROLES
@@ -176,7 +176,7 @@ def report_cmd(
             skip_bad=skip_bad,
             progress=on_progress,
             options=ReadOptions(
-                topics=_remaps(topic or []),
+                topics=topic_remaps(topic or []),
                 salvage=salvage,
                 controller=controller,
                 scenario=scenario,

@@ -56,9 +56,9 @@ TOPIC_HELP = (
 
 
 def _topics(items: list[str] | None) -> dict[str, str]:
-    from pipeline.cli.report import _remaps
+    from pipeline.cli.report import topic_remaps
 
-    return _remaps(items or [])
+    return topic_remaps(items or [])
 
 
 FRICTION_MODELS = ("coulomb", "sigmoid")

@@ -1,3 +1,4 @@
+# long: one episode's whole loop: plant, settled pre-roll, motion, settled hold, loop effects
 """One control episode: MuJoCo plant, zero-order-hold control loop, divergence detection.
 
 The plant is the MuJoCo model built from the spec (optionally mismatched:

@@ -53,9 +53,11 @@ def test_dead_band_is_friction_over_stiffness() -> None:
 
 
 def test_an_unsettled_error_at_the_target_gives_no_verdict() -> None:
-    clear = mean_ci([10.0, 11.0, 12.0])
-    assert paper.JointComparison(by_baseline=clear).verdict == "holds"
-    assert paper.JointComparison(by_baseline=clear, settled=False).verdict == "not settled"
+    base = {s: 1.0 + 0.01 * s for s in range(MIN_PAIRS + 2)}
+    cand = {s: 0.5 + 0.01 * s for s in range(MIN_PAIRS + 2)}
+    clear = compare(base, cand, unit="rad", lower_is_better=True)
+    assert paper.JointComparison(rule=clear).verdict == "holds"
+    assert paper.JointComparison(rule=clear, settled=False).verdict == "not settled"
 
 
 def test_without_a_recorded_hold_flag_the_drift_decides_settled() -> None:

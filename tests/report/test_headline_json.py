@@ -87,7 +87,7 @@ def test_headline_json_of_the_default_experiments_shape_stays_small(
         "n", "shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
         "wrist_2_joint", "wrist_3_joint", "tcp_position", "tcp_orientation",
     }  # fmt: skip
-    assert node["n"] == 5
+    assert node["n"] == 10
     for row in ("shoulder_pan_joint", "wrist_3_joint", "tcp_position", "tcp_orientation"):
         assert set(node[row]) == {"max_error_reduction_pct", "ci95_half_width"}, row
     assert node["tcp_position"]["max_error_reduction_pct"] < 0
