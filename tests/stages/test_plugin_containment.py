@@ -139,7 +139,8 @@ def test_a_call_past_its_budget_is_interrupted_and_named() -> None:
 @pytest.mark.parametrize(
     ("cls", "words"),
     [("Sleeps", "check: ran past the episode budget of 2 s"), ("Exits", "called sys.exit(7)"),
-     ("Interrupts", "raised KeyboardInterrupt")],
+     ("Interrupts", "raised KeyboardInterrupt"),
+     ("Quits", "its process died (exit code 0) during the check")],
 )  # fmt: skip
 def test_check_controller_contains_a_plug_in_in_one_line(
     tmp_path: Path, cls: str, words: str
