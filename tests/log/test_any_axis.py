@@ -117,6 +117,9 @@ def reference_pose(urdf: yourdfpy.URDF, spec: RobotSpec, q: NDArray[np.float64],
     """``relative_to_T_frame`` at ``q``, by yourdfpy."""
     cfg = dict(zip(spec.joint_names, (float(v) for v in q), strict=True))
     if cfg != getattr(urdf, "_armlab_cfg", None):
+        # trimesh's scene graph keeps an edge whose new matrix is within 1e-8 of the old one
+        # (EnforcedForest.add_edge): move every joint far away first, so each call recomputes
+        urdf.update_cfg({name: value + 1.0 for name, value in cfg.items()})
         urdf.update_cfg(cfg)
         urdf._armlab_cfg = cfg  # type: ignore[attr-defined]
     return np.asarray(urdf.get_transform(frame_to=frame, frame_from=relative_to), dtype=float)
