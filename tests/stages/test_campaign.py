@@ -135,7 +135,7 @@ def test_default_campaign_replaces_the_hand_listed_realistic_seeds():
     params = load_params(REPO / "params.yaml")
     episodes = expand(params, "paper-realistic")
     assert {(e.controller_name, e.seed) for e in episodes} == {
-        (c, s) for c in ("pid", "ctc", "ctc_pid") for s in range(5)
+        (c, s) for c in ("pid", "ctc", "ctc_pid") for s in range(10)
     }
     assert {e.name for e in params.episodes} == {"paper-pid", "paper-ctc"}
 
