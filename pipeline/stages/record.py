@@ -96,7 +96,13 @@ def validate_episodes(params: Params, episodes: Sequence[Episode]) -> None:
                    episode.controller_name)  # fmt: skip
             if probe_key not in probed:
                 probed.add(probe_key)
-                _probe_plugin(episode.controller.type, build)
+                try:
+                    _probe_plugin(episode.controller.type, build)
+                except ParamsError as err:  # an unknown name or bad gains: say where it is
+                    where_type = f"{params.source}: controllers.{episode.controller_name}"
+                    if str(err).startswith(params.source):
+                        raise
+                    raise ParamsError(f"{where_type}.type: {err}") from err
 
 
 def _probe_plugin(name: str, build: Callable[[], object]) -> None:
