@@ -19,22 +19,11 @@ import tempfile
 from pathlib import Path
 
 from pipeline.errors import PipelineError
+from pipeline.fsutil import file_kind
 
 
 class OutputPathError(PipelineError):
     """An output path names something that is not (and may not become) a regular file."""
-
-
-def _kind(mode: int) -> str:
-    if stat.S_ISDIR(mode):
-        return "a directory"
-    if stat.S_ISFIFO(mode):
-        return "a FIFO"
-    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
-        return "a device"
-    if stat.S_ISSOCK(mode):
-        return "a socket"
-    return "not a regular file"
 
 
 def output_target(path: Path) -> tuple[Path, os.stat_result | None]:
@@ -53,7 +42,9 @@ def output_target(path: Path) -> tuple[Path, os.stat_result | None]:
         raise OutputPathError(f"{path}: cannot write ({err.strerror or err})") from None
     if not stat.S_ISREG(st.st_mode):
         via = f" (through the symlink to {target})" if target != Path(path) else ""
-        raise OutputPathError(f"{path}: is {_kind(st.st_mode)}{via}; name a regular file to write")
+        raise OutputPathError(
+            f"{path}: is {file_kind(st.st_mode)}{via}; name a regular file to write"
+        )
     return target, st
 
 

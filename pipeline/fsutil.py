@@ -19,6 +19,7 @@ import errno
 import os
 import re
 import shutil
+import stat
 from pathlib import Path
 from types import TracebackType
 
@@ -267,3 +268,16 @@ def exchange(a: Path, b: Path) -> bool:
         OSError: the swap itself failed (e.g. ``EXDEV``, ``EBUSY`` for a mount point).
     """
     return renameat2(a, b, RENAME_EXCHANGE)
+
+
+def file_kind(mode: int) -> str:
+    """What a non-regular file is, in words for an error line ("a FIFO", "a device", ...)."""
+    if stat.S_ISDIR(mode):
+        return "a directory"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a regular file"

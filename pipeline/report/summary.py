@@ -5,6 +5,8 @@ Every number comes from :mod:`pipeline.analysis.summary`; this module words it.
 
 from __future__ import annotations
 
+from typing import get_args
+
 from pipeline.analysis import summary
 from pipeline.analysis.aggregate import CONFIDENCE, MeanCI
 from pipeline.analysis.catalog import BY_NAME
@@ -58,13 +60,8 @@ def _effect(e: summary.Effect, unit_name: str) -> str:
     return f"{unit_name} {e.direction} ({size})"
 
 
-_DIRECTIONS: tuple[summary.Direction, ...] = (
-    "lower",
-    "higher",
-    "no clear difference",
-    "equivalent",
-    "lower (untested)",
-    "higher (untested)",
+_DIRECTIONS: tuple[summary.Direction, ...] = tuple(
+    d for d in get_args(summary.Direction) if d != "n/a"
 )
 
 

@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING
 import polars as pl
 
 from pipeline.errors import ParamsError, PipelineError
+from pipeline.fsutil import file_kind
 from pipeline.params import (
     CampaignParams,
     Episode,
@@ -137,7 +138,7 @@ def _regular_text(path: Path, *, what: str) -> str | None:
     try:
         mode = os.fstat(fd).st_mode
         if not stat.S_ISREG(mode):
-            kind = _file_kind(mode)
+            kind = file_kind(mode)
             raise MarkError(
                 f"{path}: {what} is {kind}, expected a regular file; remove it to re-run "
                 "the episode"
@@ -149,18 +150,6 @@ def _regular_text(path: Path, *, what: str) -> str | None:
     if len(data) > MAX_MARK_BYTES:
         return ""  # not a mark we wrote: it matches nothing, the episode runs again
     return data.decode("ascii", "replace")
-
-
-def _file_kind(mode: int) -> str:
-    if stat.S_ISDIR(mode):
-        return "a directory"
-    if stat.S_ISFIFO(mode):
-        return "a FIFO"
-    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
-        return "a device"
-    if stat.S_ISSOCK(mode):
-        return "a socket"
-    return "not a regular file"
 
 
 def check_done_dir(out_dir: Path) -> None:
@@ -177,7 +166,7 @@ def check_done_dir(out_dir: Path) -> None:
     except OSError as err:
         raise MarkError(f"{folder}: cannot read the marks folder ({err.strerror or err})") from None
     if not stat.S_ISDIR(mode):
-        kind = "a file" if stat.S_ISREG(mode) else _file_kind(mode)
+        kind = "a file" if stat.S_ISREG(mode) else file_kind(mode)
         raise MarkError(
             f"{folder}: the campaign's marks folder is {kind}, expected a directory; "
             "remove it (every episode then runs again)"
