@@ -23,16 +23,16 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.constants import TOPIC_GROUND_TRUTH, TYPE_CONTROLLER_STATE, TYPE_JOINT_STATE
+from pipeline.constants import TOPIC_GROUND_TRUTH
 from pipeline.errors import RecordingError
 from pipeline.log import cdr
 from pipeline.log.db3 import Db3Scan
-from pipeline.log.decode import DecodeError, Group, TopicDecoder, Want, leaf_rows
+from pipeline.log.decode import DecodeError, Group, TopicDecoder, leaf_rows
 from pipeline.log.mcap import MESSAGE_PREFIX, McapChannel, McapScan, Salvage
 from pipeline.log.msgdef import MsgTypes, parse_msgdef, root_type_name
 from pipeline.log.recording import PlannedTrajectory, SinkError
 from pipeline.log.rosbag2 import declared_counts
-from pipeline.log.topics import OUR_TOPICS, ROLES
+from pipeline.log.topics import OUR_TOPICS, ROLES, WANT
 
 __all__ = [
     "WANT",
@@ -40,39 +40,12 @@ __all__ = [
     "Declared",
     "Roles",
     "Scanned",
+    "decode_planned",
     "pick_roles",
     "planned_trajectory",
     "robot_description",
     "scan_storage",
 ]
-
-# What to decode of each control-rate message type (the other roles' first message is kept
-# raw and decoded on demand).
-WANT: dict[str, Want] = {
-    TYPE_JOINT_STATE: Want(
-        names=("name",),
-        arrays={
-            "position": ("position",),
-            "velocity": ("velocity",),
-            "effort": ("effort",),
-        },
-        required=(("position",),),
-    ),
-    TYPE_CONTROLLER_STATE: Want(
-        names=("joint_names",),
-        arrays={
-            "reference_position": ("reference.positions", "desired.positions"),
-            "reference_velocity": ("reference.velocities", "desired.velocities"),
-            "feedback_position": ("feedback.positions", "actual.positions"),
-            "error": ("error.positions",),
-            "commanded_effort": ("output.effort",),
-        },
-        required=(
-            ("reference.positions", "desired.positions"),
-            ("error.positions", "feedback.positions", "actual.positions"),
-        ),
-    ),
-}
 
 
 class Collector:
@@ -227,9 +200,18 @@ def planned_trajectory(collector: Collector, topic: str | None) -> PlannedTrajec
         return None
     name, types = collector.types[topic]
     try:
-        lay = cdr.walk(types, name, data)
+        return decode_planned(types, name, data)
     except (ValueError, struct.error) as err:
         raise collector.fail(f"corrupt: {topic} cannot be decoded ({err})") from err
+
+
+def decode_planned(types: MsgTypes, name: str, data: bytes) -> PlannedTrajectory:
+    """The planned trajectory of one ``trajectory_msgs/JointTrajectory`` message.
+
+    Raises:
+        ValueError, struct.error: the message cannot be decoded.
+    """
+    lay = cdr.walk(types, name, data)
     names = lay.texts.get("joint_names", ())
     joints = tuple(names) if isinstance(names, tuple) else ()
     points: list[str] = []

@@ -4,8 +4,8 @@ into the tidy frames of a :class:`~pipeline.log.recording.Recording`.
 :func:`pipeline.log.reader.read_recording` sends recordings up to
 :data:`pipeline.log.recording.STREAM_ABOVE_BYTES` here (longer ones to
 :mod:`pipeline.log.windowed`, which builds the same frames from the same parts).
-:func:`assemble` is the second half: decoded arrays -> the recording; an episode's own
-arrays take the same way without a file (:mod:`pipeline.log.direct`).
+:func:`assemble` is the second half: decoded arrays -> the recording; an episode's streams
+take the same way without a file (:func:`episode_recording`: the campaign path).
 """
 
 from __future__ import annotations
@@ -18,10 +18,20 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.constants import TYPE_CONTROLLER_STATE
-from pipeline.log.collect import WANT, Collector, pick_roles, planned_trajectory, scan_storage
+from pipeline.log import cdr
+from pipeline.log.collect import (
+    WANT,
+    Collector,
+    decode_planned,
+    pick_roles,
+    planned_trajectory,
+    scan_storage,
+)
+from pipeline.log.decode import Want
 from pipeline.log.labels import (
     Labels,
     check_trajectory_duration,
+    labels_of,
     read_labels,
     reference_end_s,
 )
@@ -41,15 +51,18 @@ from pipeline.log.recording import (
     Recording,
     episode_name,
 )
+from pipeline.log.schemas import message_types
+from pipeline.log.streams import EpisodeStreams
+from pipeline.log.topics import ROLES, TOPICS, Fill
 
-__all__ = ["Decoded", "assemble", "read_whole"]
+__all__ = ["Decoded", "assemble", "episode_recording", "read_whole"]
 
 
 @dataclass(frozen=True)
 class Decoded:
     """A recording's messages decoded to arrays, before the topics are paired: what
     :func:`assemble` makes the :class:`Recording` of (from a file, :func:`read_whole`;
-    from an episode's arrays, :mod:`pipeline.log.direct`).
+    from an episode's streams, :func:`episode_recording`).
 
     Attributes:
         source, mcap_path, sha256, size_bytes: the recording as found (the file's bytes).
@@ -138,6 +151,73 @@ def read_whole(
             decoded_messages=roles.js_group.count
             + (roles.cs_group.count if roles.cs_dec is not roles.js_dec else 0)
             + (truth.count if truth else 0),
+        )
+    )
+
+
+def _wanted(fill: Fill, want: Want | None, n: int) -> dict[str, F64]:
+    """The arrays the reader decodes of a topic (``want``), taken from its fill's columns
+    (first alias present wins; absent: NaN)."""
+    assert want is not None
+    out = {}
+    for key, aliases in want.arrays.items():
+        path = next((p for p in aliases if p in fill.columns), None)
+        nan = np.full((fill.stamps.size, n), np.nan)
+        out[key] = nan if path is None else np.asarray(fill.columns[path], dtype=np.float64)
+    return out
+
+
+def episode_recording(episode: EpisodeStreams, source: Path) -> Recording:
+    """The recording :func:`pipeline.log.reader.read_recording` gives of the bag
+    :func:`pipeline.log.bag.write_streams` writes of ``episode`` at ``source`` (read
+    whole), but for the file's SHA-256 ("") and size (0): every topic's fill, its wanted
+    leaves taken as the reader decodes them (the planned trajectory encoded and decoded),
+    through :func:`assemble`. ``episode.reads_whole`` says when the bag would surely be
+    read whole (a windowed read gives decimated frames).
+
+    Raises:
+        RecordingError: what the reader refuses of its bag.
+    """
+    by_name = {t.name: t.fill(episode) for t in TOPICS}
+    fills = {role: by_name[t.name] for role, t in ROLES.items()}
+    names = episode.joint_names
+    n = len(names)
+    js, cs, gt = fills["joint_states"], fills["controller_state"], fills["ground_truth"]
+    planned = ROLES["planned_trajectory"]
+    types = message_types(planned.type, episode.ros_distro)
+    data, _ = cdr.encode(types, planned.type, fills["planned_trajectory"].columns)
+    description = fills["robot_description"].columns["data"]
+    source = Path(source)
+    return assemble(
+        Decoded(
+            source=source,
+            mcap_path=source / f"{source.name}_0.mcap",
+            sha256="",
+            size_bytes=0,
+            names=names,
+            js_topic=ROLES["joint_states"].name,
+            cs_topic=ROLES["controller_state"].name,
+            js_t=js.stamps,
+            js_a=_wanted(js, ROLES["joint_states"].want, n),
+            cs_t=cs.stamps,
+            cs_a=_wanted(cs, ROLES["controller_state"].want, n),
+            truth=(gt.stamps, _wanted(gt, ROLES["ground_truth"].want, n)),
+            gt_perm=list(range(n)),
+            notes=[],
+            lost_pct=None,
+            damaged=False,
+            labels=labels_of(
+                episode.metadata,
+                description,
+                source=source,
+                options=ReadOptions(),
+                urdf_topic=ROLES["robot_description"].name,
+                names=names,
+            ),
+            planned=decode_planned(types, planned.type, data),
+            planned_topic=planned.name,
+            topic_counts={name: f.stamps.size for name, f in by_name.items()},
+            decoded_messages=js.stamps.size + cs.stamps.size + gt.stamps.size,
         )
     )
 
