@@ -23,7 +23,6 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.constants import TOPIC_GROUND_TRUTH
 from pipeline.errors import RecordingError
 from pipeline.log import cdr
 from pipeline.log.db3 import Db3Scan
@@ -32,7 +31,7 @@ from pipeline.log.mcap import MESSAGE_PREFIX, McapChannel, McapScan, Salvage
 from pipeline.log.msgdef import MsgTypes, parse_msgdef, root_type_name
 from pipeline.log.recording import PlannedTrajectory, SinkError
 from pipeline.log.rosbag2 import declared_counts
-from pipeline.log.topics import OUR_TOPICS, ROLES, WANT
+from pipeline.log.topics import OUR_TOPICS, PAIRED, ROLES, WANT
 
 __all__ = [
     "WANT",
@@ -383,7 +382,7 @@ class Roles:
     cs_dec: TopicDecoder
     js_group: Group
     cs_group: Group
-    truth: Group | None
+    paired: dict[str, Group]  # role -> its joint list read (:data:`PAIRED`; present ones)
     names: tuple[str, ...]
 
     @property
@@ -392,10 +391,9 @@ class Roles:
         cols = [self.js_group.names.index(n) for n in self.names]
         return None if cols == list(range(len(self.js_group.names))) else cols
 
-    @property
-    def gt_perm(self) -> list[int]:
-        assert self.truth is not None
-        return [self.truth.names.index(n) for n in self.names]
+    def perm(self, role: str) -> list[int]:
+        """A paired role's columns in controller joint order."""
+        return [self.paired[role].names.index(n) for n in self.names]
 
 
 def pick_roles(
@@ -450,13 +448,16 @@ def pick_roles(
             f"{cs_dec.topic} ({', '.join(cs_names)}); joint lists seen: {shown}"
         )
     js_group = max(covering, key=lambda g: g.count)
-    truth_dec = collector.decoders.get(chosen["ground_truth"] or "")
-    truth = truth_dec.largest() if truth_dec is not None else None
-    if truth is not None and truth.count and not set(cs_names) <= set(truth.names):
-        raise RecordingError(
-            f"{mcap_path}: joints differ between {TOPIC_GROUND_TRUTH} "
-            f"({', '.join(truth.names)}) and {cs_dec.topic} ({', '.join(cs_names)})"
-        )
-    if truth is not None and not truth.count:
-        truth = None
-    return Roles(chosen, js_dec, cs_dec, js_group, cs_group, truth, cs_names)
+    paired: dict[str, Group] = {}
+    for name, row in PAIRED.items():
+        dec = collector.decoders.get(chosen[name] or "")
+        group = dec.largest() if dec is not None else None
+        if group is None or not group.count:
+            continue
+        if not set(cs_names) <= set(group.names):
+            raise RecordingError(
+                f"{mcap_path}: joints differ between {row.name} "
+                f"({', '.join(group.names)}) and {cs_dec.topic} ({', '.join(cs_names)})"
+            )
+        paired[name] = group
+    return Roles(chosen, js_dec, cs_dec, js_group, cs_group, paired, cs_names)

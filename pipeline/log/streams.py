@@ -21,13 +21,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import RecordingError
-from pipeline.log.recording import STREAM_ABOVE_BYTES
 from pipeline.log.schemas import DEFAULT_ROS_DISTRO, RosDistro, check_distro
 from pipeline.robots.spec import RobotSpec
 from pipeline.sim.result import EpisodeResult, TrajectorySamples
 
 __all__ = [
-    "MAX_BAG_BYTES_PER_JOINT_STEP",
     "REQUIRED_METADATA_KEYS",
     "RESULT_COLUMNS",
     "EpisodeStreams",
@@ -46,10 +44,6 @@ REQUIRED_METADATA_KEYS = ("episode", "scenario", "controller", "robot", "seed", 
 # The per-step columns of an episode the topics carry, (N, joints) each.
 RESULT_COLUMNS = ("q", "qd", "q_true", "qd_true", "q_ref", "qd_ref", "qdd_ref", "tau_cmd_nm",
                   "tau_nm")  # fmt: skip
-
-# Bag bytes per control step and joint, at most: every topic uncompressed (Humble's
-# controller state repeats reference and feedback) is ~250; zstd only shrinks it.
-MAX_BAG_BYTES_PER_JOINT_STEP = 400
 
 
 @dataclass(frozen=True)
@@ -143,12 +137,6 @@ class EpisodeStreams:
     def t0_ns(self) -> int:
         """The first stamp [ns] (0 without steps)."""
         return int(self.stamp_ns[0]) if self.stamp_ns.size else 0
-
-    @property
-    def reads_whole(self) -> bool:
-        """Its bag is surely read whole (not in windows) by the reader."""
-        steps = int(self.stamp_ns.size)
-        return steps * self.spec.dof * MAX_BAG_BYTES_PER_JOINT_STEP < STREAM_ABOVE_BYTES
 
 
 def planned_arrays(

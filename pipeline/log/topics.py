@@ -50,6 +50,8 @@ from pipeline.robots.spec import RobotSpec
 
 __all__ = [
     "OUR_TOPICS",
+    "PAIRED",
+    "PAIRED_COLUMNS",
     "ROLES",
     "TOPICS",
     "WANT",
@@ -95,6 +97,9 @@ class Topic:
             topics).
         want: what the reader decodes of each message of a control-rate role (None: the
             first message is kept raw and decoded on demand).
+        paired: the columns this role adds to both tidy frames (column -> ``want`` key),
+            taken at each controller state's stamp (nearest within half a period; null
+            where none, or without the topic).
     """
 
     name: str
@@ -104,6 +109,7 @@ class Topic:
     role: str | None = None
     by_type: bool = False
     want: Want | None = None
+    paired: Mapping[str, str] | None = None
 
 
 def _header_columns(stamps: I64, path: str = "header.stamp") -> dict[str, Any]:
@@ -304,10 +310,12 @@ TOPICS: tuple[Topic, ...] = (
           "controller_state", by_type=True, want=_CONTROLLER_STATE_WANT),
     Topic(TOPIC_TF, TYPE_TF, QOS_TF, _tf),
     Topic(TOPIC_GROUND_TRUTH, TYPE_JOINT_STATE, QOS_STREAM, _true_joint_states,
-          "ground_truth", want=_JOINT_STATE_WANT),
+          "ground_truth", want=_JOINT_STATE_WANT,
+          paired={"true_position_rad": "position", "true_velocity_rad_s": "velocity"}),
 )  # fmt: skip
 
-# What to decode of each control-rate message type (its rows' ``want``).
+# What to decode of each control-rate message type (its rows' ``want``: one per type, as
+# the reader finds a role's topic by type too).
 WANT: dict[str, Want] = {t.type: t.want for t in TOPICS if t.want is not None}
 
 # The order the reader picks roles in and lists them (errors, ``--topic`` help): the
@@ -332,3 +340,7 @@ ROLES: dict[str, Topic] = {
 
 # Our names of the roles' topics: never a by-type candidate for another role.
 OUR_TOPICS = frozenset(t.name for t in ROLES.values())
+
+# The roles read at the controller state's stamps, and the frame columns they add.
+PAIRED: dict[str, Topic] = {r: t for r, t in ROLES.items() if t.paired is not None}
+PAIRED_COLUMNS: tuple[str, ...] = tuple(c for t in PAIRED.values() for c in t.paired or {})

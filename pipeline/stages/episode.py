@@ -292,12 +292,12 @@ def _write_outputs(
         write()
         return
     from pipeline.log.streams import EpisodeStreams
-    from pipeline.log.whole import episode_recording
+    from pipeline.log.whole import episode_recording, reads_whole
     from pipeline.stages.campaign_run import keep_partial
 
     out_dir = bag_dir.parent
     streams = EpisodeStreams.of(**recorded)
-    if not streams.reads_whole:
+    if not reads_whole(streams):
         write()
         with contextlib.suppress(PipelineError):
             keep_partial(out_dir, episode.name, measure_code=episode.partial_code)

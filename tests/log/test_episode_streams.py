@@ -13,8 +13,8 @@ from pipeline.errors import RecordingError
 from pipeline.log.bag import write_streams
 from pipeline.log.reader import read_recording
 from pipeline.log.streams import EpisodeStreams
-from pipeline.log.topics import TOPICS
-from pipeline.log.whole import episode_recording
+from pipeline.log.topics import PAIRED, TOPICS, WANT
+from pipeline.log.whole import episode_recording, reads_whole
 from pipeline.robots import RobotSpec
 from tests.log.test_writer import analytic_episode, episode_metadata
 from tests.stages.test_partials_direct import _same_value
@@ -35,7 +35,7 @@ def test_the_in_memory_recording_equals_the_bag_read_back(
         tf_rate_hz=30.0,
         ros_distro=distro,
     )
-    assert streams.reads_whole
+    assert reads_whole(streams)
     bag_dir = tmp_path / "ctc_paper"
     summary = write_streams(bag_dir, streams)
     from_bag = read_recording(bag_dir)
@@ -58,3 +58,12 @@ def test_a_bad_value_is_refused_before_anything_is_filled(ur5: RobotSpec) -> Non
         )
     with pytest.raises(RecordingError, match=r"^metadata: missing \['episode'"):
         EpisodeStreams.of(spec=ur5, result=result, planned=planned, metadata={})
+
+
+def test_rows_of_one_message_type_decode_the_same_leaves() -> None:
+    """The reader decodes a message type one way (:data:`WANT`, also for a role found by
+    type): two rows of one type must not ask for different leaves."""
+    for t in TOPICS:
+        assert t.want is None or t.want == WANT[t.type], t.name
+    for role, t in PAIRED.items():
+        assert t.want is not None and set((t.paired or {}).values()) <= set(t.want.arrays), role
