@@ -14,7 +14,7 @@ only), so the stages add up to the run:
 - ``episode setup``: the rest of ``run_episode`` (reference sampling, noise, result);
 - ``contact check``: ``assess_execution``;
 - ``settings``: ``episode_settings`` + ``bag_metadata`` (the bag's settings JSON);
-- ``encode``: ``encode_episode`` (CDR of every topic, whole arrays);
+- ``encode``: ``encode_streams`` (CDR of every topic, whole arrays);
 - ``compress``: zstd (``ZstdCompressor.compress``);
 - ``write``: MCAP framing (``write_mcap`` without zstd), the bag folder, fsync, rename;
 - ``recording in memory``: with ``--keep-every``, ``episode_recording`` (what the bag
@@ -150,9 +150,9 @@ def instrument(timers: Timers) -> None:
     import pipeline.control as control
     import pipeline.identify.model_file as model_file
     import pipeline.log.bag as bag
-    import pipeline.log.direct as direct
     import pipeline.log.mcap as mcap
     import pipeline.log.rosbag2 as rosbag2
+    import pipeline.log.whole as whole
     import pipeline.sim.runner as runner
     import pipeline.sim.safety as safety
     import pipeline.stages.campaign_run as campaign_run
@@ -173,10 +173,10 @@ def instrument(timers: Timers) -> None:
     timers.wrap(safety, "assess_execution", "contact check")
     timers.wrap(episode, "episode_settings", "settings")
     timers.wrap(episode, "bag_metadata", "settings")
-    timers.wrap(bag, "encode_episode", "encode")
+    timers.wrap(bag, "encode_streams", "encode")
     timers.wrap(bag, "write_mcap", "write")
     timers.wrap(rosbag2, "write_bag_dir", "write")
-    timers.wrap(direct, "episode_recording", "recording in memory")
+    timers.wrap(whole, "episode_recording", "recording in memory")
     timers.wrap(campaign_run, "keep_partial", "partial")
     mcap.zstandard = _TimedZstd(timers, mcap.zstandard)  # type: ignore[attr-defined,assignment]
     timers.wrap(report, "read_recording", "read")

@@ -92,7 +92,8 @@ def _worker(work: Path, reps: int) -> dict[str, Any]:
 
     sys.path.insert(0, str(REPO))
     from pipeline.log.bag import write_episode_bag
-    from pipeline.log.direct import episode_recording
+    from pipeline.log.streams import EpisodeStreams
+    from pipeline.log.whole import episode_recording
     from pipeline.params import load_params
     from pipeline.stages import episode as episode_stage
     from pipeline.stages.campaign_run import plan_run
@@ -117,7 +118,9 @@ def _worker(work: Path, reps: int) -> dict[str, Any]:
             write_episode_bag(bag_dir, **recorded, force=True)
             measure_bag(bag_dir, measure_code="")
             t1 = time.perf_counter()
-            measure_recording(episode_recording(bag_dir, **recorded), measure_code="")
+            measure_recording(
+                episode_recording(EpisodeStreams.of(**recorded), bag_dir), measure_code=""
+            )
             t2 = time.perf_counter()
             t["bag_write_read_measure"].append(1e3 * (t1 - t0))
             t["in_memory_measure"].append(1e3 * (t2 - t1))

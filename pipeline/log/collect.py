@@ -23,16 +23,15 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.constants import TOPIC_GROUND_TRUTH, TYPE_CONTROLLER_STATE, TYPE_JOINT_STATE
 from pipeline.errors import RecordingError
 from pipeline.log import cdr
 from pipeline.log.db3 import Db3Scan
-from pipeline.log.decode import DecodeError, Group, TopicDecoder, Want, leaf_rows
+from pipeline.log.decode import DecodeError, Group, TopicDecoder, leaf_rows
 from pipeline.log.mcap import MESSAGE_PREFIX, McapChannel, McapScan, Salvage
 from pipeline.log.msgdef import MsgTypes, parse_msgdef, root_type_name
 from pipeline.log.recording import PlannedTrajectory, SinkError
 from pipeline.log.rosbag2 import declared_counts
-from pipeline.log.topics import OUR_TOPICS, ROLES
+from pipeline.log.topics import OUR_TOPICS, PAIRED, ROLES, WANT
 
 __all__ = [
     "WANT",
@@ -40,39 +39,12 @@ __all__ = [
     "Declared",
     "Roles",
     "Scanned",
+    "decode_planned",
     "pick_roles",
     "planned_trajectory",
     "robot_description",
     "scan_storage",
 ]
-
-# What to decode of each control-rate message type (the other roles' first message is kept
-# raw and decoded on demand).
-WANT: dict[str, Want] = {
-    TYPE_JOINT_STATE: Want(
-        names=("name",),
-        arrays={
-            "position": ("position",),
-            "velocity": ("velocity",),
-            "effort": ("effort",),
-        },
-        required=(("position",),),
-    ),
-    TYPE_CONTROLLER_STATE: Want(
-        names=("joint_names",),
-        arrays={
-            "reference_position": ("reference.positions", "desired.positions"),
-            "reference_velocity": ("reference.velocities", "desired.velocities"),
-            "feedback_position": ("feedback.positions", "actual.positions"),
-            "error": ("error.positions",),
-            "commanded_effort": ("output.effort",),
-        },
-        required=(
-            ("reference.positions", "desired.positions"),
-            ("error.positions", "feedback.positions", "actual.positions"),
-        ),
-    ),
-}
 
 
 class Collector:
@@ -227,9 +199,18 @@ def planned_trajectory(collector: Collector, topic: str | None) -> PlannedTrajec
         return None
     name, types = collector.types[topic]
     try:
-        lay = cdr.walk(types, name, data)
+        return decode_planned(types, name, data)
     except (ValueError, struct.error) as err:
         raise collector.fail(f"corrupt: {topic} cannot be decoded ({err})") from err
+
+
+def decode_planned(types: MsgTypes, name: str, data: bytes) -> PlannedTrajectory:
+    """The planned trajectory of one ``trajectory_msgs/JointTrajectory`` message.
+
+    Raises:
+        ValueError, struct.error: the message cannot be decoded.
+    """
+    lay = cdr.walk(types, name, data)
     names = lay.texts.get("joint_names", ())
     joints = tuple(names) if isinstance(names, tuple) else ()
     points: list[str] = []
@@ -401,7 +382,7 @@ class Roles:
     cs_dec: TopicDecoder
     js_group: Group
     cs_group: Group
-    truth: Group | None
+    paired: dict[str, Group]  # role -> its joint list read (:data:`PAIRED`; present ones)
     names: tuple[str, ...]
 
     @property
@@ -410,10 +391,9 @@ class Roles:
         cols = [self.js_group.names.index(n) for n in self.names]
         return None if cols == list(range(len(self.js_group.names))) else cols
 
-    @property
-    def gt_perm(self) -> list[int]:
-        assert self.truth is not None
-        return [self.truth.names.index(n) for n in self.names]
+    def perm(self, role: str) -> list[int]:
+        """A paired role's columns in controller joint order."""
+        return [self.paired[role].names.index(n) for n in self.names]
 
 
 def pick_roles(
@@ -468,13 +448,16 @@ def pick_roles(
             f"{cs_dec.topic} ({', '.join(cs_names)}); joint lists seen: {shown}"
         )
     js_group = max(covering, key=lambda g: g.count)
-    truth_dec = collector.decoders.get(chosen["ground_truth"] or "")
-    truth = truth_dec.largest() if truth_dec is not None else None
-    if truth is not None and truth.count and not set(cs_names) <= set(truth.names):
-        raise RecordingError(
-            f"{mcap_path}: joints differ between {TOPIC_GROUND_TRUTH} "
-            f"({', '.join(truth.names)}) and {cs_dec.topic} ({', '.join(cs_names)})"
-        )
-    if truth is not None and not truth.count:
-        truth = None
-    return Roles(chosen, js_dec, cs_dec, js_group, cs_group, truth, cs_names)
+    paired: dict[str, Group] = {}
+    for name, row in PAIRED.items():
+        dec = collector.decoders.get(chosen[name] or "")
+        group = dec.largest() if dec is not None else None
+        if group is None or not group.count:
+            continue
+        if not set(cs_names) <= set(group.names):
+            raise RecordingError(
+                f"{mcap_path}: joints differ between {row.name} "
+                f"({', '.join(group.names)}) and {cs_dec.topic} ({', '.join(cs_names)})"
+            )
+        paired[name] = group
+    return Roles(chosen, js_dec, cs_dec, js_group, cs_group, paired, cs_names)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.constants import TOPIC_CONTROLLER_STATE, TOPIC_GROUND_TRUTH, TOPIC_JOINT_STATES
+from pipeline.constants import TOPIC_CONTROLLER_STATE, TOPIC_JOINT_STATES
 from pipeline.errors import RecordingError
 from pipeline.log.collect import Declared, Roles, Scanned
 from pipeline.log.mcap import Salvage
@@ -25,9 +25,9 @@ __all__ = [
     "empty_array_notes",
     "missing_array_notes",
     "no_pairs",
+    "paired_note",
     "read_notes",
     "salvage_note",
-    "truth_note",
 ]
 
 # Optional /joint_states arrays whose absence the report notes.
@@ -139,10 +139,11 @@ def dropped_note(dropped: int) -> list[str]:
     )
 
 
-def truth_note(unmatched: int, cs_topic: str) -> list[str]:
-    return [
-        f"{unmatched} {cs_topic} samples have no {TOPIC_GROUND_TRUTH} sample at their time"
-    ] * bool(unmatched)
+def paired_note(unmatched: int, cs_topic: str, topic: str) -> list[str]:
+    """``unmatched`` controller states have no message of the paired ``topic`` (our name)."""
+    return [f"{unmatched} {cs_topic} samples have no {topic} sample at their time"] * bool(
+        unmatched
+    )
 
 
 def missing_array_notes(arrays: dict[str, F64], topic: str, fields: dict[str, str]) -> list[str]:

@@ -7,13 +7,15 @@ period, so both give the same pairs.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 import polars as pl
 from numpy.typing import NDArray
 
 from pipeline.log.recording import F64
 
-__all__ = ["error_feedback", "match_stamps", "stamp_period_ns", "tidy", "truth_at"]
+__all__ = ["error_feedback", "match_stamps", "paired_at", "stamp_period_ns", "tidy"]
 
 
 def match_stamps(
@@ -83,22 +85,22 @@ def error_feedback(cs: dict[str, F64]) -> tuple[F64, F64]:
     return error, feedback
 
 
-def truth_at(
+def paired_at(
     cs_t: NDArray[np.int64],
-    gt: tuple[NDArray[np.int64], dict[str, F64]] | None,
+    found: tuple[NDArray[np.int64], dict[str, F64]] | None,
     perm: list[int],
+    columns: Mapping[str, str],
     like: F64,
     *,
     period_ns: float | None = None,
-) -> tuple[F64, F64, NDArray[np.intp]]:
-    """True position and velocity at each controller-state row (NaN where none), and the
-    rows that have one."""
-    pos = np.full_like(like, np.nan)
-    vel = np.full_like(like, np.nan)
-    if gt is None:
-        return pos, vel, np.zeros(0, dtype=np.intp)
-    gt_t, gt_a = gt
-    rows_cs, rows_gt = match_stamps(cs_t, gt_t, period_ns=period_ns)
-    pos[rows_cs] = gt_a["position"][rows_gt][:, perm]
-    vel[rows_cs] = gt_a["velocity"][rows_gt][:, perm]
-    return pos, vel, rows_cs
+) -> tuple[dict[str, F64], NDArray[np.intp]]:
+    """A paired topic's ``columns`` (column -> its array's key) at each controller-state
+    row (NaN where none), and the rows that have one."""
+    out = {c: np.full_like(like, np.nan) for c in columns}
+    if found is None:
+        return out, np.zeros(0, dtype=np.intp)
+    t, arrays = found
+    rows_cs, rows = match_stamps(cs_t, t, period_ns=period_ns)
+    for column, key in columns.items():
+        out[column][rows_cs] = arrays[key][rows][:, perm]
+    return out, rows_cs

@@ -16,6 +16,7 @@ import numpy as np
 import polars as pl
 from numpy.typing import NDArray
 
+from pipeline.log.topics import PAIRED_COLUMNS
 from pipeline.settings import ControllerSettings, EpisodeSettings
 
 __all__ = [
@@ -51,8 +52,7 @@ SAMPLE_COLUMNS = (
     "reference_velocity_rad_s",
     "error_rad",
     "commanded_effort_nm",
-    "true_position_rad",
-    "true_velocity_rad_s",
+    *PAIRED_COLUMNS,
 )
 # Column names of the tidy /controller_state frame (every message, at its own rate).
 CONTROLLER_STATE_COLUMNS = (
@@ -65,8 +65,7 @@ CONTROLLER_STATE_COLUMNS = (
     "feedback_position_rad",
     "error_rad",
     "commanded_effort_nm",
-    "true_position_rad",
-    "true_velocity_rad_s",
+    *PAIRED_COLUMNS,
 )
 
 
@@ -136,7 +135,8 @@ class Recording:
             of the same stamp. ``time_s`` counts from the first control-rate stamp.
         controller_states: tidy frame, columns :data:`CONTROLLER_STATE_COLUMNS`: every
             ``/controller_state`` message (its full rate, even when ``/joint_states`` is
-            decimated), same order and time origin. ``true_position_rad`` /
+            decimated), same order and time origin. Then the columns of the roles
+            paired with it (:data:`pipeline.log.topics.PAIRED`): ``true_position_rad`` /
             ``true_velocity_rad_s`` (in both frames) are the plant's true state from
             ``/ground_truth/joint_states`` where the recording has it (simulation), else null.
         has_ground_truth: the recording carries ``/ground_truth/joint_states``.

@@ -4,8 +4,8 @@ into the tidy frames of a :class:`~pipeline.log.recording.Recording`.
 :func:`pipeline.log.reader.read_recording` sends recordings up to
 :data:`pipeline.log.recording.STREAM_ABOVE_BYTES` here (longer ones to
 :mod:`pipeline.log.windowed`, which builds the same frames from the same parts).
-:func:`assemble` is the second half: decoded arrays -> the recording; an episode's own
-arrays take the same way without a file (:mod:`pipeline.log.direct`).
+:func:`assemble` is the second half: decoded arrays -> the recording; an episode's streams
+take the same way without a file (:func:`episode_recording`: the campaign path).
 """
 
 from __future__ import annotations
@@ -18,10 +18,20 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.constants import TYPE_CONTROLLER_STATE
-from pipeline.log.collect import WANT, Collector, pick_roles, planned_trajectory, scan_storage
+from pipeline.log import cdr
+from pipeline.log.collect import (
+    WANT,
+    Collector,
+    decode_planned,
+    pick_roles,
+    planned_trajectory,
+    scan_storage,
+)
+from pipeline.log.decode import Want
 from pipeline.log.labels import (
     Labels,
     check_trajectory_duration,
+    labels_of,
     read_labels,
     reference_end_s,
 )
@@ -30,26 +40,41 @@ from pipeline.log.notes import (
     dropped_note,
     missing_array_notes,
     no_pairs,
+    paired_note,
     read_notes,
-    truth_note,
 )
-from pipeline.log.pairing import error_feedback, match_stamps, tidy, truth_at
+from pipeline.log.pairing import error_feedback, match_stamps, paired_at, tidy
 from pipeline.log.recording import (
     F64,
+    STREAM_ABOVE_BYTES,
     PlannedTrajectory,
     ReadOptions,
     Recording,
     episode_name,
 )
+from pipeline.log.schemas import message_types
+from pipeline.log.streams import EpisodeStreams
+from pipeline.log.topics import PAIRED, ROLES, TOPICS, Fill
 
-__all__ = ["Decoded", "assemble", "read_whole"]
+__all__ = [
+    "MAX_BAG_BYTES_PER_JOINT_STEP",
+    "Decoded",
+    "assemble",
+    "episode_recording",
+    "read_whole",
+    "reads_whole",
+]
+
+# Bag bytes per control step and joint, at most: every topic uncompressed (Humble's
+# controller state repeats reference and feedback) is ~250; zstd only shrinks it.
+MAX_BAG_BYTES_PER_JOINT_STEP = 400
 
 
 @dataclass(frozen=True)
 class Decoded:
     """A recording's messages decoded to arrays, before the topics are paired: what
     :func:`assemble` makes the :class:`Recording` of (from a file, :func:`read_whole`;
-    from an episode's arrays, :mod:`pipeline.log.direct`).
+    from an episode's streams, :func:`episode_recording`).
 
     Attributes:
         source, mcap_path, sha256, size_bytes: the recording as found (the file's bytes).
@@ -58,8 +83,8 @@ class Decoded:
         js_t, js_a: joint-state stamps [ns] and (N, joints) arrays (``position``,
             ``velocity``, ``effort``).
         cs_t, cs_a: controller-state stamps [ns] and arrays (:data:`WANT`'s keys).
-        truth: ground-truth stamps and arrays, with ``gt_perm`` (its joints in ``names``
-            order); None without that topic.
+        paired: the paired roles present (:data:`pipeline.log.topics.PAIRED`): role ->
+            stamps, arrays and its joints in ``names`` order.
         notes: the read's first notes (storage, salvage, joints analysed).
         lost_pct: the share a salvage lost [%] (None: not salvaged, or unknown).
         damaged: read with salvage up to damage, or from a file short of what it declares.
@@ -80,8 +105,7 @@ class Decoded:
     js_a: dict[str, F64]
     cs_t: NDArray[np.int64]
     cs_a: dict[str, F64]
-    truth: tuple[NDArray[np.int64], dict[str, F64]] | None
-    gt_perm: list[int]
+    paired: dict[str, tuple[NDArray[np.int64], dict[str, F64], list[int]]]
     notes: list[str]
     lost_pct: float | None
     damaged: bool
@@ -112,7 +136,6 @@ def read_whole(
     js_cols = roles.js_cols
     js_a = js_all if js_cols is None else {k: v[:, js_cols] for k, v in js_all.items()}
     notes, lost_pct = read_notes(scanned, roles)
-    truth = roles.truth
     return assemble(
         Decoded(
             source=source,
@@ -126,8 +149,7 @@ def read_whole(
             js_a=js_a,
             cs_t=cs_t,
             cs_a=cs_a,
-            truth=truth.concat() if truth is not None else None,
-            gt_perm=roles.gt_perm if truth is not None else [],
+            paired={r: (*g.concat(), roles.perm(r)) for r, g in roles.paired.items()},
             notes=notes,
             lost_pct=lost_pct,
             damaged=scanned.damaged,
@@ -137,7 +159,84 @@ def read_whole(
             topic_counts=dict(collector.topic_counts),
             decoded_messages=roles.js_group.count
             + (roles.cs_group.count if roles.cs_dec is not roles.js_dec else 0)
-            + (truth.count if truth else 0),
+            + sum(g.count for g in roles.paired.values()),
+        )
+    )
+
+
+def reads_whole(episode: EpisodeStreams) -> bool:
+    """The bag of ``episode`` is surely read whole (not in windows) by the reader."""
+    steps = int(episode.stamp_ns.size)
+    return steps * episode.spec.dof * MAX_BAG_BYTES_PER_JOINT_STEP < STREAM_ABOVE_BYTES
+
+
+def _wanted(fill: Fill, want: Want | None, n: int) -> dict[str, F64]:
+    """The arrays the reader decodes of a topic (``want``), taken from its fill's columns
+    (first alias present wins; absent: NaN)."""
+    assert want is not None
+    out = {}
+    for key, aliases in want.arrays.items():
+        path = next((p for p in aliases if p in fill.columns), None)
+        nan = np.full((fill.stamps.size, n), np.nan)
+        out[key] = nan if path is None else np.asarray(fill.columns[path], dtype=np.float64)
+    return out
+
+
+def episode_recording(episode: EpisodeStreams, source: Path) -> Recording:
+    """The recording :func:`pipeline.log.reader.read_recording` gives of the bag
+    :func:`pipeline.log.bag.write_streams` writes of ``episode`` at ``source`` (read
+    whole), but for the file's SHA-256 ("") and size (0): every topic's fill, its wanted
+    leaves taken as the reader decodes them (the planned trajectory encoded and decoded),
+    through :func:`assemble`. :func:`reads_whole` says when the bag would surely be
+    read whole (a windowed read gives decimated frames).
+
+    Raises:
+        RecordingError: what the reader refuses of its bag.
+    """
+    by_name = {t.name: t.fill(episode) for t in TOPICS}
+    fills = {role: by_name[t.name] for role, t in ROLES.items()}
+    names = episode.joint_names
+    n = len(names)
+    js, cs = fills["joint_states"], fills["controller_state"]
+    planned = ROLES["planned_trajectory"]
+    types = message_types(planned.type, episode.ros_distro)
+    data, _ = cdr.encode(types, planned.type, fills["planned_trajectory"].columns)
+    description = fills["robot_description"].columns["data"]
+    source = Path(source)
+    return assemble(
+        Decoded(
+            source=source,
+            mcap_path=source / f"{source.name}_0.mcap",
+            sha256="",
+            size_bytes=0,
+            names=names,
+            js_topic=ROLES["joint_states"].name,
+            cs_topic=ROLES["controller_state"].name,
+            js_t=js.stamps,
+            js_a=_wanted(js, ROLES["joint_states"].want, n),
+            cs_t=cs.stamps,
+            cs_a=_wanted(cs, ROLES["controller_state"].want, n),
+            paired={
+                r: (fills[r].stamps, _wanted(fills[r], t.want, n), list(range(n)))
+                for r, t in PAIRED.items()
+            },
+            notes=[],
+            lost_pct=None,
+            damaged=False,
+            labels=labels_of(
+                episode.metadata,
+                description,
+                source=source,
+                options=ReadOptions(),
+                urdf_topic=ROLES["robot_description"].name,
+                names=names,
+            ),
+            planned=decode_planned(types, planned.type, data),
+            planned_topic=planned.name,
+            topic_counts={name: f.stamps.size for name, f in by_name.items()},
+            decoded_messages=sum(
+                fills[r].stamps.size for r in ("joint_states", "controller_state", *PAIRED)
+            ),
         )
     )
 
@@ -161,10 +260,15 @@ def assemble(d: Decoded) -> Recording:
     episode = episode_name(labels.metadata, source)
     cs_all = d.cs_a
     error, feedback = error_feedback(cs_all)
-    truth = d.truth
-    truth_pos, truth_vel, rows_cs_gt = truth_at(cs_t, truth, d.gt_perm, error)
-    if truth is not None:
-        notes += truth_note(cs_t.size - rows_cs_gt.size, d.cs_topic)
+    paired: dict[str, F64] = {}
+    for role, row in PAIRED.items():
+        found = d.paired.get(role)
+        columns, rows = paired_at(
+            cs_t, found[:2] if found else None, found[2] if found else [], row.paired or {}, error
+        )
+        paired |= columns
+        if found is not None:
+            notes += paired_note(cs_t.size - rows.size, d.cs_topic, row.name)
     planned = d.planned
     contradicted = check_trajectory_duration(
         labels.settings,
@@ -196,8 +300,7 @@ def assemble(d: Decoded) -> Recording:
             "reference_velocity_rad_s": cs_rows["reference_velocity"],
             "error_rad": at_cs(error),
             "commanded_effort_nm": cs_rows["commanded_effort"],
-            "true_position_rad": at_cs(truth_pos),
-            "true_velocity_rad_s": at_cs(truth_vel),
+            **{k: at_cs(v) for k, v in paired.items()},
         },
         names=names,
         t0_ns=t0_ns,
@@ -211,8 +314,7 @@ def assemble(d: Decoded) -> Recording:
             "feedback_position_rad": feedback,
             "error_rad": error,
             "commanded_effort_nm": cs_all["commanded_effort"],
-            "true_position_rad": truth_pos,
-            "true_velocity_rad_s": truth_vel,
+            **paired,
         },
         names=names,
         t0_ns=t0_ns,
@@ -233,7 +335,7 @@ def assemble(d: Decoded) -> Recording:
         topic_counts=d.topic_counts,
         decoded_messages=d.decoded_messages,
         notes=(*notes, *labels.settings_notes),
-        has_ground_truth=truth is not None,
+        has_ground_truth="ground_truth" in d.paired,
         salvaged=d.damaged,
         salvage_lost_pct=d.lost_pct,
         armlab_metadata=labels.ours,

@@ -60,10 +60,10 @@ from pipeline.log.notes import (
     dropped_note,
     empty_array_notes,
     no_pairs,
+    paired_note,
     read_notes,
-    truth_note,
 )
-from pipeline.log.pairing import error_feedback, match_stamps, tidy, truth_at
+from pipeline.log.pairing import error_feedback, match_stamps, paired_at, tidy
 from pipeline.log.recording import (
     CONTROLLER_STATE_COLUMNS,
     F64,
@@ -75,6 +75,7 @@ from pipeline.log.recording import (
     WindowSink,
     episode_name,
 )
+from pipeline.log.topics import PAIRED
 
 # A decimated recording keeps at most about this many control steps for figures and series.
 MAX_KEPT_STEPS = 20_000
@@ -263,16 +264,16 @@ class _Facts:
 class _Windows:
     """Cuts the chosen streams into windows at a watermark and builds their frames."""
 
-    def __init__(self, facts: _Facts, js: _Stream, cs: _Stream, gt: _Stream | None) -> None:
+    def __init__(self, facts: _Facts, js: _Stream, cs: _Stream, paired: dict[str, _Stream]) -> None:
         self.f = facts
-        self.js, self.cs, self.gt = js, cs, gt
+        self.js, self.cs, self.paired = js, cs, paired
         self.margin = math.ceil(max(facts.js_period_ns, facts.cs_period_ns))
         self.lo = _LOW
         self.count = 0
         self.pairs = 0  # /joint_states rows paired so far
         self.cs_rows = 0
         self.dropped = 0
-        self.no_truth = 0
+        self.unpaired = dict.fromkeys(paired, 0)  # controller states without its row
         self.js_empty = {k: True for k in JS_OPTIONAL}
         self.end_ns: int | None = None  # the last paired stamp so far
         self.kept: list[tuple[pl.DataFrame, pl.DataFrame]] = []
@@ -284,8 +285,8 @@ class _Windows:
             limit = _HIGH
             if not final:
                 limit = min(self.js.complete_to(), self._less(self.cs.complete_to()))
-                if self.gt is not None:
-                    limit = min(limit, self._less(self.gt.complete_to()))
+                for stream in self.paired.values():
+                    limit = min(limit, self._less(stream.complete_to()))
             a, b = self.cs.span(self.lo, limit)
             steps = self.f.window_steps
             cut = a + steps
@@ -320,19 +321,24 @@ class _Windows:
         else:
             rows_js, rows_cs = match_stamps(js_t, cs_t, period_ns=f.js_period_ns)
         error, feedback = error_feedback(cs_a)
-        gt = None
-        if self.gt is not None:
-            ga, gb = self.gt.span(lo - n, hi + n)
-            gt = self.gt.rows(ga, gb)
-        truth_pos, truth_vel, with_truth = truth_at(
-            cs_t,
-            gt,
-            f.roles.gt_perm if gt is not None else [],
-            error,
-            period_ns=f.cs_period_ns,
-        )
-        if gt is not None:
-            self.no_truth += (wb - wa) - int(((with_truth >= wa) & (with_truth < wb)).sum())
+        paired: dict[str, F64] = {}
+        for role, row in PAIRED.items():
+            stream = self.paired.get(role)
+            found = None
+            if stream is not None:
+                ga, gb = stream.span(lo - n, hi + n)
+                found = stream.rows(ga, gb)
+            columns, rows = paired_at(
+                cs_t,
+                found,
+                f.roles.perm(role) if stream is not None else [],
+                row.paired or {},
+                error,
+                period_ns=f.cs_period_ns,
+            )
+            paired |= columns
+            if stream is not None:
+                self.unpaired[role] += (wb - wa) - int(((rows >= wa) & (rows < wb)).sum())
         for k in self.js_empty:
             self.js_empty[k] = self.js_empty[k] and bool(np.isnan(js_a[k]).all())
         self.dropped += js_t.size - rows_js.size
@@ -346,8 +352,7 @@ class _Windows:
                 "reference_velocity_rad_s": cs_a["reference_velocity"][rows_cs],
                 "error_rad": error[rows_cs],
                 "commanded_effort_nm": cs_a["commanded_effort"][rows_cs],
-                "true_position_rad": truth_pos[rows_cs],
-                "true_velocity_rad_s": truth_vel[rows_cs],
+                **{k: v[rows_cs] for k, v in paired.items()},
             },
         )
         w = slice(wa, wb)
@@ -359,8 +364,7 @@ class _Windows:
                 "feedback_position_rad": feedback[w],
                 "error_rad": error[w],
                 "commanded_effort_nm": cs_a["commanded_effort"][w],
-                "true_position_rad": truth_pos[w],
-                "true_velocity_rad_s": truth_vel[w],
+                **{k: v[w] for k, v in paired.items()},
             },
         )
         ends = [int(js_t[rows_js].max())] if rows_js.size else []
@@ -381,8 +385,8 @@ class _Windows:
         self.cs_rows += wb - wa
         self.js.drop_below(hi)
         self.cs.drop_below(hi - n)
-        if self.gt is not None:
-            self.gt.drop_below(hi - n)
+        for stream in self.paired.values():
+            stream.drop_below(hi - n)
 
     def _tidy(self, stamps: I64, columns: dict[str, F64]) -> pl.DataFrame:
         return tidy(
@@ -530,10 +534,11 @@ def read_windowed(
     cs_stats = first.stats[(cs_topic, roles.names)]
     _refuse_unordered(js_stats, js_topic, limit)
     _refuse_unordered(cs_stats, cs_topic, limit)
-    gt_topic = roles.chosen["ground_truth"]
-    gt_stats = first.stats[(str(gt_topic), roles.truth.names)] if roles.truth else None
-    if gt_stats is not None:
-        _refuse_unordered(gt_stats, str(gt_topic), limit)
+    paired_stats = {
+        r: first.stats[(str(roles.chosen[r]), g.names)] for r, g in roles.paired.items()
+    }
+    for r, stats in paired_stats.items():
+        _refuse_unordered(stats, str(roles.chosen[r]), limit)
     labels = read_labels(first, source, options, roles.chosen, roles.names)
     js_period = js_stats.period_ns()
 
@@ -565,12 +570,17 @@ def read_windowed(
     )
     cs_keys = tuple(WANT[roles.cs_dec.type_name].arrays)
     cs = _Stream(roles.names, cs_stats.first, cs_stats.last, gaps=cs_stats.gaps, keys=cs_keys)
-    gt = (
-        _Stream(roles.truth.names, gt_stats.first, gt_stats.last, gaps=gt_stats.gaps, keys=js_keys)
-        if roles.truth and gt_stats
-        else None
-    )
-    windows = _Windows(facts, js, cs, gt)
+    paired = {
+        r: _Stream(
+            roles.paired[r].names,
+            stats.first,
+            stats.last,
+            gaps=stats.gaps,
+            keys=tuple(WANT[PAIRED[r].type].arrays),
+        )
+        for r, stats in paired_stats.items()
+    }
+    windows = _Windows(facts, js, cs, paired)
     header_notes, lost_pct = read_notes(scanned, roles)
     planned = planned_trajectory(first, roles.chosen["planned_trajectory"])
     contradicted = check_trajectory_duration(
@@ -597,9 +607,11 @@ def read_windowed(
         planned=planned,
         robot_description=labels.urdf,
         topic_counts=dict(first.topic_counts),
-        decoded_messages=js_stats.count + cs_stats.count + (gt_stats.count if gt_stats else 0),
+        decoded_messages=js_stats.count
+        + cs_stats.count
+        + sum(stats.count for stats in paired_stats.values()),
         notes=(*header_notes, *labels.notes, *labels.settings_notes),
-        has_ground_truth=gt is not None,
+        has_ground_truth="ground_truth" in paired,
         salvaged=scanned.damaged,
         salvage_lost_pct=lost_pct,
         armlab_metadata=labels.ours,
@@ -618,8 +630,8 @@ def read_windowed(
             raise SinkError() from err
     windows.sink = sink
     streams = {js_topic: js, cs_topic: cs}
-    if gt is not None:
-        streams[str(gt_topic)] = gt
+    for r, stream in paired.items():
+        streams[str(roles.chosen[r])] = stream
     second = _Pass2(dict(options.topics), streams, windows)
     again = scan_storage(files, second, salvage=options.salvage, copies=copies)
     if again.sha256 != scanned.sha256:
@@ -632,8 +644,8 @@ def read_windowed(
         {k for k, empty_all in windows.js_empty.items() if empty_all}, js_topic, JS_OPTIONAL
     )
     notes += labels.notes
-    if gt is not None:
-        notes += truth_note(windows.no_truth, cs_topic)
+    for r in paired:
+        notes += paired_note(windows.unpaired[r], cs_topic, PAIRED[r].name)
     end_ns = facts.end_ns if windows.end_ns is None else windows.end_ns
     if end_ns != facts.end_ns:  # not expected: pass 1 (with _end_ns) found the same stamp
         notes.append(

@@ -12,11 +12,11 @@ replaces what is there.
 
 With ``keep_bags: {every: k}`` in the campaign, only every k-th episode keeps its bag.
 Every episode is measured by the report's code from the recording its bag reads back as,
-made in memory from its arrays (:mod:`pipeline.log.direct`), and kept as its metric
-partial (:mod:`pipeline.stages.partials`); the others write no bag at all and are marked
-done once their partial is written. Such an episode is done when its mark matches and
-its partial (or a whole bag) is there. ``--episode KEY`` re-runs chosen episodes into
-full bags.
+made in memory from its streams (:func:`pipeline.log.whole.episode_recording`), and kept
+as its metric partial (:mod:`pipeline.stages.partials`); the others write no bag at all
+and are marked done once their partial is written. Such an episode is done when its mark
+matches and its partial (or a whole bag) is there. ``--episode KEY`` re-runs chosen
+episodes into full bags.
 """
 
 from __future__ import annotations
@@ -533,7 +533,7 @@ def keep_partial(
     out_dir: Path, name: str, *, measure_code: str, recording: Recording | None = None
 ) -> None:
     """Measure episode ``name`` into its partial: from ``recording`` (made in memory as
-    its bag reads back: :func:`pipeline.log.direct.episode_recording`) or, without one,
+    its bag reads back: :func:`pipeline.log.whole.episode_recording`) or, without one,
     from its published bag ``out_dir/name``.
 
     Raises:

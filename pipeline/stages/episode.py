@@ -277,7 +277,7 @@ def _write_outputs(
     ``recorded``: the episode's arguments of
     :func:`~pipeline.log.bag.write_episode_bag` (but ``bag_dir`` and ``force``). The
     partial is measured from the recording made in memory from the episode's arrays
-    (:func:`pipeline.log.direct.episode_recording`: what the bag reads back as), so an
+    (:func:`pipeline.log.whole.episode_recording`: what the bag reads back as), so an
     episode that does not keep its bag writes none; its old bag, if any, goes once the
     partial is written. A recording the reader would read in windows (very long), or one
     the measuring refuses, is written as a bag and measured from it as before (an
@@ -291,11 +291,13 @@ def _write_outputs(
     if episode.partial_code is None:
         write()
         return
-    from pipeline.log.direct import episode_recording, reads_whole
+    from pipeline.log.streams import EpisodeStreams
+    from pipeline.log.whole import episode_recording, reads_whole
     from pipeline.stages.campaign_run import keep_partial
 
     out_dir = bag_dir.parent
-    if not reads_whole(recorded["result"]):
+    streams = EpisodeStreams.of(**recorded)
+    if not reads_whole(streams):
         write()
         with contextlib.suppress(PipelineError):
             keep_partial(out_dir, episode.name, measure_code=episode.partial_code)
@@ -309,7 +311,7 @@ def _write_outputs(
             out_dir,
             episode.name,
             measure_code=episode.partial_code,
-            recording=episode_recording(bag_dir, **recorded),
+            recording=episode_recording(streams, bag_dir),
         )
     except Exception:  # the bag is the data: whatever failed, keep it
         if episode.drop_bag:

@@ -3,13 +3,13 @@
 A campaign with ``keep_bags: {every: k}`` keeps the full bag of every k-th episode. Each
 episode it records is also measured by the report's own code
 (:func:`pipeline.stages.report.measure_recording`) from the recording its bag reads back
-as, made in memory from the episode's arrays (:mod:`pipeline.log.direct`: no encoding,
-compression, file or read), and kept as ``<campaign>/.partials/<key>.arrow``: what the
-report keeps of an episode once its frames are let go (the recording's facts and
-settings, the protocol view, the episode row, the metric frame and the thinned error
-series). The report reads these instead of the missing bags, so the campaign table is
-the same, exactly; re-running the episode by its key reproduces the bag byte for byte (a
-recording depends on its params and seed alone).
+as, made in memory from the episode's streams
+(:func:`pipeline.log.whole.episode_recording`: no encoding, compression, file or read),
+and kept as ``<campaign>/.partials/<key>.arrow``: what the report keeps of an episode once
+its frames are let go (the recording's facts and settings, the protocol view, the episode
+row, the metric frame and the thinned error series). The report reads these instead of the
+missing bags, so the campaign table is the same, exactly; re-running the episode by its
+key reproduces the bag byte for byte (a recording depends on its params and seed alone).
 
 The format (no pickle: nothing in it runs code when read):
 

@@ -622,7 +622,7 @@ def measure_recording(
     rec: Recording, *, tool: ToolOffset = FLANGE_TOOL, measure_code: str | None = None
 ) -> Partial:
     """Measure a recording read whole (or made in memory as its bag would read back:
-    :func:`pipeline.log.direct.episode_recording`) exactly as ``pipeline report`` does."""
+    :func:`pipeline.log.whole.episode_recording`) exactly as ``pipeline report`` does."""
     measured = Measured(tool)
     return _partial(measured, measured.add(rec), rec.source.name, tool, measure_code)
 

@@ -323,17 +323,17 @@ def test_an_episode_failing_inside_bag_writing_at_j1_fails_alone(
     """The bug this file guards against, put back for one robot (fault injection: /tf
     refuses any joint not about +z, as it did): at ``-j 1`` that episode fails with a
     one-line reason, and the run's next episode still runs and keeps its bag."""
-    from pipeline.log import bag as bag_module
+    from pipeline.log import topics as topics_module
     from pipeline.log.reader import read_recording
 
-    real = bag_module.tf_poses
+    real = topics_module.tf_poses
 
     def z_only(spec: RobotSpec, q: NDArray[np.float64]) -> object:
         if any(j.axis != (0.0, 0.0, 1.0) for j in spec.joints):
             raise AssertionError("tf_edges is no longer constant @ Rz(q_i); update tf_poses")
         return real(spec, q)
 
-    monkeypatch.setattr(bag_module, "tf_poses", z_only)
+    monkeypatch.setattr(topics_module, "tf_poses", z_only)
     params = tmp_path / "params.yaml"
     params.write_text(
         f"""\
