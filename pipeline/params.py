@@ -130,6 +130,13 @@ class UncertaintyParams(_Strict):
     com_m: float = Field(default=0.0, ge=0, le=0.5, allow_inf_nan=False)  # per axis U[-r, r]
     inertia_rel: RelativeSpread = 0.0  # second moments scaled per axis by U[1 - r, 1 + r]
     armature_rel: RelativeSpread = 0.0  # rotor armature x U[1 - r, 1 + r]
+    # joint friction, per joint (pipeline.model.uncertainty.draw_friction): Coulomb
+    # (frictionloss, or a sigmoid's phi1), viscous (damping) and a sigmoid's steepness
+    # (phi2: its transition speed) x U[1 - r, 1 + r]; a payload U[0, r] kg on top
+    coulomb_rel: RelativeSpread = 0.0
+    viscous_rel: RelativeSpread = 0.0
+    transition_rel: RelativeSpread = 0.0
+    payload_kg: float = Field(default=0.0, ge=0, le=1000, allow_inf_nan=False)
 
 
 class PlantParams(_Strict):
@@ -142,6 +149,13 @@ class PlantParams(_Strict):
     payload_kg: float = Field(default=0.0, ge=0, le=1000)
     position_noise_std_rad: float = Field(default=0.0, ge=0, le=1.0)
     velocity_noise_std_rad_s: float = Field(default=0.0, ge=0, le=100.0)
+    # a published plant (pipeline/model/published.py): its link parameters and friction
+    # replace the robot's on the plant only (the controllers keep their nominal model)
+    profile: Literal["gaz-panda"] | None = None
+    # the joint torque sensor (what is recorded as effort): an offset per joint drawn
+    # U[-r, r] per episode seed, and Gaussian noise per sample [N m]
+    effort_offset_nm: float = Field(default=0.0, ge=0, le=1000)
+    effort_noise_std_nm: float = Field(default=0.0, ge=0, le=1000)
 
 
 MAX_LOOP_DELAY_S = 0.1  # a 100 ms actuation delay is a broken loop, not a setting

@@ -21,8 +21,10 @@ import math
 from collections.abc import Sequence
 
 import mujoco
+import numpy as np
 
 from pipeline.model.mjcf import PlantOptions, build_mujoco_model
+from pipeline.model.published import SigmoidFriction
 from pipeline.model.scene import Box
 from pipeline.robots.spec import RobotSpec
 
@@ -235,3 +237,41 @@ def _set_statistics(model: mujoco.MjModel, data: mujoco.MjData) -> None:
         for adr, nnz in zip(model.M_rowadr.tolist(), model.M_rownnz.tolist(), strict=True):
             meaninertia += mass_matrix[adr + nnz - 1]
         model.stat.meaninertia = meaninertia / model.nv
+
+
+SIGMOID_FRICTION = (
+    "sigmoid (Gaz et al. 2019), a generalized force from the velocity at each control "
+    "instant, held over the control period; + viscous damping"
+)
+
+
+class SigmoidForce:
+    """A sigmoid joint friction (:class:`pipeline.model.published.SigmoidFriction`) on a
+    MuJoCo plant: ``qfrc_applied = -tau_f(qd)``, from the velocity at each control instant
+    and held over the control period, as the motor torque is.
+
+    MuJoCo has no sigmoid friction law, and evaluating it per physics step (or per RK4
+    stage) means a Python callback inside ``mj_step`` (``mjcb_passive``), which leaves the C
+    loop 4 times a step. Held per control period (1 ms in params.yaml) it costs a few
+    numpy operations per control step; ``benches/published_plant.py`` measures both its
+    cost and its difference from the per-stage callback.
+    """
+
+    def __init__(self, friction: SigmoidFriction, data: mujoco.MjData) -> None:
+        self._a = np.asarray(friction.phi1_nm, dtype=np.float64)
+        self._minus_b = -np.asarray(friction.phi2_s_rad, dtype=np.float64)
+        self._c = np.asarray(friction.phi3_rad_s, dtype=np.float64)
+        # minus the value at rest: tau_f(0) = 0
+        self._rest = self._a / (1.0 + np.exp(self._minus_b * self._c))
+        self._tmp = np.empty_like(self._a)
+        self._out = data.qfrc_applied
+
+    def apply(self, qd: np.ndarray) -> None:
+        """Set ``qfrc_applied`` to the friction force at velocity ``qd`` [rad/s]."""
+        tmp = self._tmp
+        np.add(qd, self._c, out=tmp)
+        np.multiply(tmp, self._minus_b, out=tmp)
+        np.exp(tmp, out=tmp)
+        tmp += 1.0
+        np.divide(self._a, tmp, out=tmp)
+        np.subtract(self._rest, tmp, out=self._out)  # -(tau_f): the force opposes motion
