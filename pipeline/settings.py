@@ -565,6 +565,20 @@ class EpisodeSettings(Contract):
         """JSON-ready plain data (lists, not tuples)."""
         out: dict[str, Any] = plain(asdict(self))
         out["safety"] = self.safety.to_dict()  # with its derived keys, for readers of the JSON
+        # issue 28's plant fields, left out while unused: plants without them write the
+        # same settings as before (absent reads back as the default)
+        plant = out["plant"]
+        for key, default in (
+            ("profile", ""),
+            ("sigmoid_friction", None),
+            ("effort_offset_nm", []),
+            ("effort_noise_std_nm", 0.0),
+        ):
+            if plant.get(key) == default:
+                del plant[key]
+        for key in ("coulomb_rel", "viscous_rel", "transition_rel", "payload_kg"):
+            if plant["uncertainty"].get(key) == 0:
+                del plant["uncertainty"][key]
         return out
 
     @classmethod
