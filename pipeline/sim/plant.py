@@ -258,20 +258,23 @@ class SigmoidForce:
     """
 
     def __init__(self, friction: SigmoidFriction, data: mujoco.MjData) -> None:
-        self._a = np.asarray(friction.phi1_nm, dtype=np.float64)
-        self._minus_b = -np.asarray(friction.phi2_s_rad, dtype=np.float64)
+        # phi1 / (1 + exp(-phi2 x)) = phi1 / 2 (1 + tanh(phi2 x / 2)): five in-place
+        # operations per call, no temporaries
+        a = np.asarray(friction.phi1_nm, dtype=np.float64)
+        b = np.asarray(friction.phi2_s_rad, dtype=np.float64)
         self._c = np.asarray(friction.phi3_rad_s, dtype=np.float64)
-        # minus the value at rest: tau_f(0) = 0
-        self._rest = self._a / (1.0 + np.exp(self._minus_b * self._c))
-        self._tmp = np.empty_like(self._a)
+        self._half_a = 0.5 * a
+        self._half_b = 0.5 * b
+        # tau_f(qd) = half_a tanh(half_b (qd + c)) - shift, with tau_f(0) = 0
+        self._shift = self._half_a * np.tanh(self._half_b * self._c)
+        self._tmp = np.empty_like(a)
         self._out = data.qfrc_applied
 
     def apply(self, qd: np.ndarray) -> None:
         """Set ``qfrc_applied`` to the friction force at velocity ``qd`` [rad/s]."""
         tmp = self._tmp
         np.add(qd, self._c, out=tmp)
-        np.multiply(tmp, self._minus_b, out=tmp)
-        np.exp(tmp, out=tmp)
-        tmp += 1.0
-        np.divide(self._a, tmp, out=tmp)
-        np.subtract(self._rest, tmp, out=self._out)  # -(tau_f): the force opposes motion
+        tmp *= self._half_b
+        np.tanh(tmp, out=tmp)
+        tmp *= self._half_a
+        np.subtract(self._shift, tmp, out=self._out)  # -(tau_f): the force opposes motion
