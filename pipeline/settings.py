@@ -119,6 +119,13 @@ class LinkInertial(Contract):
     ]
 
 
+# issue 28's draws and plant fields at their unused values: left out of settings then
+_UNUSED_DRAWS: dict[str, Any] = dict.fromkeys(("coulomb_rel", "viscous_rel", "transition_rel"), 0)
+_UNUSED_DRAWS["payload_kg"] = 0
+_UNUSED_PLANT: dict[str, Any] = dict(profile="", sigmoid_friction=None, effort_offset_nm=[])
+_UNUSED_PLANT["effort_noise_std_nm"] = 0
+
+
 @dataclass(frozen=True)
 class Uncertainty(Contract):
     """How far the plant may differ from the nominal model (uniform draws per episode seed).
@@ -136,8 +143,7 @@ class Uncertainty(Contract):
     """
 
     _where = "plant.uncertainty"
-    # bags written before the friction draws (issue 28): none drawn
-    _may_be_absent = frozenset({"coulomb_rel", "viscous_rel", "transition_rel", "payload_kg"})
+    _may_be_absent = frozenset(_UNUSED_DRAWS)  # bags written before issue 28: none drawn
 
     mass_rel: NonNegative = 0.0
     com_m: NonNegative = 0.0
@@ -156,12 +162,8 @@ class Uncertainty(Contract):
 
 @dataclass(frozen=True)
 class SigmoidFrictionSettings(Contract):
-    """A plant's sigmoid joint friction, per joint (``pipeline.model.published``):
-    ``tau_f = phi1 / (1 + exp(-phi2 (qd + phi3))) - phi1 / (1 + exp(-phi2 phi3))``.
-
-    Attributes:
-        phi1_nm [N m], phi2_s_rad [s/rad], phi3_rad_s [rad/s]: as drawn for the episode.
-    """
+    """A plant's sigmoid joint friction per joint, as drawn (``pipeline.model.published``):
+    ``tau_f = phi1 / (1 + exp(-phi2 (qd + phi3))) - phi1 / (1 + exp(-phi2 phi3))``."""
 
     _where = "plant.sigmoid_friction"
 
@@ -196,15 +198,7 @@ class PlantSettings(Contract):
     _where = "plant"
     # bags written before the plant recorded its friction law ran MuJoCo's soft default;
     # before issue 28 no plant had a profile, a sigmoid or a torque-sensor error
-    _may_be_absent = frozenset(
-        {
-            "friction_model",
-            "profile",
-            "sigmoid_friction",
-            "effort_offset_nm",
-            "effort_noise_std_nm",
-        }
-    )
+    _may_be_absent = frozenset({"friction_model", *_UNUSED_PLANT})
 
     exact: Flag
     links: Annotated[tuple[LinkInertial, ...], listed("a list of link inertials", tuples=False)]
@@ -565,20 +559,12 @@ class EpisodeSettings(Contract):
         """JSON-ready plain data (lists, not tuples)."""
         out: dict[str, Any] = plain(asdict(self))
         out["safety"] = self.safety.to_dict()  # with its derived keys, for readers of the JSON
-        # issue 28's plant fields, left out while unused: plants without them write the
-        # same settings as before (absent reads back as the default)
+        # issue 28's fields left out while unused: the same settings as before for plants
+        # without them (absent reads back as the default)
         plant = out["plant"]
-        for key, default in (
-            ("profile", ""),
-            ("sigmoid_friction", None),
-            ("effort_offset_nm", []),
-            ("effort_noise_std_nm", 0.0),
-        ):
-            if plant.get(key) == default:
-                del plant[key]
-        for key in ("coulomb_rel", "viscous_rel", "transition_rel", "payload_kg"):
-            if plant["uncertainty"].get(key) == 0:
-                del plant["uncertainty"][key]
+        for part, unused in ((plant, _UNUSED_PLANT), (plant["uncertainty"], _UNUSED_DRAWS)):
+            for key in [k for k, v in unused.items() if part.get(k) == v]:
+                del part[key]
         return out
 
     @classmethod

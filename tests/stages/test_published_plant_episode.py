@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 import yaml
 
-from pipeline.errors import ModelError
+from pipeline.errors import ModelError, ParamsError
 from pipeline.log.reader import read_recording
 from pipeline.params import parse_params
 from pipeline.robots import load_spec
 from pipeline.robots.packages import package_search_path
 from pipeline.stages.assemble import draw_scenario_plant, scenario_friction
-from pipeline.stages.record import record
+from pipeline.stages.record import record, validate_episodes
 
 REPO = Path(__file__).parents[2]
 EXAMPLE = REPO / "examples" / "params-panda-gaz.yaml"
@@ -145,8 +145,11 @@ def test_a_transition_spread_without_a_sigmoid_is_refused_in_one_line():
 
 def test_a_profile_on_the_ur5_is_refused_naming_the_scenario(tmp_path):
     params = _params({"a": {"scenario": "ur5-draws", "controller": "pid"}}, profile="gaz-panda")
-    outcomes = record(params, params.episodes, out_dir=tmp_path, commit="test")
-    assert outcomes[0].status != "ok"
-    message = outcomes[0].reason
-    assert "scenarios.ur5-draws.plant.profile: gaz-panda describes the Franka" in message
+    with pytest.raises(ParamsError) as err:  # before any work (pipeline record, --check)
+        validate_episodes(params, params.episodes)
+    message = str(err.value)
+    assert message.startswith(f"{EXAMPLE}: scenarios.ur5-draws.plant.profile: gaz-panda describes")
     assert "\n" not in message
+    outcomes = record(params, params.episodes, out_dir=tmp_path, commit="test")
+    assert outcomes[0].status == "failed"  # and the episode alone, if called without it
+    assert "scenarios.ur5-draws.plant.profile: gaz-panda describes the Franka" in outcomes[0].reason
