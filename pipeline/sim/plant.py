@@ -241,7 +241,8 @@ def _set_statistics(model: mujoco.MjModel, data: mujoco.MjData) -> None:
 
 SIGMOID_FRICTION = (
     "sigmoid (Gaz et al. 2019), a generalized force from the velocity at each control "
-    "instant, held over the control period; + viscous damping"
+    "instant, held over the control period; + the frictionloss (stick-slip Coulomb) and "
+    "viscous damping given, if any"
 )
 
 
