@@ -22,8 +22,10 @@ from pydantic import (
     ConfigDict,
     Discriminator,
     Field,
+    SerializerFunctionWrapHandler,
     Tag,
     ValidationError,
+    model_serializer,
     model_validator,
 )
 
@@ -123,6 +125,22 @@ RelativeSpread = Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)]
 MAX_PREROLL_S = 60.0
 
 
+def _omit_defaults(out: dict[str, Any], defaults: Mapping[str, Any]) -> dict[str, Any]:
+    """``out`` without the keys of ``defaults`` that hold their default: fields added after
+    recordings were made dump as before while unused (same settings bytes, same campaign
+    fingerprints)."""
+    return {k: v for k, v in out.items() if k not in defaults or v != defaults[k]}
+
+
+_NEW_UNCERTAINTY = {
+    "coulomb_rel": 0.0,
+    "viscous_rel": 0.0,
+    "transition_rel": 0.0,
+    "payload_kg": 0.0,
+}
+_NEW_PLANT = {"profile": None, "effort_offset_nm": 0.0, "effort_noise_std_nm": 0.0}
+
+
 class UncertaintyParams(_Strict):
     """Link-parameter and armature uncertainty: the plant draws its values per episode seed."""
 
@@ -130,6 +148,17 @@ class UncertaintyParams(_Strict):
     com_m: float = Field(default=0.0, ge=0, le=0.5, allow_inf_nan=False)  # per axis U[-r, r]
     inertia_rel: RelativeSpread = 0.0  # second moments scaled per axis by U[1 - r, 1 + r]
     armature_rel: RelativeSpread = 0.0  # rotor armature x U[1 - r, 1 + r]
+    # joint friction, per joint (pipeline.model.uncertainty.draw_friction): Coulomb
+    # (frictionloss, or a sigmoid's phi1), viscous (damping) and a sigmoid's steepness
+    # (phi2: its transition speed) x U[1 - r, 1 + r]; a payload U[0, r] kg on top
+    coulomb_rel: RelativeSpread = 0.0
+    viscous_rel: RelativeSpread = 0.0
+    transition_rel: RelativeSpread = 0.0
+    payload_kg: float = Field(default=0.0, ge=0, le=1000, allow_inf_nan=False)
+
+    @model_serializer(mode="wrap")
+    def _dump(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        return _omit_defaults(handler(self), _NEW_UNCERTAINTY)
 
 
 class PlantParams(_Strict):
@@ -142,6 +171,17 @@ class PlantParams(_Strict):
     payload_kg: float = Field(default=0.0, ge=0, le=1000)
     position_noise_std_rad: float = Field(default=0.0, ge=0, le=1.0)
     velocity_noise_std_rad_s: float = Field(default=0.0, ge=0, le=100.0)
+    # a published plant (pipeline/model/published.py): its link parameters and friction
+    # replace the robot's on the plant only (the controllers keep their nominal model)
+    profile: Literal["gaz-panda"] | None = None
+    # the joint torque sensor (what is recorded as effort): an offset per joint drawn
+    # U[-r, r] per episode seed, and Gaussian noise per sample [N m]
+    effort_offset_nm: float = Field(default=0.0, ge=0, le=1000)
+    effort_noise_std_nm: float = Field(default=0.0, ge=0, le=1000)
+
+    @model_serializer(mode="wrap")
+    def _dump(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        return _omit_defaults(handler(self), _NEW_PLANT)
 
 
 MAX_LOOP_DELAY_S = 0.1  # a 100 ms actuation delay is a broken loop, not a setting

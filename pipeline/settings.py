@@ -119,6 +119,13 @@ class LinkInertial(Contract):
     ]
 
 
+# issue 28's draws and plant fields at their unused values: left out of settings then
+_UNUSED_DRAWS: dict[str, Any] = dict.fromkeys(("coulomb_rel", "viscous_rel", "transition_rel"), 0)
+_UNUSED_DRAWS["payload_kg"] = 0
+_UNUSED_PLANT: dict[str, Any] = dict(profile="", sigmoid_friction=None, effort_offset_nm=[])
+_UNUSED_PLANT["effort_noise_std_nm"] = 0
+
+
 @dataclass(frozen=True)
 class Uncertainty(Contract):
     """How far the plant may differ from the nominal model (uniform draws per episode seed).
@@ -129,18 +136,40 @@ class Uncertainty(Contract):
         inertia_rel: per-axis scale of the link's second moments in ``[1 - r, 1 + r]``
             (keeps the tensor physical: positive definite, triangle inequality).
         armature_rel: rotor armature factor in ``[1 - r, 1 + r]``.
+        coulomb_rel, viscous_rel, transition_rel: per-joint factors in ``[1 - r, 1 + r]``
+            on the Coulomb friction (``frictionloss`` or a sigmoid's ``phi1``), the viscous
+            damping and a sigmoid's steepness ``phi2``.
+        payload_kg: extra payload in ``[0, r]`` [kg].
     """
 
     _where = "plant.uncertainty"
+    _may_be_absent = frozenset(_UNUSED_DRAWS)  # bags written before issue 28: none drawn
 
     mass_rel: NonNegative = 0.0
     com_m: NonNegative = 0.0
     inertia_rel: NonNegative = 0.0
     armature_rel: NonNegative = 0.0
+    coulomb_rel: NonNegative = 0.0
+    viscous_rel: NonNegative = 0.0
+    transition_rel: NonNegative = 0.0
+    payload_kg: NonNegative = 0.0
 
     @property
     def any(self) -> bool:
+        """Any link parameter or armature drawn (the friction draws are not link draws)."""
         return any(v > 0 for v in (self.mass_rel, self.com_m, self.inertia_rel, self.armature_rel))
+
+
+@dataclass(frozen=True)
+class SigmoidFrictionSettings(Contract):
+    """A plant's sigmoid joint friction per joint, as drawn (``pipeline.model.published``):
+    ``tau_f = phi1 / (1 + exp(-phi2 (qd + phi3))) - phi1 / (1 + exp(-phi2 phi3))``."""
+
+    _where = "plant.sigmoid_friction"
+
+    phi1_nm: NonNegatives
+    phi2_s_rad: NonNegatives
+    phi3_rad_s: Numbers
 
 
 @dataclass(frozen=True)
@@ -160,11 +189,16 @@ class PlantSettings(Contract):
         physics_dt_s, control_period_s: MuJoCo step and control period [s].
         integrator, engine: MuJoCo's integrator, "mujoco".
         friction_model: the joint friction law the plant ran (``frictionloss`` and ``damping``).
+        profile: the published plant's source (``plant.profile``), "" for the robot's own.
+        sigmoid_friction: the sigmoid friction the plant ran, None if none.
+        effort_offset_nm, effort_noise_std_nm: the torque sensor's offset per joint and
+            noise std on what is recorded as effort [N m] (empty, 0: exact).
     """
 
     _where = "plant"
-    # bags written before the plant recorded its friction law ran MuJoCo's soft default
-    _may_be_absent = frozenset({"friction_model"})
+    # bags written before the plant recorded its friction law ran MuJoCo's soft default;
+    # before issue 28 no plant had a profile, a sigmoid or a torque-sensor error
+    _may_be_absent = frozenset({"friction_model", *_UNUSED_PLANT})
 
     exact: Flag
     links: Annotated[tuple[LinkInertial, ...], listed("a list of link inertials", tuples=False)]
@@ -181,6 +215,10 @@ class PlantSettings(Contract):
     integrator: Text = "Euler"
     engine: Text = "mujoco"
     friction_model: Text = LEGACY_FRICTION
+    profile: Text = ""
+    sigmoid_friction: SigmoidFrictionSettings | None = None
+    effort_offset_nm: Numbers = ()
+    effort_noise_std_nm: NonNegative = 0.0
 
 
 VelocitySource = Literal["plant", "encoder"]
@@ -521,6 +559,12 @@ class EpisodeSettings(Contract):
         """JSON-ready plain data (lists, not tuples)."""
         out: dict[str, Any] = plain(asdict(self))
         out["safety"] = self.safety.to_dict()  # with its derived keys, for readers of the JSON
+        # issue 28's fields left out while unused: the same settings as before for plants
+        # without them (absent reads back as the default)
+        plant = out["plant"]
+        for part, unused in ((plant, _UNUSED_PLANT), (plant["uncertainty"], _UNUSED_DRAWS)):
+            for key in [k for k, v in unused.items() if part.get(k) == v]:
+                del part[key]
         return out
 
     @classmethod

@@ -380,6 +380,8 @@ def record_excitation(
         ),
         source=f"controllers.{controller_name}",
     )
+    from pipeline.stages.assemble import plant_run_options
+
     plant_spec, plant, plant_settings = scenario_plant(spec, scenario, seed=seed)
     sim = params.sim
     result = run_episode(
@@ -398,6 +400,7 @@ def record_excitation(
         position_noise_std_rad=scenario.plant.position_noise_std_rad,
         velocity_noise_std_rad_s=scenario.plant.velocity_noise_std_rad_s,
         seed=seed,
+        **plant_run_options(spec, scenario, seed=seed),
     )
     if result.status != "ok":
         raise IdentificationError(f"excitation episode {result.status}: {result.reason}")
@@ -500,7 +503,7 @@ def scenario_plant(
         "armature": [float(a) for a in plant_spec.armature],
         "damping": list(per_joint(plant.damping, spec.dof)),
         "frictionloss": list(per_joint(plant.frictionloss, spec.dof)),
-        "payload_kg": p.payload_kg,
+        "payload_kg": plant.payload_kg,
         "position_noise_std_rad": p.position_noise_std_rad,
         "velocity_noise_std_rad_s": p.velocity_noise_std_rad_s,
         "uncertainty": asdict(uncertainty),

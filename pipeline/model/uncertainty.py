@@ -12,11 +12,12 @@ and satisfies the triangle inequality whatever is drawn.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from pipeline.errors import ModelError
+from pipeline.model.published import SigmoidFriction
 from pipeline.robots.spec import Inertial, RobotSpec
 from pipeline.settings import LinkInertial, Uncertainty
 
@@ -127,3 +128,97 @@ def with_plant(
         for j, link, a in zip(spec.joints, links, armature, strict=True)
     )
     return replace(spec, joints=joints)
+
+
+# The friction, payload and torque-sensor draws use their own streams: adding them
+# changes neither the link draws nor the sensor noise of a seed.
+_FRICTION_STREAM = 0x46524943
+EFFORT_NOISE_STREAM = 0x45464654
+"""Stream id of the torque sensor's per-sample noise (``pipeline.sim.runner``)."""
+
+
+@dataclass(frozen=True)
+class DrawnFriction:
+    """The joint friction, payload and torque-sensor offset one episode's plant draws.
+
+    Attributes:
+        damping: viscous friction per joint [N m s/rad].
+        frictionloss: MuJoCo's stick-slip Coulomb friction per joint [N m].
+        sigmoid: the sigmoid friction (a published profile's), None if none.
+        payload_kg: the payload at the flange [kg].
+        effort_offset_nm: the torque sensor's offset per joint [N m] (empty: none).
+    """
+
+    damping: tuple[float, ...]
+    frictionloss: tuple[float, ...]
+    sigmoid: SigmoidFriction | None
+    payload_kg: float
+    effort_offset_nm: tuple[float, ...]
+
+
+def draw_friction(
+    uncertainty: Uncertainty,
+    *,
+    damping: Sequence[float],
+    frictionloss: Sequence[float],
+    sigmoid: SigmoidFriction | None,
+    payload_kg: float,
+    effort_offset_nm: float,
+    seed: int,
+) -> DrawnFriction:
+    """The joint friction, payload and sensor offset drawn per ``seed`` (uniform):
+    Coulomb (``frictionloss``, or the sigmoid's ``phi1``) x ``1 + coulomb_rel u``, damping
+    x ``1 + viscous_rel u``, the sigmoid's ``phi2`` x ``1 + transition_rel u`` (u in
+    [-1, 1] per joint), ``payload_kg + U[0, uncertainty.payload_kg]`` and an offset
+    ``U[-effort_offset_nm, effort_offset_nm]`` per joint. ``damping`` and ``frictionloss``
+    have one value per joint. Nothing spread: the values as given.
+
+    Raises:
+        ModelError: a transition spread on a plant without a sigmoid, or a relative
+            spread of 1 or more.
+    """
+    n = len(damping)
+    for name in ("coulomb_rel", "viscous_rel", "transition_rel"):
+        if not 0 <= getattr(uncertainty, name) < 1:
+            raise ModelError(
+                f"plant.uncertainty.{name}: expected a relative spread in [0, 1), got "
+                f"{getattr(uncertainty, name)}"
+            )
+    if uncertainty.transition_rel > 0 and sigmoid is None:
+        raise ModelError(
+            f"plant.uncertainty.transition_rel: {uncertainty.transition_rel:g} spreads a "
+            "sigmoid friction's transition, but this plant's friction is MuJoCo's Coulomb "
+            "frictionloss (give a plant.profile with sigmoid friction, or 0)"
+        )
+    rng = np.random.default_rng([int(seed), _FRICTION_STREAM])
+    # a fixed order and size whatever is spread (one spread does not reshuffle another)
+    u_coulomb = rng.uniform(-1.0, 1.0, n)
+    u_viscous = rng.uniform(-1.0, 1.0, n)
+    u_transition = rng.uniform(-1.0, 1.0, n)
+    u_payload = float(rng.uniform(0.0, 1.0))
+    u_offset = rng.uniform(-1.0, 1.0, n)
+
+    def scaled(values: Sequence[float], spread: float, u: np.ndarray) -> tuple[float, ...]:
+        if spread == 0:
+            return tuple(float(v) for v in values)
+        return tuple(float(v * (1.0 + spread * x)) for v, x in zip(values, u, strict=True))
+
+    drawn_sigmoid = None
+    if sigmoid is not None:
+        drawn_sigmoid = SigmoidFriction(
+            phi1_nm=scaled(sigmoid.phi1_nm, uncertainty.coulomb_rel, u_coulomb),
+            phi2_s_rad=scaled(sigmoid.phi2_s_rad, uncertainty.transition_rel, u_transition),
+            phi3_rad_s=sigmoid.phi3_rad_s,
+        )
+    payload = (
+        payload_kg + uncertainty.payload_kg * u_payload if uncertainty.payload_kg else payload_kg
+    )
+    return DrawnFriction(
+        damping=scaled(damping, uncertainty.viscous_rel, u_viscous),
+        frictionloss=scaled(frictionloss, uncertainty.coulomb_rel, u_coulomb),
+        sigmoid=drawn_sigmoid,
+        payload_kg=float(payload),
+        effort_offset_nm=(
+            tuple(float(effort_offset_nm * x) for x in u_offset) if effort_offset_nm else ()
+        ),
+    )

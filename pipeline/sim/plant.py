@@ -21,8 +21,10 @@ import math
 from collections.abc import Sequence
 
 import mujoco
+import numpy as np
 
 from pipeline.model.mjcf import PlantOptions, build_mujoco_model
+from pipeline.model.published import SigmoidFriction
 from pipeline.model.scene import Box
 from pipeline.robots.spec import RobotSpec
 
@@ -235,3 +237,45 @@ def _set_statistics(model: mujoco.MjModel, data: mujoco.MjData) -> None:
         for adr, nnz in zip(model.M_rowadr.tolist(), model.M_rownnz.tolist(), strict=True):
             meaninertia += mass_matrix[adr + nnz - 1]
         model.stat.meaninertia = meaninertia / model.nv
+
+
+SIGMOID_FRICTION = (
+    "sigmoid (Gaz et al. 2019), a generalized force from the velocity at each control "
+    "instant, held over the control period; + the frictionloss (stick-slip Coulomb) and "
+    "viscous damping given, if any"
+)
+
+
+class SigmoidForce:
+    """A sigmoid joint friction (:class:`pipeline.model.published.SigmoidFriction`) on a
+    MuJoCo plant: ``qfrc_applied = -tau_f(qd)``, from the velocity at each control instant
+    and held over the control period, as the motor torque is.
+
+    MuJoCo has no sigmoid friction law, and evaluating it per physics step (or per RK4
+    stage) means a Python callback inside ``mj_step`` (``mjcb_passive``), which leaves the C
+    loop 4 times a step. Held per control period (1 ms in params.yaml) it costs a few
+    numpy operations per control step; ``benches/published_plant.py`` measures both its
+    cost and its difference from the per-stage callback.
+    """
+
+    def __init__(self, friction: SigmoidFriction, data: mujoco.MjData) -> None:
+        # phi1 / (1 + exp(-phi2 x)) = phi1 / 2 (1 + tanh(phi2 x / 2)): five in-place
+        # operations per call, no temporaries
+        a = np.asarray(friction.phi1_nm, dtype=np.float64)
+        b = np.asarray(friction.phi2_s_rad, dtype=np.float64)
+        self._c = np.asarray(friction.phi3_rad_s, dtype=np.float64)
+        self._half_a = 0.5 * a
+        self._half_b = 0.5 * b
+        # tau_f(qd) = half_a tanh(half_b (qd + c)) - shift, with tau_f(0) = 0
+        self._shift = self._half_a * np.tanh(self._half_b * self._c)
+        self._tmp = np.empty_like(a)
+        self._out = data.qfrc_applied
+
+    def apply(self, qd: np.ndarray) -> None:
+        """Set ``qfrc_applied`` to the friction force at velocity ``qd`` [rad/s]."""
+        tmp = self._tmp
+        np.add(qd, self._c, out=tmp)
+        tmp *= self._half_b
+        np.tanh(tmp, out=tmp)
+        tmp *= self._half_a
+        np.subtract(self._shift, tmp, out=self._out)  # -(tau_f): the force opposes motion

@@ -37,11 +37,12 @@ from pipeline.constants import PLANT_FRICTION, PLANT_INTEGRATOR
 from pipeline.control.base import Controller
 from pipeline.errors import SimulationError
 from pipeline.model.mjcf import PlantOptions
+from pipeline.model.published import SigmoidFriction
 from pipeline.model.scene import Box
 from pipeline.robots.spec import RobotSpec
 from pipeline.settings import LoopSettings
 from pipeline.sim.loop import Actuator, Sensor, check_loop
-from pipeline.sim.plant import plant_model
+from pipeline.sim.plant import SIGMOID_FRICTION, SigmoidForce, plant_model
 from pipeline.sim.result import F64, EpisodeResult, Reference
 from pipeline.sim.settling import SETTLING, integral_state, settled
 
@@ -87,6 +88,9 @@ def run_episode(
     divergence_speed_factor: float = DIVERGENCE_SPEED_FACTOR,
     loop: LoopSettings | None = None,
     progress: ProgressFn | None = None,
+    friction: SigmoidFriction | None = None,
+    effort_offset_nm: Sequence[float] = (),
+    effort_noise_std_nm: float = 0.0,
 ) -> EpisodeResult:
     """Run ``controller`` on the MuJoCo plant along ``reference``, then hold the goal.
 
@@ -129,6 +133,11 @@ def run_episode(
         loop: actuation delay and jitter, encoder quantisation, encoder velocity
             (``pipeline.sim.loop``); None = the ideal loop.
         progress: called with the completed fraction in [0, 1] about every 1 %.
+        friction: a sigmoid joint friction (a published plant's), applied as a generalized
+            force held over each control period (``pipeline.sim.plant.SigmoidForce``).
+        effort_offset_nm, effort_noise_std_nm: the torque sensor's offset per joint and
+            Gaussian noise [N m] on what is recorded as effort (``tau_nm``); the noise has
+            its own stream of ``seed``, so it changes no other draw.
 
     Raises:
         SpecError: the robot has no dynamics.
@@ -237,6 +246,7 @@ def run_episode(
         speed_factor=divergence_speed_factor,
         sensor=sensor,
         actuator=actuator,
+        friction=SigmoidForce(friction, data) if friction is not None else None,
     )
 
     def run_rows(first: int, stop: int, *, final: bool) -> tuple[int, str]:
@@ -284,6 +294,7 @@ def run_episode(
     applied = tau_cmd if actuator is None else actuator.applied(tau_cmd, rows)
     np.clip(applied[:rows], -effort, effort, out=tau_app[:rows])
     saturated = np.abs(tau_cmd[:rows]) > effort
+    _torque_sensor(tau_app[:rows], effort_offset_nm, effort_noise_std_nm, seed=seed, rows=n)
     warnings = {
         name: int(count)
         for name, count in zip(_WARNING_NAMES, data.warning.number, strict=True)
@@ -297,7 +308,7 @@ def run_episode(
         "control_period_steps": int(control_period_steps),
         "control_period_s": float(control_dt_s),
         "integrator": integrator,
-        "friction_model": PLANT_FRICTION,
+        "friction_model": PLANT_FRICTION if friction is None else SIGMOID_FRICTION,
         "reference_duration_s": duration_s,
         "hold_s": float(hold_s),
         "preroll_s": float(preroll_s),
@@ -338,6 +349,21 @@ def run_episode(
         mujoco_warnings=warnings,
         extra=extra,
     )
+
+
+def _torque_sensor(
+    tau: F64, offset_nm: Sequence[float], noise_std_nm: float, *, seed: int, rows: int
+) -> None:
+    """Add the torque sensor's offset and noise to ``tau`` in place (what is recorded as
+    effort). The noise is drawn for all ``rows`` the episode may have, in one block of its
+    own stream, so where the episode ends does not change a row's noise."""
+    if len(offset_nm):
+        tau += np.asarray(offset_nm, dtype=np.float64)
+    if noise_std_nm > 0:
+        from pipeline.model.uncertainty import EFFORT_NOISE_STREAM
+
+        rng = np.random.default_rng([int(seed), EFFORT_NOISE_STREAM])
+        tau += rng.standard_normal((rows, tau.shape[1]))[: tau.shape[0]] * noise_std_nm
 
 
 def _no_progress(fraction: float) -> None:
@@ -447,6 +473,7 @@ class _Loop:
         speed_factor: float,
         sensor: Sensor | None = None,
         actuator: Actuator | None = None,
+        friction: SigmoidForce | None = None,
     ) -> None:
         self.spec = spec
         self.model = model
@@ -459,6 +486,7 @@ class _Loop:
         self.speed_limits = spec.velocity_limits
         self.sensor = sensor
         self.actuator = actuator
+        self.friction = friction
 
     def run(
         self,
@@ -511,7 +539,7 @@ class _Loop:
         next_tick = (first // tick + 1) * tick
         noisy = noise_qd is not None
         shape = (self.spec.dof,)
-        sensor, actuator = self.sensor, self.actuator
+        sensor, actuator, friction = self.sensor, self.actuator, self.friction
 
         def physics(steps: int) -> None:
             step(model, data, steps)
@@ -558,6 +586,8 @@ class _Loop:
             ctrl[:] = tc
             if k == last:
                 break
+            if friction is not None:  # held over the control period, as the torque
+                friction.apply(vt)
             if actuator is None:
                 step(model, data, nstep)
             else:

@@ -27,12 +27,14 @@ from pipeline.settings import (
     PlannerSettings,
     PlantSettings,
     ProtocolSettings,
+    SigmoidFrictionSettings,
     Uncertainty,
     per_joint,
 )
 
 if TYPE_CHECKING:
     from pipeline.model.mjcf import PlantOptions
+    from pipeline.model.uncertainty import DrawnFriction
     from pipeline.sim.result import EpisodeResult
 
 
@@ -164,27 +166,86 @@ def plant_friction(
     return pick("damping", spec.damping), pick("frictionloss", spec.frictionloss)
 
 
+def _per_joint(values: tuple[float, ...], dof: int, what: str) -> tuple[float, ...]:
+    from pipeline.errors import ModelError
+
+    if len(values) not in (1, dof):
+        raise ModelError(f"plant.{what}: expected 1 or {dof} values, got {len(values)}")
+    return values * dof if len(values) == 1 else values
+
+
+def scenario_friction(spec: RobotSpec, scenario: ScenarioParams, *, seed: int) -> DrawnFriction:
+    """The plant's joint friction, payload and torque-sensor offset ``scenario`` draws for
+    ``seed`` (:func:`pipeline.model.uncertainty.draw_friction`). A published profile's
+    friction is the plant's whole friction: the robot's own damping and frictionloss do
+    not apply (the scenario's ``plant.damping``, ``plant.frictionloss`` still add theirs).
+
+    Raises:
+        ModelError: a per-joint list of the wrong length, a transition spread without a
+            sigmoid.
+    """
+    from pipeline.model.published import PROFILES
+    from pipeline.model.uncertainty import draw_friction
+
+    p = scenario.plant
+    profile = PROFILES[p.profile] if p.profile else None
+    if profile is None:
+        damping, frictionloss = plant_friction(spec, scenario)
+    else:
+        damping, frictionloss = param_values(p.damping), param_values(p.frictionloss)
+    return draw_friction(
+        Uncertainty(**p.uncertainty.model_dump()),
+        damping=_per_joint(damping, spec.dof, "damping"),
+        frictionloss=_per_joint(frictionloss, spec.dof, "frictionloss"),
+        sigmoid=profile.friction if profile else None,
+        payload_kg=p.payload_kg,
+        effort_offset_nm=p.effort_offset_nm,
+        seed=seed,
+    )
+
+
+def plant_run_options(spec: RobotSpec, scenario: ScenarioParams, *, seed: int) -> dict[str, Any]:
+    """``run_episode``'s keyword arguments for what the plant adds beyond MuJoCo's model:
+    the sigmoid friction and the torque sensor's offset and noise."""
+    drawn = scenario_friction(spec, scenario, seed=seed)
+    return {
+        "friction": drawn.sigmoid,
+        "effort_offset_nm": drawn.effort_offset_nm,
+        "effort_noise_std_nm": scenario.plant.effort_noise_std_nm,
+    }
+
+
 def draw_scenario_plant(
-    spec: RobotSpec, scenario: ScenarioParams, *, seed: int
+    spec: RobotSpec, scenario: ScenarioParams, *, seed: int, where: str = "plant.profile"
 ) -> tuple[RobotSpec, PlantOptions, Uncertainty]:
     """The plant ``scenario`` draws for ``seed``, whatever motion is recorded on it.
 
     Returns:
-        The plant's robot (drawn links, armature plus the scenario's extra armature), its
-        MuJoCo options (damping, friction, payload) and the spread the links were drawn from.
+        The plant's robot (the robot's or a published profile's links, drawn; armature
+        plus the scenario's extra armature), its MuJoCo options (damping, friction,
+        payload, drawn) and the spread the links were drawn from.
+
+    Raises:
+        ModelError: a profile that does not describe the robot (``where`` names the field).
     """
     from pipeline.model.mjcf import PlantOptions
+    from pipeline.model.published import profile_plant
     from pipeline.model.uncertainty import draw_plant, link_inertials, with_plant
 
     p = scenario.plant
     uncertainty = Uncertainty(**p.uncertainty.model_dump())
-    drawn = draw_plant(spec, uncertainty, seed=seed)
+    base = profile_plant(spec, p.profile, where=where) if p.profile else spec
+    drawn = draw_plant(base, uncertainty, seed=seed)
     extra = per_joint(param_values(p.armature), spec.dof)
     plant_spec = with_plant(
         drawn, link_inertials(drawn), [a + x for a, x in zip(drawn.armature, extra, strict=True)]
     )
-    damping, frictionloss = plant_friction(spec, scenario)
-    plant = PlantOptions(damping=damping, frictionloss=frictionloss, payload_kg=p.payload_kg)
+    friction = scenario_friction(spec, scenario, seed=seed)
+    plant = PlantOptions(
+        damping=friction.damping,
+        frictionloss=friction.frictionloss,
+        payload_kg=friction.payload_kg,
+    )
     return plant_spec, plant, uncertainty
 
 
@@ -199,14 +260,38 @@ def _plant_is_exact(spec: RobotSpec, plant_spec: RobotSpec, scenario: ScenarioPa
     p = scenario.plant
     zero = (
         *plant_friction(plant_spec, scenario),
-        (p.payload_kg,),
+        (p.payload_kg, p.uncertainty.payload_kg),
         (p.position_noise_std_rad, p.velocity_noise_std_rad_s),
+        (p.effort_offset_nm, p.effort_noise_std_nm),
     )
     return (
         plant_spec == spec
+        and p.profile is None
         and all(x == 0 for group in zero for x in group)
         and loop_settings(scenario).ideal
     )
+
+
+def _published(scenario: ScenarioParams, drawn: DrawnFriction) -> dict[str, Any]:
+    """The plant settings a published profile or a torque sensor adds (none: nothing, so
+    the settings of plants without them read as before)."""
+    from pipeline.model.published import PROFILES
+
+    p = scenario.plant
+    out: dict[str, Any] = {}
+    if p.profile:
+        out["profile"] = f"{p.profile}: {PROFILES[p.profile].source}"
+    if drawn.sigmoid is not None:
+        out["sigmoid_friction"] = SigmoidFrictionSettings(
+            phi1_nm=drawn.sigmoid.phi1_nm,
+            phi2_s_rad=drawn.sigmoid.phi2_s_rad,
+            phi3_rad_s=drawn.sigmoid.phi3_rad_s,
+        )
+    if drawn.effort_offset_nm:
+        out["effort_offset_nm"] = drawn.effort_offset_nm
+    if p.effort_noise_std_nm:
+        out["effort_noise_std_nm"] = p.effort_noise_std_nm
+    return out
 
 
 def episode_settings(
@@ -243,16 +328,16 @@ def episode_settings(
     p = scenario.plant
     k0 = int(result.extra["motion_start_row"])
     at_start = min(k0, len(result.stamp_ns) - 1)
-    damping, frictionloss = plant_friction(spec, scenario)
+    drawn = scenario_friction(spec, scenario, seed=episode.seed)
     design, recorded_gains = GainDesign.split_from(gains)
     plant = PlantSettings(
         exact=_plant_is_exact(nominal, plant_spec, scenario),
         links=link_inertials(plant_spec),
         armature=tuple(float(a) for a in plant_spec.armature),
         nominal_armature=tuple(float(a) for a in nominal.armature),
-        damping=per_joint(damping, spec.dof),
-        frictionloss=per_joint(frictionloss, spec.dof),
-        payload_kg=p.payload_kg,
+        damping=drawn.damping,
+        frictionloss=drawn.frictionloss,
+        payload_kg=drawn.payload_kg,
         position_noise_std_rad=p.position_noise_std_rad,
         velocity_noise_std_rad_s=p.velocity_noise_std_rad_s,
         uncertainty=uncertainty,
@@ -260,6 +345,7 @@ def episode_settings(
         control_period_s=sim.physics_dt_s * sim.control_period_steps,
         integrator=str(result.extra["integrator"]),
         friction_model=str(result.extra["friction_model"]),
+        **_published(scenario, drawn),
     )
     # planning_time_s is wall clock: printed, never recorded (recordings are byte-reproducible)
     return EpisodeSettings(

@@ -30,6 +30,7 @@ from pipeline.stages.assemble import (
     draw_scenario_plant,
     episode_settings,
     loop_settings,
+    plant_run_options,
     scenario_spec,
 )
 from pipeline.stages.plans import ScenarioPlan, obstacle_boxes
@@ -169,7 +170,10 @@ def _simulate(
 
     scenario, sim = episode.scenario, episode.sim
     p = scenario.plant
-    plant_spec, plant, uncertainty = draw_scenario_plant(spec, scenario, seed=episode.seed)
+    where = f"scenarios.{episode.scenario_name}.plant.profile"
+    plant_spec, plant, uncertainty = draw_scenario_plant(
+        spec, scenario, seed=episode.seed, where=where
+    )
     result = run_episode(
         spec,
         reference=trajectory,
@@ -188,6 +192,7 @@ def _simulate(
         loop=loop_settings(scenario),
         seed=episode.seed,
         progress=progress,
+        **plant_run_options(spec, scenario, seed=episode.seed),
     )
     return result, controller.gains_in_effect(), (plant_spec, uncertainty)
 

@@ -82,6 +82,7 @@ def validate_episodes(params: Params, episodes: Sequence[Episode]) -> None:
                     f"expected 1 or {spec.dof} values, got {len(value)}"
                 )
         _check_loop(params, episode, where)
+        _check_profile(params, spec, scenario, where)
         build = functools.partial(
             make_controller,
             episode.controller.type,
@@ -103,6 +104,23 @@ def validate_episodes(params: Params, episodes: Sequence[Episode]) -> None:
                     if str(err).startswith(params.source):
                         raise
                     raise ParamsError(f"{where_type}.type: {err}") from err
+
+
+def _check_profile(params: Params, spec: Any, scenario: Any, where: str) -> None:
+    """A published plant profile that does not describe the robot, or a friction spread
+    the plant's friction law lacks: refused before any work (one line)."""
+    from pipeline.errors import ModelError
+    from pipeline.stages.assemble import draw_scenario_plant
+
+    if not scenario.plant.profile and not scenario.plant.uncertainty.transition_rel:
+        return
+    try:
+        draw_scenario_plant(spec, scenario, seed=0, where=f"{where}.plant.profile")
+    except ModelError as err:
+        message = str(err)
+        if message.startswith("plant."):  # a draw's field: say whose
+            message = f"{where}.{message}"
+        raise ParamsError(f"{params.source}: {message}") from err
 
 
 def _probe_plugin(name: str, build: Callable[[], object]) -> None:
