@@ -23,20 +23,21 @@ if TYPE_CHECKING:
         make_controller,
     )
 
+# Each name's module, by its full import path (what make sync's import scan follows).
 _WHERE = {
-    "DEFAULT_OMEGA_N_RAD_S": "base",
-    "DEFAULT_ZETA": "base",
-    "Controller": "base",
-    "GainSpec": "base",
-    "CONTROLLERS": "registry",
-    "ControllerEntry": "registry",
-    "UnknownControllerError": "registry",
-    "controller_entry": "registry",
-    "controller_names": "registry",
-    "controller_origin": "registry",
-    "default_gains": "registry",
-    "installed_controllers": "registry",
-    "make_controller": "registry",
+    "DEFAULT_OMEGA_N_RAD_S": "pipeline.control.base",
+    "DEFAULT_ZETA": "pipeline.control.base",
+    "Controller": "pipeline.control.base",
+    "GainSpec": "pipeline.control.base",
+    "CONTROLLERS": "pipeline.control.registry",
+    "ControllerEntry": "pipeline.control.registry",
+    "UnknownControllerError": "pipeline.control.registry",
+    "controller_entry": "pipeline.control.registry",
+    "controller_names": "pipeline.control.registry",
+    "controller_origin": "pipeline.control.registry",
+    "default_gains": "pipeline.control.registry",
+    "installed_controllers": "pipeline.control.registry",
+    "make_controller": "pipeline.control.registry",
 }
 
 __all__ = [
@@ -58,5 +59,5 @@ __all__ = [
 
 def __getattr__(name: str) -> Any:
     if name in _WHERE:
-        return getattr(importlib.import_module(f"pipeline.control.{_WHERE[name]}"), name)
+        return getattr(importlib.import_module(_WHERE[name]), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
