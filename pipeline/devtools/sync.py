@@ -6,7 +6,9 @@ equal by hand.
 - ``BUILTIN_INFO`` in pipeline/control/info.py: the built-in controllers' declared facts,
   read from their classes (the report reads this table and never imports a controller);
 - ``.dvc/plots/controller_joint.json``: the built-in controllers' colours;
-- docs/report.md's metric definitions: the metric catalog's.
+- docs/report.md's metric definitions: the metric catalog's;
+- the reader roles in ``pipeline report --topic``'s help (pipeline/cli/report.py):
+  :data:`pipeline.log.topics.ROLES`.
 
 ``python -m pipeline.devtools.sync`` writes what is stale; ``--check`` only lists it (exit 1).
 The tests run :func:`generated` in memory and compare.
@@ -211,12 +213,22 @@ def report_md() -> str:
     return "".join([*rows[: k0[0] + 1], *body, *rows[k1[0] :]])
 
 
+def cli_report_py() -> str:
+    """pipeline/cli/report.py with the reader roles (``--topic`` help) in its block."""
+    from pipeline.log.topics import ROLES
+
+    path = PACKAGE / "cli" / "report.py"
+    lines = [json.dumps(", ".join(ROLES))]
+    return _replace_block(path.read_text(encoding="utf-8"), "reader roles", lines, where=str(path))
+
+
 GENERATORS: dict[str, Callable[[], str]] = {
     "pipeline/control/info.py": info_py,
     "pipeline/stages/provenance.py": provenance_py,
     "dvc.yaml": dvc_yaml,
     ".dvc/plots/controller_joint.json": plot_template_json,
     "docs/report.md": report_md,
+    "pipeline/cli/report.py": cli_report_py,
 }
 """Each generated file (relative to the repository), and what makes its text."""
 
