@@ -62,6 +62,14 @@ def info_of(name: str, obj: object) -> ControllerInfo | None:
     gains = getattr(obj, "gain_specs", None) or tuple(getattr(factory, "GAINS", ()))
     color = getattr(obj, "color", None) if factory is not obj else None
     color = color if color is not None else getattr(factory, "COLOR", None)
+    if not gains or not all(hasattr(g, "key") for g in gains):
+        return None  # not a controller the registry would accept
+    if color is not None and not (
+        isinstance(color, tuple | list)
+        and len(color) == 3
+        and all(isinstance(c, int) and 0 <= c <= 255 for c in color)
+    ):
+        return None
     offset = str(getattr(factory, "KIT_STEADY_OFFSET", ""))
     doc = inspect.getdoc(factory) or ""
     summary = str(getattr(obj, "description", "") or getattr(factory, "DESCRIPTION", ""))

@@ -61,7 +61,7 @@ class ControllerEntry:
         return self.description or (doc.splitlines()[0] if doc else "")
 
 
-def _class_entry(cls: Any) -> ControllerEntry:
+def controller_entry_of_class(cls: Any) -> ControllerEntry:
     """The entry of a controller class, from what it declares (:mod:`pipeline.control.base`)."""
     color = getattr(cls, "COLOR", None)
     return ControllerEntry(
@@ -86,7 +86,7 @@ BUILTIN_CLASSES: tuple[type, ...] = (
 )
 
 CONTROLLERS: dict[str, ControllerEntry] = {
-    str(getattr(cls, "NAME")): _class_entry(cls)  # noqa: B009 - every built-in declares NAME
+    str(getattr(cls, "NAME")): controller_entry_of_class(cls)  # noqa: B009 - every built-in declares NAME
     for cls in BUILTIN_CLASSES
 }
 """The built-in controllers, by name (their colours are matplotlib's tab10)."""
@@ -145,7 +145,7 @@ def _as_entry(obj: object, name: str, where: str) -> ControllerEntry:
     if isinstance(obj, ControllerEntry):
         entry = obj
     elif callable(obj) and hasattr(obj, "GAINS") and callable(getattr(obj, "DEFAULT_GAINS", None)):
-        entry = _class_entry(obj)
+        entry = controller_entry_of_class(obj)
     else:
         raise UnknownControllerError(
             f"{where}controller '{name}' is not a controller: expected a ControllerEntry or a "

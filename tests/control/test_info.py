@@ -8,8 +8,10 @@ import sys
 import numpy as np
 import pytest
 
-from pipeline.control import controller_names, default_gains, make_controller
-from pipeline.control.info import builtin_info, controller_info
+from pipeline.control import controller_names, default_gains, make_controller, pd_gravity
+from pipeline.control.base import NominalPDController
+from pipeline.control.info import builtin_info, controller_info, info_of
+from pipeline.control.registry import controller_entry_of_class
 from pipeline.model.uncertainty import draw_plant
 from pipeline.settings import Uncertainty
 
@@ -55,3 +57,26 @@ def test_reading_the_records_imports_no_controller_nor_physics_library() -> None
         "if m in sys.modules]; assert not bad, bad"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+class _Law(NominalPDController):
+    """A law as a plug-in writes it."""
+
+    NAME = "law"
+    DEFAULT_GAINS = staticmethod(pd_gravity.default_gains)
+    COLOR = (1, 2, 3)
+    KIT_STEADY_OFFSET = "no gravity term"
+
+
+class _BadColour(_Law):
+    COLOR = (300, 0, 0)
+
+
+def test_a_plugin_class_is_read_as_the_registry_reads_it() -> None:
+    info = info_of("law", _Law)
+    assert info is not None and info.color == (1, 2, 3) and not info.holds_gravity
+    assert info.uses_nominal_model and info.summary == "A law as a plug-in writes it."
+    assert info == info_of("law", controller_entry_of_class(_Law))
+    # what the registry refuses has no record (no colour, no stiffness gains)
+    assert info_of("bad", _BadColour) is None
+    assert info_of("bad", object()) is None
