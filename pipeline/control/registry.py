@@ -86,7 +86,7 @@ BUILTIN_CLASSES: tuple[type, ...] = (
 )
 
 CONTROLLERS: dict[str, ControllerEntry] = {
-    str(getattr(cls, "NAME")): controller_entry_of_class(cls)  # noqa: B009 - every built-in declares NAME
+    str(getattr(cls, "NAME")): controller_entry_of_class(cls)  # noqa: B009 - a built-in has one
     for cls in BUILTIN_CLASSES
 }
 """The built-in controllers, by name (their colours are matplotlib's tab10)."""
