@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 # dvc runs stage commands (`pipeline ...`) through the shell: put the venv first on PATH
 RUN    := PATH="$(CURDIR)/$(BIN):$$PATH"
 
-.PHONY: demo test clean
+.PHONY: demo test clean sync
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -29,3 +29,9 @@ test: $(STAMP)
 
 clean:
 	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache
+
+# Write the files generated from the code (dvc.yaml's deps, RECORD_CODE, the built-in
+# controllers' facts, the DVC plot colours, docs/report.md's metric definitions);
+# `make sync` after adding a module, a controller or a metric. The tests check they are current.
+sync: $(STAMP)
+	$(BIN)/python -m pipeline.devtools.sync

@@ -1,7 +1,9 @@
 """dvc.yaml's deps must cover every pipeline module a stage's command really loads.
 
-Otherwise DVC would skip a stage whose code changed. Each stage runs for real in a
-fresh interpreter that prints the pipeline modules it imported.
+Otherwise DVC would skip a stage whose code changed. `make sync` writes the deps from the
+commands' import closure, found by scanning the source (pipeline/devtools/deps.py); here
+each stage runs for real in a fresh interpreter that prints the pipeline modules it
+imported: a cross-check of the scan.
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ import polars as pl
 
 from pipeline.analysis.catalog import SETTLING_TOLERANCE_RAD, not_settled
 from pipeline.analysis.protocol import ProtocolView
-from pipeline.control.registry import stiffness_gains
+from pipeline.control.info import stiffness_gains
 from pipeline.log.reader import Recording
 from pipeline.log.robot_facts import robot_facts
 from pipeline.robots.spec import RobotSpec

@@ -35,7 +35,6 @@ from pipeline.errors import ReportError
 from pipeline.log.reader import Recording
 from pipeline.model import transforms as tf
 from pipeline.model.chain import FLANGE, joint_motions
-from pipeline.model.urdf import pinocchio_model
 from pipeline.robots.spec import JointSpec, RobotSpec
 
 # The pseudo-joint the task-space rows of a metrics frame carry in their ``joint`` column.
@@ -108,6 +107,10 @@ class _Chain:
 
 @functools.lru_cache(maxsize=64)
 def _chain(spec: RobotSpec) -> _Chain:
+    # Pinocchio loads here, for a recording with a robot model: importing the analysis (and
+    # the report) loads no physics library (tests/report/test_report_imports_no_engine.py)
+    from pipeline.model.urdf import pinocchio_model
+
     model = pinocchio_model(spec)
     by_name = {j.name: j for j in spec.joints}
     names = [str(model.names[k]) for k in range(1, model.njoints)]

@@ -13,6 +13,14 @@ from pipeline.cli.root import app, console
 from pipeline.constants import ERROR_FORMAT
 from pipeline.errors import PipelineError
 
+# pipeline.log.topics.ROLES, written here by `make sync` (importing it would load the bag
+# code on every `pipeline` command)
+READER_ROLES = (
+    # begin generated: reader roles (make sync)
+    "joint_states, controller_state, planned_trajectory, robot_description, ground_truth"
+    # end generated: reader roles
+)
+
 
 def _labels(items: list[str]) -> dict[str, str]:
     """``--label BAG=CONTROLLER`` items as a dict (a one-line error for a bad one)."""
@@ -60,9 +68,8 @@ def report_cmd(
         list[str] | None,
         typer.Option(
             "--topic",
-            help="ROLE=/name: the topic serving a role (joint_states, controller_state, "
-            "planned_trajectory, robot_description, ground_truth) when it is neither ours "
-            "nor the only one of its message type. Repeatable.",
+            help=f"ROLE=/name: the topic serving a role ({READER_ROLES}) when it is neither "
+            "ours nor the only one of its message type. Repeatable.",
         ),
     ] = None,
     controller: Annotated[

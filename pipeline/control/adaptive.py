@@ -117,6 +117,8 @@ class AdaptiveController:
     """Slotine–Li adaptive control with a projected gradient update of ``theta_hat``."""
 
     NAME = NAME
+    COLOR = (227, 119, 194)
+    USES_NOMINAL_MODEL = True
     GAINS = GAINS
     REPORTS = ("estimates",)  # gains_in_effect() also holds the final estimates (not a gain)
     DEFAULT_GAINS = staticmethod(default_gains)

@@ -30,6 +30,18 @@ DEFAULT_ZETA = 1.0
 """Closed-loop damping ratio of the default gains (critically damped)."""
 
 
+# What a controller class declares for the rest of the pipeline, read from the class by
+# pipeline.control.info (the report reads a generated table of the built-ins' facts and
+# never imports a controller). NAME, GAINS and DEFAULT_GAINS are required; the others
+# are optional, with these defaults:
+#   COLOR = None               its plot colour, (R, G, B) bytes; None: the next free one.
+#   USES_NOMINAL_MODEL = False compute() evaluates the nominal rigid-body model.
+#   KIT_STEADY_OFFSET = ""     why, at its default gains, it does not hold the arm still
+#                              against gravity (a steady offset g / kp); "": it does.
+#   REPORTS = ()               keys of gains_in_effect() that are not gains.
+#   DESCRIPTION = ""           one line; "": the first line of the class docstring.
+
+
 class Controller(Protocol):
     """A joint-space torque controller.
 
@@ -424,6 +436,8 @@ class NominalPDController:
     NAME: ClassVar[str]
     GAINS: ClassVar[tuple[GainSpec, ...]] = (GainSpec("kp"), GainSpec("kd"))
     DEFAULT_GAINS: ClassVar[Callable[..., dict[str, Any]]]
+    COLOR: ClassVar[tuple[int, int, int] | None] = None
+    USES_NOMINAL_MODEL: ClassVar[bool] = True
 
     def __init__(
         self, spec: RobotSpec, gains: Mapping[str, Any] | None = None, *, where: str = "gains"

@@ -56,6 +56,7 @@ class ComputedTorqueController(NominalPDController):
     """Model-based CTC; the model is always the nominal one built from the YAML."""
 
     NAME = NAME
+    COLOR = (255, 127, 14)
     GAINS = GAINS
     DEFAULT_GAINS = staticmethod(default_gains)
 

@@ -91,6 +91,7 @@ class ComputedTorquePidController(NominalPDController):
     """CTC whose outer loop is a PID with a clamped integral state."""
 
     NAME = NAME
+    COLOR = (44, 160, 44)
     GAINS = GAINS
     DEFAULT_GAINS = staticmethod(default_gains)
 

@@ -99,6 +99,8 @@ class PassivityController:
     """Slotine–Li passivity-based tracking on the nominal model (the YAML robot)."""
 
     NAME = NAME
+    COLOR = (140, 86, 75)
+    USES_NOMINAL_MODEL = True
     GAINS = GAINS
     DEFAULT_GAINS = staticmethod(default_gains)
 

@@ -48,6 +48,7 @@ class PdGravityController(NominalPDController):
     """Joint PD plus the nominal gravity torque ``g_n(q)``."""
 
     NAME = NAME
+    COLOR = (148, 103, 189)
     GAINS = GAINS
     DEFAULT_GAINS = staticmethod(default_gains)
 

@@ -86,6 +86,8 @@ class PidController:
     """
 
     NAME: ClassVar[str] = NAME
+    COLOR: ClassVar[tuple[int, int, int] | None] = (31, 119, 180)
+    USES_NOMINAL_MODEL: ClassVar[bool] = False
     GAINS: ClassVar[tuple[GainSpec, ...]] = GAINS
     DEFAULT_GAINS: ClassVar[Callable[..., dict[str, Any]]] = staticmethod(default_gains)
 

@@ -63,6 +63,8 @@ class PidFeedForwardController(pid.PidController):
     """Effort PID + nominal inverse dynamics of the reference (Jazzy JTC with efforts)."""
 
     NAME = NAME
+    COLOR = (214, 39, 40)
+    USES_NOMINAL_MODEL = True
     GAINS = GAINS
     DEFAULT_GAINS = staticmethod(default_gains)
 

@@ -82,6 +82,8 @@ class PidHumbleController:
     """Humble JTC + control_toolbox 3.x ``Pid``: no anti-windup, output-clamped integral."""
 
     NAME = NAME
+    COLOR = (23, 190, 207)
+    USES_NOMINAL_MODEL = False
     GAINS = GAINS
     REPORTS = ("warning",)  # gains_in_effect() says when the integral is off (not a gain)
     KIT_STEADY_OFFSET = (

@@ -19,14 +19,10 @@ from numpy.typing import ArrayLike
 
 from pipeline.control import adaptive, ctc, ctc_pid, passivity, pd_gravity, pid, pid_ff, pid_humble
 from pipeline.control.base import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, Controller, GainSpec
+from pipeline.control.info import GROUP, RGB
 from pipeline.errors import ParamsError, PipelineError
 from pipeline.plugins import installed_names, resolve
 from pipeline.robots.spec import RobotSpec
-
-GROUP = "armlab.controllers"
-"""Entry-point group of installed controllers."""
-
-RGB = tuple[int, int, int]
 
 
 class UnknownControllerError(ParamsError):
@@ -65,31 +61,35 @@ class ControllerEntry:
         return self.description or (doc.splitlines()[0] if doc else "")
 
 
+def controller_entry_of_class(cls: Any) -> ControllerEntry:
+    """The entry of a controller class, from what it declares (:mod:`pipeline.control.base`)."""
+    color = getattr(cls, "COLOR", None)
+    return ControllerEntry(
+        cls,
+        cls.DEFAULT_GAINS,
+        gains=tuple(cls.GAINS),
+        color=tuple(color) if color is not None else None,
+        description=str(getattr(cls, "DESCRIPTION", "")),
+    )
+
+
+# One line per built-in controller: its class (which declares its name, gains, colour, ...).
+BUILTIN_CLASSES: tuple[type, ...] = (
+    pid.PidController,
+    ctc.ComputedTorqueController,
+    ctc_pid.ComputedTorquePidController,
+    pd_gravity.PdGravityController,
+    pid_ff.PidFeedForwardController,
+    pid_humble.PidHumbleController,
+    passivity.PassivityController,
+    adaptive.AdaptiveController,
+)
+
 CONTROLLERS: dict[str, ControllerEntry] = {
-    pid.NAME: ControllerEntry(pid.PidController, pid.default_gains, color=(31, 119, 180)),
-    ctc.NAME: ControllerEntry(
-        ctc.ComputedTorqueController, ctc.default_gains, color=(255, 127, 14)
-    ),
-    ctc_pid.NAME: ControllerEntry(
-        ctc_pid.ComputedTorquePidController, ctc_pid.default_gains, color=(44, 160, 44)
-    ),
-    pd_gravity.NAME: ControllerEntry(
-        pd_gravity.PdGravityController, pd_gravity.default_gains, color=(148, 103, 189)
-    ),
-    pid_ff.NAME: ControllerEntry(
-        pid_ff.PidFeedForwardController, pid_ff.default_gains, color=(214, 39, 40)
-    ),
-    pid_humble.NAME: ControllerEntry(
-        pid_humble.PidHumbleController, pid_humble.default_gains, color=(23, 190, 207)
-    ),
-    passivity.NAME: ControllerEntry(
-        passivity.PassivityController, passivity.default_gains, color=(140, 86, 75)
-    ),
-    adaptive.NAME: ControllerEntry(
-        adaptive.AdaptiveController, adaptive.default_gains, color=(227, 119, 194)
-    ),
+    str(getattr(cls, "NAME")): controller_entry_of_class(cls)  # noqa: B009 - a built-in has one
+    for cls in BUILTIN_CLASSES
 }
-"""The built-in controllers (colours: matplotlib's tab10, as ``.dvc/plots/`` lists them)."""
+"""The built-in controllers, by name (their colours are matplotlib's tab10)."""
 
 
 def controller_names() -> tuple[str, ...]:
@@ -140,33 +140,12 @@ def known_entry(name: str) -> ControllerEntry | None:
         return None
 
 
-def stiffness_gains(name: str) -> tuple[str, ...] | None:
-    """Keys of controller ``name``'s gains that are joint stiffnesses [N m/rad]; None
-    when the name is no built-in or installed entry point (see :func:`known_entry`)."""
-    entry = known_entry(name)
-    return None if entry is None else tuple(g.key for g in entry.gain_specs if g.stiffness)
-
-
-def declared_color(name: str) -> RGB | None:
-    """Controller ``name``'s own colour, if it is a built-in or an installed entry point
-    that declares one (see :func:`known_entry`)."""
-    entry = known_entry(name)
-    return None if entry is None else entry.color
-
-
 def _as_entry(obj: object, name: str, where: str) -> ControllerEntry:
     """A plug-in's object as an entry: an entry itself, or a class declaring its gains."""
     if isinstance(obj, ControllerEntry):
         entry = obj
     elif callable(obj) and hasattr(obj, "GAINS") and callable(getattr(obj, "DEFAULT_GAINS", None)):
-        color = getattr(obj, "COLOR", None)
-        entry = ControllerEntry(
-            obj,
-            getattr(obj, "DEFAULT_GAINS"),  # noqa: B009 - a plug-in class, checked above
-            gains=tuple(getattr(obj, "GAINS")),  # noqa: B009
-            color=tuple(color) if color is not None else None,
-            description=str(getattr(obj, "DESCRIPTION", "")),
-        )
+        entry = controller_entry_of_class(obj)
     else:
         raise UnknownControllerError(
             f"{where}controller '{name}' is not a controller: expected a ControllerEntry or a "

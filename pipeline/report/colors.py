@@ -1,15 +1,16 @@
 """One colour per controller, the same in every figure, the .rrd and the DVC plots.
 
-A controller's entry may declare its colour (the built-ins do; the DVC plot template in
-``.dvc/plots/controller_joint.json`` lists the same ones, a test checks they agree);
-any other controller name takes the next unused palette colour in sorted order.
+A controller class may declare its colour (``COLOR``; the built-ins do, and ``make sync``
+writes them into the DVC plot template ``.dvc/plots/controller_joint.json``); any other
+controller name takes the next unused palette colour in sorted order. The colours are read
+from :mod:`pipeline.control.info` (no controller is imported).
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
 
-from pipeline.control.registry import CONTROLLERS, declared_color
+from pipeline.control.info import builtin_info, declared_color
 
 # Matplotlib's tab10, then tab20's light shades (the built-ins take most of tab10), as RGB.
 PALETTE: tuple[tuple[int, int, int], ...] = (
@@ -39,9 +40,9 @@ PALETTE_NAMES = (
     "light blue", "light orange", "light green", "light red", "light purple", "light brown",
     "light pink", "light olive", "light cyan",
 )  # fmt: skip
-# The built-in controllers' declared colours (pipeline.control.registry), by name.
+# The built-in controllers' declared colours, by name.
 FIXED: dict[str, tuple[int, int, int]] = {
-    name: entry.color for name, entry in sorted(CONTROLLERS.items()) if entry.color is not None
+    name: info.color for name, info in sorted(builtin_info().items()) if info.color is not None
 }
 # The reference: light grey, visible on Rerun's dark theme and on white.
 REFERENCE_RGB = (200, 200, 200)

@@ -16,7 +16,7 @@ from pipeline.control import (
     installed_controllers,
     make_controller,
 )
-from pipeline.control.registry import declared_color, stiffness_gains
+from pipeline.control.info import declared_color, stiffness_gains
 from pipeline.errors import KinematicsError, ParamsError
 from pipeline.kinematics.numeric import NumericLMSolver
 from pipeline.kinematics.registry import installed_solvers, make_solver, solver_factory

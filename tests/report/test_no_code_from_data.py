@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.control.registry import declared_color, known_entry, stiffness_gains
+from pipeline.control.info import declared_color, stiffness_gains
+from pipeline.control.registry import known_entry
 from tests.analysis.bagfactory import paper_like, write_bag
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -1,0 +1,1 @@
+"""Developer tools (``make sync``): nothing the pipeline's commands import."""
