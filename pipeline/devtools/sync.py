@@ -36,7 +36,7 @@ REPORT_COMMAND = "pipeline.cli.report"
 RECORD_STOPS = (
     "pipeline.stages.report",
     "pipeline.stages.partials",
-    "pipeline.log.direct",
+    "pipeline.log.whole",
     "pipeline.report",
 )
 _NOT_DATA = {"py.typed"}  # a marker for type checkers, never read by a command

@@ -52,6 +52,7 @@ RECORD_CODE = (
     "model/dh.py",
     "model/frames.py",
     "model/mjcf.py",
+    "model/published.py",
     "model/scene.py",
     "model/transforms.py",
     "model/uncertainty.py",
