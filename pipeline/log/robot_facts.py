@@ -7,18 +7,32 @@ analysis and the report ask for a robot's name, joints, model and effort limits.
 - **Foreign** (a bag we did not write, or ours without its robot): the robot name its
   URDF declares (:mod:`pipeline.log.labels`), the joints of ``/joint_states`` and the
   effort limits its ``/robot_description`` URDF declares; never a built-in robot of the
-  same name (a URDF that names its robot ``ur5`` is not our ur5).
+  same name (a URDF that names its robot ``ur5`` is not our ur5). The robot itself (and so
+  the TCP) is that URDF's, loaded as the URDF loader loads a file (the chain to its single
+  leaf; the flange ``tool0`` where the URDF has one fixed to that leaf, else the leaf link),
+  its visual and collision elements left out (kinematics and dynamics need no mesh);
+  :attr:`RobotFacts.note` says which description and which frame, or why there is none.
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import re
+import tempfile
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Literal
+from xml.etree import ElementTree
 
+from pipeline.errors import SpecError
 from pipeline.log.recording import Recording
 from pipeline.model.urdf_xml import urdf_effort_limits
 from pipeline.robots import RobotSpec, builtin_robot_names, load_spec
+
+DESCRIPTION_SOURCE = "/robot_description"
+"""The ``source`` of a robot built from a bag's ``/robot_description``."""
 
 __all__ = ["RobotFacts", "robot_facts"]
 
@@ -37,6 +51,8 @@ class RobotFacts:
         effort_limits_nm: effort limit per joint [N m] (None where unknown).
         source: where ``spec`` and the limits come from: our recorded ``settings``, the
             ``builtin`` robot of the recorded name, or the bag's ``urdf``.
+        note: for a robot from the bag's ``/robot_description``: which description and
+            which frame the TCP is, or why the description gives no robot ("" otherwise).
     """
 
     name: str
@@ -44,6 +60,7 @@ class RobotFacts:
     spec: RobotSpec | None
     effort_limits_nm: Mapping[str, float | None]
     source: FactsSource
+    note: str = ""
 
 
 def robot_facts(rec: Recording) -> RobotFacts:
@@ -56,7 +73,8 @@ def robot_facts(rec: Recording) -> RobotFacts:
         for name, urdf_limit in urdf_effort_limits(rec.robot_description or "").items():
             if name in limits:
                 limits[name] = urdf_limit
-        return RobotFacts(rec.robot, rec.joint_names, spec, limits, "urdf")
+        described, note = described_robot(rec.robot_description or "")
+        return RobotFacts(rec.robot, rec.joint_names, described, limits, "urdf", note)
     for j in spec.joints:
         if j.name in limits:
             limits[j.name] = j.limits.effort
@@ -74,3 +92,36 @@ def _spec(rec: Recording) -> RobotSpec | None:
     if rec.robot in builtin_robot_names():
         return load_spec(rec.robot)
     return None
+
+
+@functools.lru_cache(maxsize=16)
+def described_robot(urdf: str) -> tuple[RobotSpec | None, str]:
+    """The robot a bag's ``/robot_description`` URDF describes, and a note saying which
+    description and which TCP frame (see the module doc); (None, why) when it describes
+    none the loader accepts, (None, "") without a description."""
+    if not urdf.strip():
+        return None, ""
+    digest = hashlib.sha256(urdf.encode("utf-8")).hexdigest()
+    # kinematics and dynamics need no mesh: a foreign description's meshes are not here
+    text = re.sub(r"<(visual|collision)\b.*?</\1\s*>|<(visual|collision)\b[^>]*/>", "", urdf,
+                  flags=re.S)  # fmt: skip
+    with tempfile.TemporaryDirectory(prefix="armlab-description-") as folder:
+        path = Path(folder) / "robot_description.urdf"
+        path.write_text(text, encoding="utf-8")
+        try:
+            spec = load_spec(path)
+        except SpecError as err:
+            why = str(err).replace(str(path), DESCRIPTION_SOURCE)
+            return None, f"no robot from the bag's {DESCRIPTION_SOURCE} ({why})"
+    spec = replace(spec, source=DESCRIPTION_SOURCE, source_sha256=digest, loaded_from="",
+                   description=urdf)  # fmt: skip
+    try:
+        links = {el.get("name") for el in ElementTree.fromstring(text).iter("link")}
+    except ElementTree.ParseError:  # pragma: no cover - the loader parsed it
+        links = set()
+    tip = spec.joints[-1].link_name
+    frame = "tool0" if "tool0" in links and tip != "tool0" else tip
+    return spec, (
+        f"robot from the bag's {DESCRIPTION_SOURCE} (URDF '{spec.name}', SHA-256 "
+        f"{digest[:12]}...), TCP at frame '{frame}'"
+    )

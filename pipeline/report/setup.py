@@ -9,6 +9,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from pipeline.analysis.findings import nominal_plant
+from pipeline.log.robot_facts import robot_facts
 from pipeline.report import md
 from pipeline.report.inputs import ReportData
 from pipeline.robots.spec import RobotSpec
@@ -169,20 +170,23 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
         # The planner records the joint-space start/goal it used.
         return md.value(planner.get(key))
 
+    robot = s.robot if s is not None else None
+    # a bag without our settings: the robot its /robot_description describes, if any
+    described = robot_facts(first).note if s is None else ""
     obstacles = sc.get("obstacles") or []
     lines = [
         "### Setup",
         "",
         f"- Robot: **{first.robot}** ({len(first.joint_names)} joints: "
-        f"{', '.join(first.joint_names)}), {_robot_source(s.robot if s is not None else None)}.",
+        f"{', '.join(first.joint_names)}), {described or _robot_source(robot)}.",
         f"- Start [rad]: {pose('start')}; goal [rad]: {pose('goal')}; "
         f"obstacles: {len(obstacles) if isinstance(obstacles, list) else md.NA}; "
         f"hold after the motion: {md.value(_given(sc, 'hold_s'))} s"
         + (f" (in {first.episode}; settings differ, below)." if mixed else "."),
         f"- Planner: {_planner_line(planner)}.",
-        *_armature_lines(s.robot if s is not None else None, plant, sc),
-        *_friction_lines(s.robot if s is not None else None),
-        *_acceleration_lines(s.robot if s is not None else None),
+        *_armature_lines(robot, plant, sc),
+        *_friction_lines(robot),
+        *_acceleration_lines(robot),
         f"- Plant: {_settings_line(plant, _PLANT_KEYS, skip=('links',))}"
         + (
             "; link masses, centres of mass and inertias (and the armature above) drawn per "
