@@ -10,6 +10,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from pipeline.errors import SpecError
@@ -179,6 +180,11 @@ def test_a_urdf_robots_bag_is_reported_after_its_files_are_deleted(
     rec = read_recording(tmp_path / "rec" / "copied-ctc")
     assert rec.settings is not None and rec.settings.robot.source == str(urdf)
     assert rec.settings.robot.joints == recorded.joints
+    from pipeline.report.rrd_meshes import link_meshes
+
+    arm = link_meshes(rec.settings.robot, np.zeros((1, 7)))
+    assert arm is not None and arm.geometry == ()  # capsules, and the reason beside them
+    assert "link meshes not drawn (capsules instead)" in arm.note
     code, _, err = run_cli_out(
         ["report", "--recordings", str(tmp_path / "rec"), "--out", str(tmp_path / "rep")], capsys
     )
