@@ -74,6 +74,11 @@ def robot_facts(rec: Recording) -> RobotFacts:
             if name in limits:
                 limits[name] = urdf_limit
         described, note = described_robot(rec.robot_description or "")
+        if described is not None and described.joint_names != rec.joint_names:
+            note += (
+                f"; its chain's joints ({', '.join(described.joint_names)}) are not the "
+                f"bag's ({', '.join(rec.joint_names)}): task space n/a"
+            )
         return RobotFacts(rec.robot, rec.joint_names, described, limits, "urdf", note)
     for j in spec.joints:
         if j.name in limits:

@@ -103,6 +103,15 @@ def test_a_description_without_a_chain_gives_no_robot_and_says_why() -> None:
     assert described_robot("") == (None, "")
 
 
+def test_a_description_of_other_joints_says_task_space_is_na(tmp_path: Path) -> None:
+    path = tmp_path / "run"
+    write_external_bag(path, distro="jazzy", storage=StoragePlugin.MCAP,
+                       urdf=URDF.replace('"wrist"', '"wrist_roll"'))  # fmt: skip
+    facts = robot_facts(read_recording(path, ReadOptions(controller="jtc")))
+    assert facts.spec is not None and facts.note.endswith("task space n/a")
+    assert "(shoulder, elbow, wrist_roll) are not the bag's (shoulder, elbow, wrist)" in facts.note
+
+
 def test_without_tool0_the_tcp_is_the_leaf_link() -> None:
     text = URDF.replace('<link name="tool0"/>', "").split('<joint name="flange"')[0] + "</robot>"
     spec, note = described_robot(text)
