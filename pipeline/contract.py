@@ -34,6 +34,11 @@ def expected_error(what: str) -> PydanticCustomError:
     return PydanticCustomError("contract", "expected {expected}", {"expected": what})
 
 
+def stated_error(message: str) -> PydanticCustomError:
+    """An error whose message names its field and value itself (a nested parser's)."""
+    return PydanticCustomError("contract_stated", "{message}", {"message": message})
+
+
 def rule(expected: str, ok: Callable[[Any], bool], cast: Callable[[Any], Any] = lambda v: v) -> Any:
     """A leaf: ``cast(value)`` if ``ok(value)``, else "expected <expected>"."""
 
@@ -182,6 +187,8 @@ def _settings_error(err: _ValidationError, where: str) -> SettingsError:
     path = where
     for part in first["loc"]:
         path += f"[{part}]" if isinstance(part, int) else f"{'.' if path else ''}{part}"
+    if first["type"] == "contract_stated":
+        return SettingsError(str(first["msg"]))
     if first["type"] == "contract_missing":
         field_name = (first.get("ctx") or {}).get("field", "")
         path += f"{'.' if path else ''}{field_name}"

@@ -46,8 +46,12 @@ from pipeline.contract import (
     listed,
     plain,
     rule,
+    stated_error,
 )
 from pipeline.contract import SettingsError as SettingsError
+from pipeline.errors import SpecError
+from pipeline.robots.recorded import robot_from_dict, robot_to_dict
+from pipeline.robots.spec import RobotSpec
 
 SETTINGS_VERSION = 2
 LEGACY_FRICTION = "frictionloss at MuJoCo's default softness (creeps under the breakaway torque)"
@@ -69,6 +73,19 @@ def _status(value: Any) -> str:
 
 
 Status = Annotated[str, PlainValidator(_status)]
+
+
+def _robot(value: Any) -> RobotSpec:
+    if isinstance(value, RobotSpec):
+        return value
+    try:
+        return robot_from_dict(value)
+    except SpecError as err:
+        raise stated_error(str(err)) from err
+
+
+Robot = Annotated[RobotSpec, PlainValidator(_robot)]
+"""The robot by value (:mod:`pipeline.robots.recorded`): written by ``robot_to_dict``."""
 Version = Annotated[
     int, rule(f"settings version {SETTINGS_VERSION}", lambda v: v == SETTINGS_VERSION, int)
 ]
@@ -515,7 +532,8 @@ class EpisodeSettings(Contract):
 
     Attributes:
         episode: the episode key (the recording's name).
-        robot: the robot spec as plain data (YAML form, radians).
+        robot: the robot by value (:mod:`pipeline.robots.recorded`: a DH robot in its
+            YAML form, radians; any other with every spec field).
         scenario: the scenario's params as given (with ``name``).
         controller: the controller as run.
         plant: the plant as simulated.
@@ -536,7 +554,7 @@ class EpisodeSettings(Contract):
     _may_be_absent = frozenset({"loop"})  # bags written before issue 18: the ideal loop
 
     episode: Text
-    robot: Plain
+    robot: Robot
     scenario: Plain
     controller: ControllerSettings
     plant: PlantSettings
@@ -558,6 +576,7 @@ class EpisodeSettings(Contract):
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready plain data (lists, not tuples)."""
         out: dict[str, Any] = plain(asdict(self))
+        out["robot"] = robot_to_dict(self.robot)  # by value: its own form
         out["safety"] = self.safety.to_dict()  # with its derived keys, for readers of the JSON
         # issue 28's fields left out while unused: the same settings as before for plants
         # without them (absent reads back as the default)

@@ -16,7 +16,8 @@ the joint metrics use (true where recorded, else measured: the protocol's
 - orientation error [mrad]: the angle of ``R_ref^T R`` (atan2 of its sine and cosine parts,
   accurate for small angles, unlike arccos of the trace).
 
-A bag without our robot (a foreign bag) has no model: its task-space metrics are n/a.
+A bag without our robot (a foreign bag) takes it from its ``/robot_description`` URDF
+(:func:`pipeline.log.robot_facts.described_robot`); without one its task-space metrics are n/a.
 """
 
 from __future__ import annotations

@@ -236,3 +236,43 @@ def report_cmd(
         f"wrote {len(result.files)} file(s) to {result.out_dir}/ "
         "(report.md, metrics.json, recording.rrd)"
     )
+
+
+@app.command("layouts")
+def layouts_cmd(
+    bag: Annotated[
+        str, typer.Option("--bag", help="A recording (rosbag2 folder or .mcap), ours or not.")
+    ],
+    out: Annotated[
+        str, typer.Option("--out", "-o", help="Folder for foxglove.json and plotjuggler.xml.")
+    ],
+    topic: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--topic", help="ROLE=/name: the topic serving a role, as for `report`. Repeatable."
+        ),
+    ] = None,
+) -> None:
+    """Write the Foxglove and PlotJuggler layouts for one bag: a tab per joint of the bag
+    (its names, in its order), the plots of the topics it has (a plot on a topic it lacks,
+    such as a real robot's /ground_truth/joint_states, is left out and named)."""
+    from pathlib import Path
+
+    from pipeline.errors import RecordingError
+    from pipeline.log.layouts import bag_plots, write_layouts
+    from pipeline.log.reader import ReadOptions, read_recording
+
+    remaps = topic_remaps(topic or [])
+    rec = read_recording(Path(bag), ReadOptions(topics=remaps))
+    plots, missing = bag_plots(rec.topic_counts, remaps)
+    if not plots:
+        raise RecordingError(f"{bag}: none of the layouts' topics is in the bag")
+    for written in write_layouts(Path(out), rec.joint_names, plots):
+        console.print(str(written), highlight=False, soft_wrap=True)
+    if missing:
+        console.print(
+            f"left out (not in the bag; name a role's topic with --topic ROLE=/name): "
+            f"{', '.join(missing)}",
+            highlight=False,
+            soft_wrap=True,
+        )

@@ -20,6 +20,8 @@ TCP error (the report's ``recording.rrd`` has it) and ``/tf`` is the measured st
 
 ``python -m pipeline.log.layouts [FOLDER]`` writes ``foxglove.json`` and
 ``plotjuggler.xml`` (default folder ``layouts/``, what the repository ships, for the UR5);
+``pipeline layouts --bag B --out DIR`` writes them for one bag's joints and topics
+(:func:`bag_plots`; ours or any robot's);
 ``tests/log/test_layouts.py`` checks the shipped files are these, and that every topic,
 field and script input in them exists in a bag ``pipeline record`` writes.
 """
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 import json
 import sys
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
@@ -73,6 +76,8 @@ class Source:
 
     topic: str
     fields: tuple[str, ...]
+    type: str = ""
+    """The topic's message type ("": our topic of that name's, :data:`TOPICS`)."""
 
 
 @dataclass(frozen=True)
@@ -143,15 +148,55 @@ PLOTS = (
 )
 
 
-def differences() -> tuple[Difference, ...]:
-    """The :class:`Difference` values :data:`PLOTS` draw, in order, each once."""
-    found = [c.value for p in PLOTS for c in p.curves if isinstance(c.value, Difference)]
+def differences(plots: tuple[Plot, ...] = PLOTS) -> tuple[Difference, ...]:
+    """The :class:`Difference` values ``plots`` draw, in order, each once."""
+    found = [c.value for p in plots for c in p.curves if isinstance(c.value, Difference)]
     return tuple(dict.fromkeys(found))
 
 
-def _type(topic: str) -> str:
-    (row,) = [t for t in TOPICS if t.name == topic]
+def _type(source: Source) -> str:
+    if source.type:
+        return source.type
+    (row,) = [t for t in TOPICS if t.name == source.topic]
     return row.type
+
+
+def bag_plots(
+    present: Collection[str], remaps: Mapping[str, str] | None = None
+) -> tuple[tuple[Plot, ...], tuple[str, ...]]:
+    """:data:`PLOTS` for one bag, and our topics it lacks.
+
+    Args:
+        present: the bag's topics.
+        remaps: role -> the bag's topic (``--topic``, roles as the reader's), for a bag whose
+            topics are not ours (``/arm_controller/controller_state``).
+
+    A curve on a topic the bag lacks is left out (a :class:`Difference` when either input
+    is), and a plot left without curves.
+    """
+    by_name = {t.name: (remaps or {}).get(str(t.role), t.name) for t in TOPICS}
+    missing: dict[str, None] = {}
+
+    def mapped(source: Source) -> Source | None:
+        topic = by_name.get(source.topic, source.topic)
+        if topic not in present:
+            missing[source.topic] = None
+            return None
+        return Source(topic, source.fields, _type(source))
+
+    plots = []
+    for plot in PLOTS:
+        curves = []
+        for c in plot.curves:
+            if isinstance(c.value, Difference):
+                a, b = mapped(c.value.minuend), mapped(c.value.subtrahend)
+                if a is not None and b is not None:
+                    curves.append(Curve(Difference(c.value.name, a, b), c.label, c.color))
+            elif (source := mapped(c.value)) is not None:
+                curves.append(Curve(source, c.label, c.color))
+        if curves:
+            plots.append(Plot(plot.title, tuple(curves)))
+    return tuple(plots), tuple(missing)
 
 
 def script_topic(diff: Difference) -> str:
@@ -167,7 +212,7 @@ def foxglove_path(curve: Curve, index: int) -> str:
 
 
 def _pj_series(source: Source, index: int, joint: str) -> str:
-    if _type(source.topic) == TYPE_JOINT_STATE:
+    if _type(source) == TYPE_JOINT_STATE:
         (leaf,) = source.fields
         return f"{source.topic}/{joint}/{leaf}"
     return f"{source.topic}/{'/'.join(source.fields)}[{index}]"
@@ -254,13 +299,15 @@ def three_d_config() -> dict[str, object]:
     }
 
 
-def foxglove_layout(joints: tuple[str, ...] = UR5_JOINTS) -> dict[str, object]:
+def foxglove_layout(
+    joints: tuple[str, ...] = UR5_JOINTS, plots: tuple[Plot, ...] = PLOTS
+) -> dict[str, object]:
     """A Foxglove layout (Layouts → Import from file): a tab per joint, its plots stacked."""
     config: dict[str, object] = {}
     tabs = []
     for j, joint in enumerate(joints):
         ids = []
-        for k, plot in enumerate(PLOTS):
+        for k, plot in enumerate(plots):
             panel = f"Plot!{joint}_{k}"
             ids.append(panel)
             config[panel] = {
@@ -291,7 +338,7 @@ def foxglove_layout(joints: tuple[str, ...] = UR5_JOINTS) -> dict[str, object]:
             "name": d.name,
             "sourceCode": foxglove_script(d),
         }
-        for d in differences()
+        for d in differences(plots)
     }
     return {
         "configById": config,
@@ -314,17 +361,19 @@ def _column(ids: list[str]) -> object:
     }
 
 
-def plotjuggler_layout(joints: tuple[str, ...] = UR5_JOINTS) -> str:
+def plotjuggler_layout(
+    joints: tuple[str, ...] = UR5_JOINTS, plots: tuple[Plot, ...] = PLOTS
+) -> str:
     """A PlotJuggler layout (File → Load layout, with the MCAP loaded): a tab per joint."""
     lines = ["<?xml version='1.0' encoding='UTF-8'?>", "<root>"]
     lines.append(' <tabbed_widget name="Main Window" parent="main_window">')
-    n = len(PLOTS)
+    n = len(plots)
     sizes = ";".join([f"{1 / n:.6f}"] * n)
     for j, joint in enumerate(joints):
         lines.append(f'  <Tab containers="1" tab_name={quoteattr(f"{j + 1} {joint}")}>')
         lines.append("   <Container>")
         lines.append(f'    <DockSplitter orientation="-" count="{n}" sizes="{sizes}">')
-        for plot in PLOTS:
+        for plot in plots:
             lines.append(f"     <DockArea name={quoteattr(f'{joint}: {plot.title}')}>")
             lines.append(
                 '      <plot mode="TimeSeries" style="Lines" flip_x="false" flip_y="false">'
@@ -346,17 +395,17 @@ def plotjuggler_layout(joints: tuple[str, ...] = UR5_JOINTS) -> str:
     lines.append('  <plugin ID="DataLoad MCAP"/>')
     lines.append(" </Plugins>")
     lines.append(" <previouslyLoaded_Datafiles/>")
-    lines.extend(_pj_snippets(joints))
+    lines.extend(_pj_snippets(joints, plots))
     lines.append(" <snippets/>")
     lines.append("</root>")
     return "\n".join(lines) + "\n"
 
 
-def _pj_snippets(joints: tuple[str, ...]) -> list[str]:
+def _pj_snippets(joints: tuple[str, ...], plots: tuple[Plot, ...]) -> list[str]:
     """PlotJuggler's custom math series: per :class:`Difference` and joint, ``value`` (the
     minuend's series) minus ``v1`` (the subtrahend's), in Lua."""
     lines = [" <customMathEquations>"]
-    for d in differences():
+    for d in differences(plots):
         for j, joint in enumerate(joints):
             lines.append(f"  <snippet name={quoteattr(f'{d.name}/{joint}')}>")
             lines.append("   <global></global>")
@@ -371,16 +420,19 @@ def _pj_snippets(joints: tuple[str, ...]) -> list[str]:
     return lines
 
 
-def write_layouts(folder: Path) -> list[Path]:
-    """Write both layouts into ``folder``; return their paths."""
+def write_layouts(
+    folder: Path, joints: tuple[str, ...] = UR5_JOINTS, plots: tuple[Plot, ...] = PLOTS
+) -> list[Path]:
+    """Write both layouts (for ``joints``, drawing ``plots``) into ``folder``; return their
+    paths."""
     folder.mkdir(parents=True, exist_ok=True)
     from pipeline.fileio import atomic_write_bytes
 
     fox = folder / FOXGLOVE_FILE
-    text = json.dumps(foxglove_layout(), indent=2, ensure_ascii=False) + "\n"
+    text = json.dumps(foxglove_layout(joints, plots), indent=2, ensure_ascii=False) + "\n"
     atomic_write_bytes(fox, text.encode("utf-8"))
     pj = folder / PLOTJUGGLER_FILE
-    atomic_write_bytes(pj, plotjuggler_layout().encode("utf-8"))
+    atomic_write_bytes(pj, plotjuggler_layout(joints, plots).encode("utf-8"))
     return [fox, pj]
 
 

@@ -36,7 +36,8 @@ class LinkMeshes:
         geometry: each link's drawn geometry, on its owner's link frame.
         links: the owners' link names: the base first, then each joint's link.
         base_T_link: the joints' link frames per drawn frame, (F, n, 4, 4) [m].
-        note: why some links show their collision geometry ("" when none do).
+        note: why some links show their collision geometry, or (no geometry) why none is
+            drawn ("" when every link shows its visual geometry).
     """
 
     geometry: tuple[LinkGeometry, ...]
@@ -79,18 +80,21 @@ def drawn_geometry(spec: RobotSpec) -> tuple[tuple[LinkGeometry, ...], str]:
 
 
 def link_meshes(spec: RobotSpec, q: NDArray[np.float64]) -> LinkMeshes | None:
-    """The mesh arm at each row of ``q``; None for a robot that is not a URDF, or whose
-    geometry cannot be drawn (a mesh file gone since the recording): capsules then."""
+    """The mesh arm at each row of ``q``; None for a robot that is not a URDF. A URDF
+    robot whose geometry cannot be drawn (a mesh file not on this machine: the bag carries
+    the robot, its meshes by path only) gets no geometry and a note saying why: capsules
+    then, with the note."""
     if spec.format != "urdf":
         return None
+    links = (spec.base_link, *(j.link for j in spec.joints))
     try:
         geometry, note = drawn_geometry(spec)
-    except SpecError:
-        return None
+    except SpecError as err:
+        empty = np.zeros((q.shape[0], spec.dof, 4, 4))
+        return LinkMeshes((), links, empty, f"link meshes not drawn (capsules instead): {err}")
     if not geometry:
         return None
     frames = np.array([link_frames(spec, qf) for qf in q]).reshape(q.shape[0], spec.dof, 4, 4)
-    links = (spec.base_link, *(j.link for j in spec.joints))
     return LinkMeshes(geometry, links, frames, note)
 
 

@@ -143,10 +143,12 @@ def send_arm(stream: rr.RecordingStream, arm: Arm) -> None:
     root = ent.episode_root(arm.episode)
     stream.log(root, rr.Transform3D(translation=arm.offset.tolist()), static=True)
     per_frame = arm.lengths.size // arm.t.size
-    if arm.meshes is not None:
+    if arm.meshes is not None and arm.meshes.geometry:
         send_link_meshes(stream, arm.episode, arm.t, arm.meshes, arm.color)
     else:
         _send_capsules(stream, arm, per_frame)
+        if arm.meshes is not None and arm.meshes.note:  # why the meshes are not drawn
+            send_link_meshes(stream, arm.episode, arm.t, arm.meshes, arm.color)
     stream.log(
         ent.ee_path_path(arm.episode),
         rr.LineStrips3D([arm.flange], radii=[0.004], colors=[arm.color]),

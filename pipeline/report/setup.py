@@ -9,8 +9,10 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from pipeline.analysis.findings import nominal_plant
+from pipeline.log.robot_facts import robot_facts
 from pipeline.report import md
 from pipeline.report.inputs import ReportData
+from pipeline.robots.spec import RobotSpec
 from pipeline.settings import LoopSettings
 
 # Settings shown first, in this order, when present; any others follow as recorded.
@@ -64,15 +66,14 @@ def _settings_line(node: Any, first: Sequence[str], *, skip: Sequence[str] = ())
 _PATH_KEYS = ("planner", "direct", "simplify", "n_waypoints", "n_states_before_simplify")
 
 
-def _robot_source(robot: Mapping[str, Any] | None) -> str:
+def _robot_source(robot: RobotSpec | None) -> str:
     """How the robot is given: its DH convention, or its description file and SHA-256."""
-    if robot is not None and robot.get("format") not in (None, "dh-yaml"):
-        sha = str(robot.get("sha256") or "")[:12]
+    if robot is not None and robot.dh_rows is None:
         return (
-            f"from {md.value(robot.get('format'))} `{md.value(robot.get('source'))}` "
-            f"(SHA-256 {sha}...)"
+            f"from {md.value(robot.format)} `{md.value(robot.source)}` "
+            f"(SHA-256 {robot.source_sha256[:12]}...)"
         )
-    return f"DH convention {md.value(_given(robot, 'convention') if robot else None)}"
+    return f"DH convention {md.value(robot.convention if robot else None)}"
 
 
 def _planner_line(planner: Any) -> str:
@@ -113,21 +114,18 @@ def _loop_lines(loop: LoopSettings | None) -> list[str]:
     return [f"- Loop (the same for every law): {_settings_line(_as_recorded(loop), ())}."]
 
 
-def _armature_lines(robot: Any, plant: Mapping[str, Any], scenario: Mapping[str, Any]) -> list[str]:
+def _armature_lines(
+    robot: RobotSpec | None, plant: Mapping[str, Any], scenario: Mapping[str, Any]
+) -> list[str]:
     """The rotor armature the nominal model assumes, and where its values come from."""
-    if not isinstance(robot, Mapping):
+    if robot is None:
         return []
     nominal = plant.get("nominal_armature")
     if nominal is None:
-        joints = robot.get("joints")
-        if isinstance(joints, list):
-            nominal = [j.get("armature") for j in joints if isinstance(j, Mapping)]
-    source = _given(robot, "armature_source")
-    sources = robot.get("settings_sources")
-    if source is None and isinstance(sources, Mapping):  # a URDF/MJCF robot's sidecar facts
-        source = _given(sources, "armature")
-    if nominal is None and source is None:
-        return []
+        nominal = [float(a) for a in robot.armature]
+    # a DH robot states its armature's source; a URDF/MJCF robot among its sidecar facts
+    stated_by = robot.armature_source if robot.dh_rows is not None else ""
+    source = stated_by or dict(robot.settings_sources).get("armature") or None
     stated = source if source is not None else "not stated in the robot file"
     model = _given(scenario, "nominal")
     if model is not None:  # the controllers' model is an identified one, not the file
@@ -136,29 +134,23 @@ def _armature_lines(robot: Any, plant: Mapping[str, Any], scenario: Mapping[str,
     return [f"- Rotor armature of the nominal model [kg m²]: {values}; source: {stated}."]
 
 
-def _friction_lines(robot: Any) -> list[str]:
+def _friction_lines(robot: RobotSpec | None) -> list[str]:
     """Where the plant's joint friction came from, for a robot that records its sources
     (a URDF or MJCF robot: scenario, sidecar, the file's own, or not stated)."""
-    sources = robot.get("settings_sources") if isinstance(robot, Mapping) else None
-    if not isinstance(sources, Mapping) or "damping" not in sources:
+    sources = dict(robot.settings_sources) if robot is not None else {}
+    if "damping" not in sources:
         return []
     named = "; ".join(f"{k}: {sources[k]}" for k in ("damping", "frictionloss") if k in sources)
     return [f"- Where the plant's joint friction comes from: {named}."]
 
 
-def _acceleration_lines(robot: Any) -> list[str]:
+def _acceleration_lines(robot: RobotSpec | None) -> list[str]:
     """The acceleration limits the planner used and where they come from, for a robot that
     records its sources (a URDF or MJCF robot: its sidecar, or derived by the stated rule)."""
-    sources = robot.get("settings_sources") if isinstance(robot, Mapping) else None
-    joints = robot.get("joints") if isinstance(robot, Mapping) else None
-    if not isinstance(sources, Mapping) or "acceleration" not in sources:
+    sources = dict(robot.settings_sources) if robot is not None else {}
+    if robot is None or "acceleration" not in sources:
         return []
-    values = [
-        j["limits"].get("acceleration")
-        for j in joints or []
-        if isinstance(j, Mapping) and isinstance(j.get("limits"), Mapping)
-    ]
-    shown = md.value([float(f"{v:.3g}") for v in values if isinstance(v, int | float)])
+    shown = md.value([float(f"{v:.3g}") for v in robot.acceleration_limits])
     return [f"- Acceleration limits [rad/s²]: {shown}; source: {sources['acceleration']}."]
 
 
@@ -178,20 +170,23 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
         # The planner records the joint-space start/goal it used.
         return md.value(planner.get(key))
 
+    robot = s.robot if s is not None else None
+    # a bag without our settings: the robot its /robot_description describes, if any
+    described = robot_facts(first).note if s is None else ""
     obstacles = sc.get("obstacles") or []
     lines = [
         "### Setup",
         "",
         f"- Robot: **{first.robot}** ({len(first.joint_names)} joints: "
-        f"{', '.join(first.joint_names)}), {_robot_source(s.robot if s is not None else None)}.",
+        f"{', '.join(first.joint_names)}), {described or _robot_source(robot)}.",
         f"- Start [rad]: {pose('start')}; goal [rad]: {pose('goal')}; "
         f"obstacles: {len(obstacles) if isinstance(obstacles, list) else md.NA}; "
         f"hold after the motion: {md.value(_given(sc, 'hold_s'))} s"
         + (f" (in {first.episode}; settings differ, below)." if mixed else "."),
         f"- Planner: {_planner_line(planner)}.",
-        *_armature_lines(s.robot if s is not None else None, plant, sc),
-        *_friction_lines(s.robot if s is not None else None),
-        *_acceleration_lines(s.robot if s is not None else None),
+        *_armature_lines(robot, plant, sc),
+        *_friction_lines(robot),
+        *_acceleration_lines(robot),
         f"- Plant: {_settings_line(plant, _PLANT_KEYS, skip=('links',))}"
         + (
             "; link masses, centres of mass and inertias (and the armature above) drawn per "

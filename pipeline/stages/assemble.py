@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import asdict
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -17,7 +16,8 @@ import numpy as np
 from pipeline import __version__
 from pipeline.params import Episode, ScenarioParams
 from pipeline.planning import PlannedPath, TimedTrajectory
-from pipeline.robots.spec import JointSpec, RobotSpec
+from pipeline.robots.recorded import robot_to_dict
+from pipeline.robots.spec import RobotSpec
 from pipeline.settings import (
     ControllerSettings,
     EpisodeSettings,
@@ -38,83 +38,10 @@ if TYPE_CHECKING:
     from pipeline.sim.result import EpisodeResult
 
 
-def _inertial_dict(j: JointSpec) -> dict[str, Any]:
-    if j.inertial is None:
-        return {}
-    t = j.inertial.inertia
-    return {
-        "inertial": {
-            "mass": j.inertial.mass,
-            "com": list(j.inertial.com),
-            "inertia": [t[0][0], t[1][1], t[2][2], t[0][1], t[0][2], t[1][2]],
-        }
-    }
-
-
 def spec_as_dict(spec: RobotSpec) -> dict[str, Any]:
-    """The robot spec as plain data (radians), as recorded in every bag.
-
-    A robot given as DH rows is recorded whole (the robot YAML, radians); any other robot
-    by its source file and that file's SHA-256 (a changed file re-runs what it drives), its
-    joints (limits, link inertials as modelled, armature) and where the facts its file
-    lacks came from.
-    """
-    rows = spec.dh_rows
-    if rows is None:
-        return {
-            "name": spec.name,
-            "format": spec.format,
-            "source": spec.source,
-            "sha256": spec.source_sha256,
-            "robot": spec.loaded_from,
-            "base_link": spec.base_link,
-            "joints": [
-                {
-                    "name": j.name,
-                    "type": j.kind,
-                    "link": j.link_name,
-                    "limits": asdict(j.limits),
-                    **_inertial_dict(j),
-                    "armature": j.armature,
-                }
-                for j in spec.joints
-            ],
-            "settings_sources": dict(spec.settings_sources),
-        }
-    return {
-        "name": spec.name,
-        "convention": spec.convention,
-        "angle_unit": "rad",
-        "joints": [
-            {
-                "name": j.name,
-                "dh": [dh.alpha, dh.a, dh.d, dh.theta_offset],
-                "limits": asdict(j.limits),
-                **(
-                    {
-                        "inertial": {
-                            "mass": j.inertial.mass,
-                            "com": list(j.inertial.com),
-                            "inertia": [
-                                j.inertial.inertia[0][0],
-                                j.inertial.inertia[1][1],
-                                j.inertial.inertia[2][2],
-                                j.inertial.inertia[0][1],
-                                j.inertial.inertia[0][2],
-                                j.inertial.inertia[1][2],
-                            ],
-                        }
-                    }
-                    if j.inertial is not None
-                    else {}
-                ),
-                "collision": {"radius": j.collision_radius},
-                "armature": j.armature,
-            }
-            for j, dh in zip(spec.joints, rows, strict=True)
-        ],
-        **({"armature_source": spec.armature_source} if spec.armature_source else {}),
-    }
+    """The robot spec as plain data (radians), as recorded in every bag: by value
+    (:func:`pipeline.robots.recorded.robot_to_dict`)."""
+    return robot_to_dict(spec)
 
 
 def scenario_spec(scenario: ScenarioParams) -> RobotSpec:
@@ -350,7 +277,7 @@ def episode_settings(
     # planning_time_s is wall clock: printed, never recorded (recordings are byte-reproducible)
     return EpisodeSettings(
         episode=episode.name,
-        robot=spec_as_dict(spec),
+        robot=spec,
         scenario={"name": episode.scenario_name, **scenario.model_dump()},
         controller=ControllerSettings(
             name=episode.controller_name,

@@ -12,7 +12,6 @@ import json
 import struct
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -80,13 +79,6 @@ def msgdef(typename: str) -> str:
     """ros2msg schema text (with dependencies) for ``typename``."""
     text, _ = _STORE.generate_msgdef(typename, ros_version=2)
     return str(text)
-
-
-def ur5_robot_dict() -> dict[str, Any]:
-    """The ur5 spec as YAML data (what settings.robot holds)."""
-    text = (resources.files("pipeline.robots") / "ur5.yaml").read_text(encoding="utf-8")
-    data: dict[str, Any] = yaml.safe_load(text)
-    return data
 
 
 def _stamp(ns: int) -> dict[str, int]:
@@ -168,7 +160,7 @@ def default_settings(ep: Episode) -> dict[str, Any]:
     spec = load_spec("ur5")
     settings = EpisodeSettings(
         episode=ep.episode,
-        robot=ur5_robot_dict(),
+        robot=spec,
         scenario={
             "name": ep.scenario,
             "start": [float(v) for v in ep.q_ref[0]],

@@ -50,7 +50,9 @@ def test_missing_settings_fall_back_to_metadata_and_na(tmp_path: Path) -> None:
     assert rec.settings is None and not rec.notes  # absent: n/a, nothing to note
 
 
-def test_unusable_robot_settings_give_no_spec_and_raw_limits(tmp_path: Path) -> None:
+def test_a_robot_that_is_not_one_refuses_the_settings_with_a_note(tmp_path: Path) -> None:
+    """settings.robot is the robot by value: one that does not parse breaks the contract
+    (the settings are n/a, with a note naming the field); the recorded robot name stands."""
     ep = paper_like("raw", "pid", duration_s=0.2)
     settings = default_settings(ep)
     settings["robot"] = {
@@ -58,9 +60,10 @@ def test_unusable_robot_settings_give_no_spec_and_raw_limits(tmp_path: Path) -> 
         "joints": [{"name": "shoulder_pan_joint", "limits": {"effort": 99.0}}],
     }
     rec = _recording(tmp_path, settings, "raw")
-    assert robot_spec(rec) is None
-    limits = robot_facts(rec).effort_limits_nm
-    assert limits["shoulder_pan_joint"] == 99.0 and limits["elbow_joint"] is None
+    assert rec.settings is None
+    assert any("settings.robot: " in n and "settings are n/a" in n for n in rec.notes)
+    assert robot_spec(rec) == load_spec("ur5")  # the built-in of the recorded robot name
+    assert robot_facts(rec).effort_limits_nm["shoulder_pan_joint"] == 150.0
 
 
 def test_a_foreign_bag_gives_no_settings_and_its_own_urdf_facts(tmp_path: Path) -> None:

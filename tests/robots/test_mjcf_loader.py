@@ -289,7 +289,7 @@ def test_an_mjcf_robot_records_and_reports(panda_xml, tmp_path, capsys):
     code, err = run_cli(["record", "--params", str(params), "--out", str(tmp_path / "rec")], capsys)
     assert code == 0, err
     rec = read_recording(tmp_path / "rec" / "panda-ctc")
-    assert rec.settings is not None and rec.settings.robot["format"] == "mjcf"
+    assert rec.settings is not None and rec.settings.robot.format == "mjcf"
     assert rec.settings.plant.damping == (0.003,) * 7  # the file's, the scenario gives none
     code, _, err = run_cli_out(
         ["report", "--recordings", str(tmp_path / "rec"), "--out", str(tmp_path / "rep")], capsys

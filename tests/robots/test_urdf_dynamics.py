@@ -13,7 +13,7 @@ from pipeline.errors import SpecError
 from pipeline.model.mjcf import build_mujoco_model
 from pipeline.params import ScenarioParams
 from pipeline.robots import load_spec
-from pipeline.stages.assemble import draw_scenario_plant, scenario_spec, spec_as_dict
+from pipeline.stages.assemble import draw_scenario_plant, scenario_spec
 from tests.robots.test_urdf_loader import THREE_JOINT
 
 # j1 states both, j2 damping only, j3 nothing (0)
@@ -50,7 +50,7 @@ def _plant_friction(scenario: ScenarioParams) -> tuple[np.ndarray, np.ndarray, d
     spec = scenario_spec(scenario)
     plant_spec, plant, _ = draw_scenario_plant(spec, scenario, seed=0)
     model = build_mujoco_model(plant_spec, plant=plant)
-    sources: dict[str, str] = spec_as_dict(spec)["settings_sources"]
+    sources = dict(spec.settings_sources)
     return model.dof_damping.copy(), model.dof_frictionloss.copy(), sources
 
 

@@ -49,15 +49,16 @@ def test_panda_records_and_reports_with_its_own_urdf(tmp_path: Path, capsys) -> 
     assert rec.robot_description == Path(panda.source).read_text(encoding="utf-8")
     assert rec.settings is not None
     robot = rec.settings.robot
-    assert robot["source"] == panda.source and robot["format"] == "urdf"
-    assert robot["sha256"] == hashlib.sha256(Path(panda.source).read_bytes()).hexdigest()
-    assert "Menagerie" in robot["settings_sources"]["armature"]
+    assert robot.source == panda.source and robot.format == "urdf"
+    assert robot.source_sha256 == hashlib.sha256(Path(panda.source).read_bytes()).hexdigest()
+    sources = dict(robot.settings_sources)
+    assert "Menagerie" in sources["armature"]
     # plant: {} gives no friction: the sidecar's damping, the URDF's <dynamics friction>
-    assert robot["settings_sources"]["frictionloss"] == "URDF <dynamics>"
+    assert sources["frictionloss"] == "URDF <dynamics>"
     assert rec.settings.plant.damping == (1.0,) * 7
     from pipeline.analysis.episodes import robot_spec
 
-    assert robot_spec(rec) == panda  # the recording loads its robot again (same SHA-256)
+    assert robot_spec(rec) == panda  # the recording carries its robot by value
     code, _, err = run_cli_out(
         ["report", "--recordings", str(tmp_path / "rec"), "--out", str(tmp_path / "rep")], capsys
     )

@@ -62,7 +62,7 @@ def test_a_urdf_without_srdf_records_and_a_named_start_is_used(tmp_path: Path, c
     assert code == 0, err
     copied = read_recording(tmp_path / "rec" / "copied-ctc")
     assert copied.settings is not None
-    assert "no SRDF" in copied.settings.robot["settings_sources"]["collision_pairs"]
+    assert "no SRDF" in dict(copied.settings.robot.settings_sources)["collision_pairs"]
     named = read_recording(tmp_path / "rec" / "named-ctc")
     start = load_spec("panda").named_state("default")
     first = named.samples.sort("time_s").head(named.samples["joint"].n_unique())
