@@ -77,6 +77,7 @@ RECORD_CODE = (
     "robots/packages.py",
     "robots/panda.armlab.yaml",
     "robots/panda_dh.yaml",
+    "robots/recorded.py",
     "robots/sidecar.py",
     "robots/spec.py",
     "robots/srdf.py",
