@@ -198,10 +198,10 @@ def physics_floor_s(
     import numpy as np
     import pinocchio as pin
 
+    from pipeline.experiment.assemble import draw_scenario_plant
     from pipeline.model.mjcf import build_mujoco_model
     from pipeline.model.urdf import build_pinocchio_model
     from pipeline.robots.loaders import load_spec
-    from pipeline.stages.assemble import draw_scenario_plant
     from pipeline.stages.plans import obstacle_boxes
 
     spec = load_spec(episode.scenario.robot)

@@ -21,17 +21,17 @@ import numpy as np
 
 from pipeline.constants import FINAL_EDGE_S, FINAL_WINDOW_S
 from pipeline.errors import PipelineError
-from pipeline.fsutil import remove_stale
-from pipeline.memory import out_of_memory
-from pipeline.params import Episode
-from pipeline.planning import PlannedPath, TimedTrajectory
-from pipeline.stages.assemble import (
+from pipeline.experiment.assemble import (
     bag_metadata,
     draw_scenario_plant,
     episode_settings,
     loop_settings,
     scenario_spec,
 )
+from pipeline.fsutil import remove_stale
+from pipeline.memory import out_of_memory
+from pipeline.params import Episode
+from pipeline.planning import PlannedPath, TimedTrajectory
 from pipeline.stages.plans import ScenarioPlan, obstacle_boxes
 
 

@@ -18,9 +18,9 @@ def test_setup_names_a_delayed_loop_and_not_the_ideal_one() -> None:
 
 
 def test_setup_states_the_armature_and_its_source() -> None:
+    from pipeline.experiment.assemble import spec_as_dict
     from pipeline.report.setup import _armature_lines
     from pipeline.robots.loaders import load_spec
-    from pipeline.stages.assemble import spec_as_dict
 
     robot = spec_as_dict(load_spec("ur5"))
     plant = {"nominal_armature": [0.4, 0.4, 0.2, 0.04, 0.04, 0.04]}

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from pipeline.errors import SpecError
+from pipeline.experiment.assemble import draw_scenario_plant, scenario_spec, spec_as_dict
 from pipeline.model.mjcf import build_mujoco_model
 from pipeline.params import ScenarioParams
 from pipeline.robots import load_spec
-from pipeline.stages.assemble import draw_scenario_plant, scenario_spec, spec_as_dict
 from tests.robots.test_urdf_loader import THREE_JOINT
 
 # j1 states both, j2 damping only, j3 nothing (0)

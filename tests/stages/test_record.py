@@ -201,11 +201,11 @@ def test_bad_params_exit_1_with_one_line(tmp_path):
 
 
 def test_cartesian_goal_becomes_the_ik_solution_nearest_the_start(ur5):
+    from pipeline.experiment.goals import resolve_goal
     from pipeline.kinematics import make_solver
     from pipeline.model import transforms as tf
     from pipeline.model.dh import forward_kinematics
     from pipeline.params import load_params
-    from pipeline.stages.goals import resolve_goal
 
     paper_goal = np.array([-0.15, -0.5, 0.785, -1.15, -0.3925, 0.0])
     pose = forward_kinematics(ur5, paper_goal)
