@@ -24,7 +24,6 @@ RECORD_CODE = (
     "trajectory.py",
     "yamlio.py",
     "identify/__init__.py",  # cli's sub-app, and a scenario's `nominal:` model file
-    "identify/cli.py",
     "identify/defaults.py",
     "identify/identity.py",
     "identify/model_file.py",
