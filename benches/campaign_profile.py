@@ -200,8 +200,8 @@ def physics_floor_s(
 
     from pipeline.experiment.assemble import draw_scenario_plant
     from pipeline.model.mjcf import build_mujoco_model
-    from pipeline.model.urdf import build_pinocchio_model
     from pipeline.robots.loaders import load_spec
+    from pipeline.robots.urdf import build_pinocchio_model
     from pipeline.stages.plans import obstacle_boxes
 
     spec = load_spec(episode.scenario.robot)

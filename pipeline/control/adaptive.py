@@ -59,8 +59,8 @@ from pipeline.control.base import (
     resolve_tuned_gains,
 )
 from pipeline.errors import ParamsError
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
+from pipeline.robots.urdf import build_pinocchio_model
 
 NAME = "adaptive"
 GAINS = (

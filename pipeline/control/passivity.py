@@ -45,8 +45,8 @@ from pipeline.control.base import (
     nominal_mass_diagonal,
     resolve_tuned_gains,
 )
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
+from pipeline.robots.urdf import build_pinocchio_model
 
 NAME = "passivity"
 GAINS = (

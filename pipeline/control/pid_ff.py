@@ -40,8 +40,8 @@ from pipeline.control.base import (
     GainSpec,
     friction_feedforward,
 )
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
+from pipeline.robots.urdf import build_pinocchio_model
 
 NAME = "pid_ff"
 GAINS = (*pid.GAINS, GainSpec("ff_at_next_sample", flag=True), *FRICTION_GAINS)

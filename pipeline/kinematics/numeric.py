@@ -78,9 +78,9 @@ from pipeline.kinematics.base import (
 )
 from pipeline.kinematics.limits import nearest_representative
 from pipeline.kinematics.seeds import seed_table
-from pipeline.model.chain import FLANGE
-from pipeline.model.urdf import build_pinocchio_model
+from pipeline.robots.chain import FLANGE
 from pipeline.robots.spec import RobotSpec
+from pipeline.robots.urdf import build_pinocchio_model
 
 Array = NDArray[np.float64]
 

@@ -27,6 +27,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline import transforms
 from pipeline.constants import (
     METADATA_EPISODE,
     TOPIC_CONTROLLER_STATE,
@@ -49,9 +50,8 @@ from pipeline.log.schemas import (
     message_types,
 )
 from pipeline.log.topics import TOPICS
-from pipeline.model import transforms
-from pipeline.model.chain import then_joint_motions
 from pipeline.model.frames import tf_edges
+from pipeline.robots.chain import then_joint_motions
 from pipeline.robots.spec import RobotSpec
 from pipeline.sim.result import EpisodeResult, TrajectorySamples
 
@@ -284,7 +284,7 @@ def encode_episode(
     if tf_source not in ("measured", "true"):
         raise RecordingError(f"tf_source: {tf_source!r}, expected 'measured' or 'true'")
     # Imported here: the URDF module pulls in Pinocchio, which readers of pipeline.log skip.
-    from pipeline.model.urdf import build_urdf
+    from pipeline.robots.urdf import build_urdf
 
     names = list(spec.joint_names)
     n = len(names)
@@ -367,7 +367,7 @@ def tf_poses(
 
     Every joint edge of :func:`pipeline.model.frames.tf_edges` is its transform at q = 0
     followed by the joint's motion (a rotation about, or a translation along, its axis:
-    :func:`pipeline.model.chain.then_joint_motions`); the flange edge is constant.
+    :func:`pipeline.robots.chain.then_joint_motions`); the flange edge is constant.
 
     Returns:
         (parent, child) frame pairs; (M, E, 3) translations [m]; (M, E, 4) quaternions

@@ -75,7 +75,7 @@ def episode_recording(
     Raises:
         RecordingError: what the writer refuses, or what the reader refuses of its bag.
     """
-    from pipeline.model.urdf import build_urdf  # Pinocchio, as the writer imports it
+    from pipeline.robots.urdf import build_urdf  # Pinocchio, as the writer imports it
 
     del motion_start_ns  # the planned trajectory's header stamp: not read
     try:

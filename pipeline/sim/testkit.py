@@ -46,9 +46,9 @@ from pipeline.control.base import (
     RECORDED_TUNING_KEYS,
 )
 from pipeline.errors import ParamsError, PipelineError
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.loaders import load_spec
 from pipeline.robots.spec import RobotSpec
+from pipeline.robots.urdf import build_pinocchio_model
 
 ROBOT = "ur5"
 """The kit's arm: the smallest shipped robot with dynamics."""

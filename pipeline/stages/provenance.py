@@ -22,6 +22,7 @@ RECORD_CODE = (
     "plugins.py",
     "settings.py",
     "trajectory.py",
+    "transforms.py",
     "yamlio.py",
     "identify/__init__.py",  # cli's sub-app, and a scenario's `nominal:` model file
     "identify/defaults.py",

@@ -375,7 +375,7 @@ def _plain_ctc(spec, g, state, z, dt, *, integral):
     import pinocchio as pin
 
     from pipeline.control.base import friction_feedforward
-    from pipeline.model.urdf import build_pinocchio_model
+    from pipeline.robots.urdf import build_pinocchio_model
 
     q, qd, q_ref, qd_ref, qdd_ref = state
     model = build_pinocchio_model(spec)
