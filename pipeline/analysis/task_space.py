@@ -36,7 +36,6 @@ from pipeline.errors import ReportError
 from pipeline.log.reader import Recording
 from pipeline.robots.chain import FLANGE, joint_motions
 from pipeline.robots.spec import JointSpec, RobotSpec
-from pipeline.robots.urdf import pinocchio_model
 
 # The pseudo-joint the task-space rows of a metrics frame carry in their ``joint`` column.
 TCP = TCP_JOINT
@@ -108,6 +107,9 @@ class _Chain:
 
 @functools.lru_cache(maxsize=64)
 def _chain(spec: RobotSpec) -> _Chain:
+    # here, not at the top: importing this module (the report reads its types) loads no engine
+    from pipeline.robots.urdf import pinocchio_model
+
     model = pinocchio_model(spec)
     by_name = {j.name: j for j in spec.joints}
     names = [str(model.names[k]) for k in range(1, model.njoints)]
