@@ -13,9 +13,10 @@ import polars as pl
 from pipeline.analysis import summary
 from pipeline.analysis.aggregate import CONFIDENCE
 from pipeline.analysis.catalog import BY_NAME, COMPARED_METRICS, METRIC_SOURCES, METRICS
+from pipeline.analysis.measure import cs_times_s, cs_wide, times_s, wide
 from pipeline.analysis.metrics import ERROR_FLOOR_RAD, SETTLING_TOLERANCE_RAD
 from pipeline.constants import FINAL_WINDOW_S
-from pipeline.report.inputs import ReportData, cs_times_s, cs_wide, times_s, wide
+from pipeline.report.inputs import ReportData
 
 METRICS_FILE = "metrics.json"
 # The declared DVC metric: the headline reductions only (metrics.json is a plain output).

@@ -11,10 +11,10 @@ import rerun as rr
 from numpy.typing import NDArray
 
 from pipeline.analysis.episodes import robot_spec
+from pipeline.analysis.measure import times_s, wide
 from pipeline.log.reader import Recording
 from pipeline.model.dh import link_frames
 from pipeline.report import entities as ent
-from pipeline.report.inputs import times_s, wide
 from pipeline.report.rrd_meshes import LinkMeshes, link_meshes, send_link_meshes
 from pipeline.robots import RobotSpec
 from pipeline.robots.chain import chain
