@@ -47,6 +47,7 @@ RECORD_CODE = (
     "stages/__init__.py",
     "stages/budget.py",
     "stages/campaign.py",
+    "stages/campaign_record.py",
     "stages/campaign_run.py",
     "stages/episode.py",
     "stages/executors",
