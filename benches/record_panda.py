@@ -39,7 +39,7 @@ from campaign_profile import episode_wall_s, physics_floor_s  # noqa: E402
 from pipeline.model import mjcf  # noqa: E402
 from pipeline.params import load_params  # noqa: E402
 from pipeline.robots import loaders, urdf  # noqa: E402
-from pipeline.stages.campaign import expand  # noqa: E402
+from pipeline.stages.campaign_expand import expand  # noqa: E402
 from pipeline.stages.plans import plan_scenario  # noqa: E402
 
 CAMPAIGN = "panda-box"

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from pipeline.control.base import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, Controller, GainSpec
+from pipeline.control.controller import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, Controller, GainSpec
 from pipeline.control.registry import (
     CONTROLLERS,
     ControllerEntry,

@@ -50,7 +50,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike
 
 from pipeline.control import passivity
-from pipeline.control.base import (
+from pipeline.control.controller import (
     DEFAULT_OMEGA_N_RAD_S,
     DEFAULT_ZETA,
     F64,

@@ -367,7 +367,7 @@ def record_excitation(
     )
     ref = design.reference
     check_excitation(spec, ref, obstacles=obstacles)
-    from pipeline.control.base import with_planned_path
+    from pipeline.control.controller import with_planned_path
 
     # built again with its default gains designed along the excitation (the one built above
     # checked the controller before the design's work)

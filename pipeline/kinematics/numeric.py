@@ -1,6 +1,6 @@
 """Iterative IK for any serial arm: Levenberg-Marquardt on Pinocchio Jacobians.
 
-Any joint count (:mod:`pipeline.kinematics.base` says what IK means for it):
+Any joint count (:mod:`pipeline.kinematics.ik` says what IK means for it):
 
 - 6 or more joints, full pose: each attempt minimises F(q) = 1/2 |e(q)|^2 with
   e = log6(base_T_flange(q)^-1 target) (flange-frame twist: linear [m], angular
@@ -67,7 +67,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import lapack
 
 from pipeline.errors import KinematicsError
-from pipeline.kinematics.base import (
+from pipeline.kinematics.ik import (
     IKOptions,
     IKResult,
     as_pose,

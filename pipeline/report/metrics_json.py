@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import polars as pl
 
-from pipeline.analysis import summary
+from pipeline.analysis import headline as summary
 from pipeline.analysis.aggregate import CONFIDENCE
 from pipeline.analysis.catalog import BY_NAME, COMPARED_METRICS, METRIC_SOURCES, METRICS
 from pipeline.analysis.measure import cs_times_s, cs_wide, times_s, wide
@@ -211,7 +211,7 @@ def write_metrics(data: ReportData, out_dir: Path) -> str:
 
 
 def headline_json(data: ReportData) -> dict[str, Any]:
-    """headline.json's content: :func:`pipeline.analysis.summary.headline_document` of the
+    """headline.json's content: :func:`pipeline.analysis.headline.headline_document` of the
     report's questions."""
     joints = {g: list(r[0].joint_names) for g in data.groups() if (r := data.in_group(g))}
     return summary.headline_document(summary.questions(data.reduction_summary, joints))

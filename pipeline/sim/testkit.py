@@ -39,7 +39,7 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.control import Controller, controller_entry, make_controller
-from pipeline.control.base import (
+from pipeline.control.controller import (
     DEFAULT_OMEGA_N_RAD_S,
     DEFAULT_ZETA,
     F64,

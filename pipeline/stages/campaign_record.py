@@ -2,7 +2,7 @@
 run under the campaign folder's lock, and the re-run that keeps the sampled episodes' bags.
 
 What the user sees (progress bar, messages, the summary table) is the caller's: it passes
-a :class:`CampaignView` (:mod:`pipeline.cli.record` draws it with Rich).
+a :class:`CampaignView` (:mod:`pipeline.cli.record_cmd` draws it with Rich).
 """
 
 from __future__ import annotations

@@ -45,7 +45,7 @@ from pipeline.params import (
     RandomGoals,
     SimParams,
 )
-from pipeline.stages.campaign import episode_fingerprint, expand
+from pipeline.stages.campaign_expand import episode_fingerprint, expand
 from pipeline.stages.provenance import git_commit
 
 if TYPE_CHECKING:

@@ -129,8 +129,8 @@ def _run_and_write(
     before_write: Callable[[], None] | None = None,
 ) -> EpisodeOutcome:
     from pipeline.control import make_controller
-    from pipeline.control.base import with_planned_path
     from pipeline.control.contain import contained_controller
+    from pipeline.control.controller import with_planned_path
     from pipeline.identify.model_file import nominal_path, nominal_spec, with_nominal_friction
 
     scenario = episode.scenario

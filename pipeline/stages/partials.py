@@ -51,7 +51,7 @@ if TYPE_CHECKING:
 
     from pipeline.analysis.task_space import ToolOffset
     from pipeline.log.reader import Recording
-    from pipeline.report.campaigns import CampaignSection
+    from pipeline.report.campaign_section import CampaignSection
 
 PARTIAL_DIR = ".partials"
 PARTIAL_SUFFIX = ".arrow"
@@ -441,7 +441,7 @@ def bags_listed(
     into ``staging``) and one line saying so."""
     import polars as pl
 
-    from pipeline.analysis.campaign import TABLE_DIR
+    from pipeline.analysis.campaign_tables import TABLE_DIR
 
     rel = f"{TABLE_DIR}/{stem}.bags.csv"
     pl.DataFrame(

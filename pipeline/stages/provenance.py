@@ -46,7 +46,7 @@ RECORD_CODE = (
     "log/topics.py",
     "stages/__init__.py",
     "stages/budget.py",
-    "stages/campaign.py",
+    "stages/campaign_expand.py",
     "stages/campaign_record.py",
     "stages/campaign_run.py",
     "stages/episode.py",

@@ -25,7 +25,7 @@ from pipeline.robots.loaders import load_spec
 from pipeline.stages.budget import check_budget
 from pipeline.stages.episode import EpisodeOutcome, remove_work_folders
 from pipeline.stages.executors import make_executor
-from pipeline.stages.executors.base import interrupted
+from pipeline.stages.executors.executor import interrupted
 from pipeline.stages.plans import plan_all
 from pipeline.stages.provenance import git_commit
 

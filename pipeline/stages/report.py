@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 
 import polars as pl
 
-from pipeline.analysis.campaign import TABLE_DIR, campaign_tables
+from pipeline.analysis.campaign_tables import TABLE_DIR, campaign_tables
 from pipeline.analysis.checks import (
     merged_label_notes,
 )
@@ -61,7 +61,7 @@ from pipeline.stages.report_commit import (
 from pipeline.stages.report_pool import default_jobs, measure_in_workers
 
 if TYPE_CHECKING:  # the writers load when a report is written (see _writers)
-    from pipeline.report.campaigns import CampaignSection
+    from pipeline.report.campaign_section import CampaignSection
     from pipeline.report.figures import FigureFile
 
 # the baseline when none is named; recordings of one other controller are fine with it
@@ -432,7 +432,7 @@ def _campaigns(
     with a lazy scan: the summary is the table's numbers. A campaign some of whose
     episodes were measured from their partials (``bagless``) also lists which episodes
     have bags (``<stem>.bags.csv``)."""
-    from pipeline.report.campaigns import campaign_section
+    from pipeline.report.campaign_section import campaign_section
     from pipeline.report.figures import MAX_FIGURE_SCENARIOS, scenario_slugs
 
     settings = {ep: view.settings for ep, view in data.protocol.items()}

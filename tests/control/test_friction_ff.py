@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from pipeline.control import make_controller
-from pipeline.control.base import friction_feedforward
+from pipeline.control.controller import friction_feedforward
 from pipeline.errors import ParamsError
 from pipeline.experiment.assemble import draw_scenario_plant, scenario_spec
 from pipeline.identify.model_file import (

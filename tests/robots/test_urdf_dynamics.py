@@ -94,7 +94,7 @@ def test_a_urdf_without_dynamics_keeps_the_scenarios_default(tmp_path):
 
 def test_a_campaign_keeps_the_robots_friction_where_its_scenario_gives_none(tmp_path):
     from pipeline.params import parse_params
-    from pipeline.stages.campaign import expand
+    from pipeline.stages.campaign_expand import expand
 
     robot = _robot(tmp_path)
     params = parse_params(

@@ -36,7 +36,7 @@ def check_params(params: str) -> None:
     from pathlib import Path
 
     from pipeline.params import load_params
-    from pipeline.stages.campaign import expand
+    from pipeline.stages.campaign_expand import expand
     from pipeline.stages.campaign_run import check_campaign_count, distinct_settings
     from pipeline.stages.record import validate_episodes
 
@@ -388,7 +388,7 @@ def campaigns_cmd(
     """List the campaigns in PARAMS: size, base scenario, and what each sweeps (those
     under extra_campaigns are not DVC stages: `make demo` does not run them)."""
     from pipeline.params import load_params
-    from pipeline.stages.campaign import campaign_axes
+    from pipeline.stages.campaign_expand import campaign_axes
 
     loaded = load_params(params)
     rows: list[dict[str, Any]] = []

@@ -230,7 +230,7 @@ def _controller_for(
     """The controller with the swept gains: ``gains.K`` for every controller,
     ``controllers.NAME.gains.K`` for one. Sweeping a tuning knob (``omega_n_rad_s``,
     ``zeta``) drops the explicit gains it derives, so the knob takes effect."""
-    from pipeline.control.base import TUNING_KEYS
+    from pipeline.control.controller import TUNING_KEYS
 
     base = params.controllers[name]
     gains = dict(base.gains)
