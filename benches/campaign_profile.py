@@ -27,7 +27,7 @@ only), so the stages add up to the run:
 
 The report side runs ``run_report`` on the recordings with the same timers:
 ``read`` (``read_recording``: MCAP scan, decompress, CDR decode into frames),
-``metrics`` (``_Measured.add``: protocol view, metrics, the kept error series),
+``metrics`` (``Measured.add``: protocol view, metrics, the kept error series),
 ``partial read`` (``read_partial``: a dropped episode's partial) and ``report outputs``
 (tables, figures, .rrd, Markdown: partly fixed per report, so its per-episode share
 shrinks with N).
@@ -147,6 +147,7 @@ class _TimedZstd:
 
 def instrument(timers: Timers) -> None:
     """Wrap the record and report stages' pieces (module attributes, looked up per call)."""
+    import pipeline.analysis.measure as measure
     import pipeline.control as control
     import pipeline.identify.model_file as model_file
     import pipeline.log.bag as bag
@@ -157,6 +158,7 @@ def instrument(timers: Timers) -> None:
     import pipeline.sim.safety as safety
     import pipeline.stages.campaign_run as campaign_run
     import pipeline.stages.episode as episode
+    import pipeline.stages.partials as partials
     import pipeline.stages.plans as plans
     import pipeline.stages.report as report
 
@@ -180,7 +182,9 @@ def instrument(timers: Timers) -> None:
     timers.wrap(campaign_run, "keep_partial", "partial")
     mcap.zstandard = _TimedZstd(timers, mcap.zstandard)  # type: ignore[attr-defined,assignment]
     timers.wrap(report, "read_recording", "read")
-    timers.wrap(report._Measured, "add", "metrics")
+    timers.wrap(measure, "read_recording", "read")
+    timers.wrap(partials, "read_recording", "read")
+    timers.wrap(measure.Measured, "add", "metrics")
     timers.wrap(report, "read_partial", "partial read")
 
 
@@ -198,10 +202,10 @@ def physics_floor_s(
     import numpy as np
     import pinocchio as pin
 
+    from pipeline.experiment.assemble import draw_scenario_plant
     from pipeline.model.mjcf import build_mujoco_model
-    from pipeline.model.urdf import build_pinocchio_model
     from pipeline.robots.loaders import load_spec
-    from pipeline.stages.assemble import draw_scenario_plant
+    from pipeline.robots.urdf import build_pinocchio_model
     from pipeline.stages.plans import obstacle_boxes
 
     spec = load_spec(episode.scenario.robot)

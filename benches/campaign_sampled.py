@@ -97,8 +97,8 @@ def _worker(work: Path, reps: int) -> dict[str, Any]:
     from pipeline.params import load_params
     from pipeline.stages import episode as episode_stage
     from pipeline.stages.campaign_run import plan_run
+    from pipeline.stages.partials import measure_bag, measure_recording
     from pipeline.stages.record import record
-    from pipeline.stages.report import measure_bag, measure_recording
 
     params = load_params(_params(work, seeds=1, every=2))
     run = plan_run(params, "bench", out=work / "worker")

@@ -32,8 +32,9 @@ CHILD = """
 import json, sys, time
 from pathlib import Path
 from pipeline.log.reader import ReadOptions
-from pipeline.stages.report import _Measured, read_all
-m = _Measured()
+from pipeline.analysis.measure import Measured
+from pipeline.stages.report import read_all
+m = Measured()
 options = ReadOptions(stream_above_bytes=0) if sys.argv[2] == "1" else ReadOptions()
 t = time.perf_counter()
 [rec], _ = read_all(Path(sys.argv[1]), skip_bad=False, options=options, measure=m.add, sink=m)

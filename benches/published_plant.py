@@ -95,8 +95,8 @@ class _NoForce:
 def _per_stage_difference(episode: Any, plan: Any) -> dict[str, float]:
     """The episode with the sigmoid per control period vs per RK4 stage (callback)."""
     friction = GAZ_PANDA.friction  # seed 0 draws around it: use the episode's own draw
+    from pipeline.experiment.assemble import scenario_friction
     from pipeline.robots.loaders import load_spec
-    from pipeline.stages.assemble import scenario_friction
 
     drawn = scenario_friction(load_spec("panda"), episode.scenario, seed=episode.seed).sigmoid
     friction = drawn or friction

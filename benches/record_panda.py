@@ -36,10 +36,10 @@ sys.path.insert(0, str(REPO / "benches"))
 
 from campaign_profile import episode_wall_s, physics_floor_s  # noqa: E402
 
-from pipeline.model import mjcf, urdf  # noqa: E402
+from pipeline.model import mjcf  # noqa: E402
 from pipeline.params import load_params  # noqa: E402
-from pipeline.robots import loaders  # noqa: E402
-from pipeline.stages.campaign import expand  # noqa: E402
+from pipeline.robots import loaders, urdf  # noqa: E402
+from pipeline.stages.campaign_expand import expand  # noqa: E402
 from pipeline.stages.plans import plan_scenario  # noqa: E402
 
 CAMPAIGN = "panda-box"

@@ -26,9 +26,9 @@ import pinocchio as pin
 
 from pipeline.control import make_controller
 from pipeline.model.mjcf import build_mujoco_model
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots import load_spec
 from pipeline.robots.spec import RobotSpec
+from pipeline.robots.urdf import build_pinocchio_model
 from pipeline.sim.references import PAPER_GOAL_RAD, PAPER_START_RAD, QuinticReference
 from pipeline.sim.runner import run_episode
 

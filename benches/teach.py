@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 from ik import machine
 
-from pipeline.model import transforms as tf
+from pipeline import transforms as tf
 from pipeline.model.dh import forward_kinematics
 from pipeline.robots import RobotSpec, load_spec
 from pipeline.teach.server import BAD_RGB, MARKER_NODE, TeachServer, link_node

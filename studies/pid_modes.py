@@ -66,7 +66,7 @@ def modes(
     mass-weighted amplitude ``sqrt(m_jj) |dq_j|`` (the largest first)."""
     import pinocchio as pin
 
-    from pipeline.model.urdf import build_pinocchio_model
+    from pipeline.robots.urdf import build_pinocchio_model
 
     n = spec.dof
     pmodel = build_pinocchio_model(spec)

@@ -30,7 +30,7 @@ def test_default_params_hold_the_papers_scenario_under_pid_and_ctc():
     # the realistic plant differs from the nominal model, with seeds for an interval
     real = params.scenarios["paper-realistic"]
     assert real.plant.uncertainty.mass_rel > 0 and real.goal == paper.goal
-    from pipeline.stages.campaign import expand
+    from pipeline.stages.campaign_expand import expand
 
     realistic = expand(params, "paper-realistic")
     for controller in ("pid", "ctc", "ctc_pid"):
@@ -185,7 +185,7 @@ def test_a_delay_off_the_physics_step_grid_is_refused_before_any_work(tmp_path):
 
 
 def test_the_delay_can_be_swept_by_a_campaign(tmp_path):
-    from pipeline.stages.campaign import expand
+    from pipeline.stages.campaign_expand import expand
 
     data = _default()
     data["campaigns"]["paper-realistic"]["sweep"] = {"loop.delay_s": [0.0, 0.002]}
@@ -198,7 +198,7 @@ def test_the_delay_can_be_swept_by_a_campaign(tmp_path):
 def test_the_controller_study_is_a_valid_params_file_outside_the_demo():
     """studies/controllers.yaml: the six laws x 20 seeds x {0, 1 ms}; not in params.yaml,
     whose campaigns are all DVC stages of `make demo`."""
-    from pipeline.stages.campaign import expand
+    from pipeline.stages.campaign_expand import expand
     from pipeline.stages.record import validate_episodes
 
     study = load_params(REPO / "studies" / "controllers.yaml")

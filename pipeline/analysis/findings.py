@@ -229,7 +229,7 @@ def _mass_diagonal(spec: RobotSpec, q: tuple[float, ...]) -> tuple[float, ...]:
     """diag M_n(q) of the nominal model (a campaign shares robot and goal: computed once)."""
     import pinocchio as pin
 
-    from pipeline.model.urdf import build_pinocchio_model
+    from pipeline.robots.urdf import build_pinocchio_model
 
     model = build_pinocchio_model(spec)
     mass = pin.crba(model, model.createData(), np.asarray(q, dtype=float))

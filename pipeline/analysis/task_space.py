@@ -2,10 +2,10 @@
 
 The tool centre point (TCP) is the robot's flange (``tool0``) moved by a tool offset
 (:class:`ToolOffset`, default none: the flange). Its pose is the forward kinematics (FK) of
-the Pinocchio model the recording's robot builds (:func:`pipeline.model.urdf.pinocchio_model`),
+the Pinocchio model the recording's robot builds (:func:`pipeline.robots.urdf.pinocchio_model`),
 evaluated for a whole time slice at once: ``world_T_joint = world_T_parent @ placement @
 motion(q)``, the motion a rotation about or a translation along the joint's axis
-(:func:`pipeline.model.chain.joint_motions`), is one batched matrix product per joint over
+(:func:`pipeline.robots.chain.joint_motions`), is one batched matrix product per joint over
 all samples of the slice.
 
 The TCP errors compare the FK of the reference joint positions with the FK of the position
@@ -30,12 +30,12 @@ import numpy as np
 import polars as pl
 from numpy.typing import NDArray
 
+from pipeline import transforms as tf
 from pipeline.analysis.catalog import TCP_JOINT
 from pipeline.analysis.episodes import robot_spec
 from pipeline.errors import ReportError
 from pipeline.log.reader import Recording
-from pipeline.model import transforms as tf
-from pipeline.model.chain import FLANGE, joint_motions
+from pipeline.robots.chain import FLANGE, joint_motions
 from pipeline.robots.spec import JointSpec, RobotSpec
 
 # The pseudo-joint the task-space rows of a metrics frame carry in their ``joint`` column.
@@ -108,9 +108,8 @@ class _Chain:
 
 @functools.lru_cache(maxsize=64)
 def _chain(spec: RobotSpec) -> _Chain:
-    # Pinocchio loads here, for a recording with a robot model: importing the analysis (and
-    # the report) loads no physics library (tests/report/test_report_imports_no_engine.py)
-    from pipeline.model.urdf import pinocchio_model
+    # here, not at the top: importing this module (the report reads its types) loads no engine
+    from pipeline.robots.urdf import pinocchio_model
 
     model = pinocchio_model(spec)
     by_name = {j.name: j for j in spec.joints}

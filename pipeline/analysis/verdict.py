@@ -1,8 +1,8 @@
 """The one rule that decides every candidate-vs-baseline comparison of a report.
 
-The Verdicts sentence (:mod:`pipeline.analysis.summary`), the campaign win/loss cells
-(:func:`pipeline.analysis.campaign.win_loss`, and the flips drawn from them) and the
-paper's claims (:mod:`pipeline.analysis.paper`) all call :func:`compare`, so one page
+The Verdicts sentence (:mod:`pipeline.analysis.headline`), the campaign win/loss cells
+(:func:`pipeline.analysis.campaign_tables.win_loss`, and the flips drawn from them) and the
+paper's claims (:mod:`pipeline.analysis.paper_claims`) all call :func:`compare`, so one page
 cannot hold two rules (issue 28):
 
 1. **Equivalent** (practical equivalence, TOST-style): the difference is within the

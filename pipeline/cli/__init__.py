@@ -4,9 +4,10 @@ Errors that are the user's input (:class:`PipelineError`) print one
 ``error: ...`` line and exit 1; ``--debug`` shows the traceback instead.
 
 Each command group is a module registered on the one Typer app (:mod:`pipeline.cli.root`):
-:mod:`~pipeline.cli.kinematics` (``robots``, ``fk``, ``ik``, ``ik-check``),
-:mod:`~pipeline.cli.teach`, :mod:`~pipeline.cli.controllers` (``check-controller``),
-:mod:`~pipeline.cli.record` (``record``, ``campaigns``) and :mod:`~pipeline.cli.report`.
+:mod:`~pipeline.cli.kinematics_cmd` (``robots``, ``fk``, ``ik``, ``ik-check``),
+:mod:`~pipeline.cli.teach_cmd`, :mod:`~pipeline.cli.controllers_cmd` (``check-controller``),
+:mod:`~pipeline.cli.record_cmd` (``record``, ``campaigns``), :mod:`~pipeline.cli.report_cmd`
+and :mod:`~pipeline.cli.identify_cmd`.
 """
 
 from __future__ import annotations
@@ -23,7 +24,14 @@ from pipeline.cli.root import app, console
 # isort: off
 # the command modules register their commands on ``app``; `pipeline --help` lists them in
 # this order
-from pipeline.cli import kinematics, teach, controllers, record, report, identify  # noqa: F401
+from pipeline.cli import (  # noqa: F401
+    kinematics_cmd,
+    teach_cmd,
+    controllers_cmd,
+    record_cmd,
+    report_cmd,
+    identify_cmd,
+)
 
 # isort: on
 from pipeline.errors import (
@@ -35,7 +43,7 @@ from pipeline.errors import (
 )
 from pipeline.memory import OUT_OF_MEMORY_HINT, out_of_memory, quiet_unraisable_memory_errors
 
-__all__ = ["app", "console", "controllers", "kinematics", "main", "record", "report", "teach"]
+__all__ = ["app", "console", "main"]
 
 
 def _interrupt_in_chain(err: BaseException) -> KeyboardInterrupt | None:

@@ -10,7 +10,12 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from pipeline.control.base import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, Controller, GainSpec
+    from pipeline.control.controller import (
+        DEFAULT_OMEGA_N_RAD_S,
+        DEFAULT_ZETA,
+        Controller,
+        GainSpec,
+    )
     from pipeline.control.registry import (
         CONTROLLERS,
         ControllerEntry,
@@ -25,10 +30,10 @@ if TYPE_CHECKING:
 
 # Each name's module, by its full import path (what make sync's import scan follows).
 _WHERE = {
-    "DEFAULT_OMEGA_N_RAD_S": "pipeline.control.base",
-    "DEFAULT_ZETA": "pipeline.control.base",
-    "Controller": "pipeline.control.base",
-    "GainSpec": "pipeline.control.base",
+    "DEFAULT_OMEGA_N_RAD_S": "pipeline.control.controller",
+    "DEFAULT_ZETA": "pipeline.control.controller",
+    "Controller": "pipeline.control.controller",
+    "GainSpec": "pipeline.control.controller",
     "CONTROLLERS": "pipeline.control.registry",
     "ControllerEntry": "pipeline.control.registry",
     "UnknownControllerError": "pipeline.control.registry",

@@ -50,7 +50,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike
 
 from pipeline.control import passivity
-from pipeline.control.base import (
+from pipeline.control.controller import (
     DEFAULT_OMEGA_N_RAD_S,
     DEFAULT_ZETA,
     F64,
@@ -59,8 +59,8 @@ from pipeline.control.base import (
     resolve_tuned_gains,
 )
 from pipeline.errors import ParamsError
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
+from pipeline.robots.urdf import build_pinocchio_model
 
 NAME = "adaptive"
 GAINS = (

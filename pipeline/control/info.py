@@ -1,6 +1,6 @@
 """What the rest of the pipeline knows of a controller, without importing one.
 
-A controller class declares its facts (:mod:`pipeline.control.base` lists them: colour,
+A controller class declares its facts (:mod:`pipeline.control.controller` lists them: colour,
 whether it holds the arm against gravity, whether it uses the nominal model, which gains
 are stiffnesses). :class:`ControllerInfo` is that record; the built-ins' records are a
 generated table (:data:`BUILTIN_INFO` below, written by ``make sync`` from the classes; a

@@ -35,7 +35,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike
 
-from pipeline.control.base import (
+from pipeline.control.controller import (
     DEFAULT_OMEGA_N_RAD_S,
     DEFAULT_ZETA,
     F64,
@@ -45,8 +45,8 @@ from pipeline.control.base import (
     nominal_mass_diagonal,
     resolve_tuned_gains,
 )
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
+from pipeline.robots.urdf import build_pinocchio_model
 
 NAME = "passivity"
 GAINS = (

@@ -12,7 +12,7 @@ from typing import Any
 import pinocchio as pin
 from numpy.typing import ArrayLike
 
-from pipeline.control.base import (
+from pipeline.control.controller import (
     DEFAULT_OMEGA_N_RAD_S,
     DEFAULT_ZETA,
     F64,

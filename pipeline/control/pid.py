@@ -22,7 +22,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from pipeline.control.base import (
+from pipeline.control.controller import (
     DEFAULT_OMEGA_N_RAD_S,
     DEFAULT_ZETA,
     F64,

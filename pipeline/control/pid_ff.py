@@ -32,7 +32,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike
 
 from pipeline.control import pid
-from pipeline.control.base import (
+from pipeline.control.controller import (
     DEFAULT_OMEGA_N_RAD_S,
     DEFAULT_ZETA,
     F64,
@@ -40,8 +40,8 @@ from pipeline.control.base import (
     GainSpec,
     friction_feedforward,
 )
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
+from pipeline.robots.urdf import build_pinocchio_model
 
 NAME = "pid_ff"
 GAINS = (*pid.GAINS, GainSpec("ff_at_next_sample", flag=True), *FRICTION_GAINS)

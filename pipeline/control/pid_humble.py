@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from pipeline.control import pid
-from pipeline.control.base import (
+from pipeline.control.controller import (
     DEFAULT_OMEGA_N_RAD_S,
     DEFAULT_ZETA,
     F64,

@@ -5,7 +5,7 @@ the group ``armlab.controllers``, else ``package.module:Object`` (see
 :mod:`pipeline.plugins`). A plug-in points at a :class:`ControllerEntry`, or at a
 controller class that declares ``GAINS`` (a tuple of :class:`GainSpec`) and
 ``DEFAULT_GAINS`` (and optionally ``COLOR`` and ``DESCRIPTION``), as
-:class:`~pipeline.control.base.NominalPDController` subclasses do.
+:class:`~pipeline.control.controller.NominalPDController` subclasses do.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from typing import Any
 from numpy.typing import ArrayLike
 
 from pipeline.control import adaptive, ctc, ctc_pid, passivity, pd_gravity, pid, pid_ff, pid_humble
-from pipeline.control.base import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, Controller, GainSpec
+from pipeline.control.controller import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, Controller, GainSpec
 from pipeline.control.info import GROUP, RGB
 from pipeline.errors import ParamsError, PipelineError
 from pipeline.plugins import installed_names, resolve
@@ -62,7 +62,8 @@ class ControllerEntry:
 
 
 def controller_entry_of_class(cls: Any) -> ControllerEntry:
-    """The entry of a controller class, from what it declares (:mod:`pipeline.control.base`)."""
+    """The entry of a controller class, from what it declares
+    (:mod:`pipeline.control.controller`)."""
     color = getattr(cls, "COLOR", None)
     return ControllerEntry(
         cls,

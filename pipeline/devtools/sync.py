@@ -7,7 +7,7 @@ equal by hand.
   read from their classes (the report reads this table and never imports a controller);
 - ``.dvc/plots/controller_joint.json``: the built-in controllers' colours;
 - docs/report.md's metric definitions: the metric catalog's;
-- the reader roles in ``pipeline report --topic``'s help (pipeline/cli/report.py):
+- the reader roles in ``pipeline report --topic``'s help (pipeline/cli/report_cmd.py):
   :data:`pipeline.log.topics.ROLES`.
 
 ``python -m pipeline.devtools.sync`` writes what is stale; ``--check`` only lists it (exit 1).
@@ -28,8 +28,8 @@ from pipeline.devtools.deps import PACKAGE, closure, imports_of, module_file
 REPO = PACKAGE.parent
 
 # The commands' modules: a stage's code is what their command functions import.
-RECORD_COMMAND = "pipeline.cli.record"
-REPORT_COMMAND = "pipeline.cli.report"
+RECORD_COMMAND = "pipeline.cli.record_cmd"
+REPORT_COMMAND = "pipeline.cli.report_cmd"
 # The record stage does not depend on the code that measures a campaign's episodes as
 # they are recorded (their partials carry that code's own commit: stages/partials.py
 # MEASURE_CODE, and are re-made when it changes): the closure does not enter it.
@@ -217,10 +217,10 @@ def report_md() -> str:
 
 
 def cli_report_py() -> str:
-    """pipeline/cli/report.py with the reader roles (``--topic`` help) in its block."""
+    """pipeline/cli/report_cmd.py with the reader roles (``--topic`` help) in its block."""
     from pipeline.log.topics import ROLES
 
-    path = PACKAGE / "cli" / "report.py"
+    path = PACKAGE / "cli" / "report_cmd.py"
     lines = [json.dumps(", ".join(ROLES))]
     return _replace_block(path.read_text(encoding="utf-8"), "reader roles", lines, where=str(path))
 
@@ -231,7 +231,7 @@ GENERATORS: dict[str, Callable[[], str]] = {
     "dvc.yaml": dvc_yaml,
     ".dvc/plots/controller_joint.json": plot_template_json,
     "docs/report.md": report_md,
-    "pipeline/cli/report.py": cli_report_py,
+    "pipeline/cli/report_cmd.py": cli_report_py,
 }
 """Each generated file (relative to the repository), and what makes its text."""
 

@@ -299,12 +299,12 @@ def record_excitation(
             or collides, a diverged episode, an existing ``out`` without ``force``.
     """
     from pipeline.control import make_controller
+    from pipeline.experiment.assemble import scenario_spec
+    from pipeline.experiment.goals import resolve_start
     from pipeline.log.bag import write_episode_bag
     from pipeline.model.scene import Box
     from pipeline.params import load_params
     from pipeline.sim.runner import run_episode
-    from pipeline.stages.assemble import scenario_spec
-    from pipeline.stages.goals import resolve_start
     from pipeline.trajectory import TrajectorySamples
 
     wall0 = time.perf_counter()
@@ -367,7 +367,7 @@ def record_excitation(
     )
     ref = design.reference
     check_excitation(spec, ref, obstacles=obstacles)
-    from pipeline.control.base import with_planned_path
+    from pipeline.control.controller import with_planned_path
 
     # built again with its default gains designed along the excitation (the one built above
     # checked the controller before the design's work)
@@ -380,7 +380,7 @@ def record_excitation(
         ),
         source=f"controllers.{controller_name}",
     )
-    from pipeline.stages.assemble import plant_run_options
+    from pipeline.experiment.assemble import plant_run_options
 
     plant_spec, plant, plant_settings = scenario_plant(spec, scenario, seed=seed)
     sim = params.sim
@@ -404,8 +404,8 @@ def record_excitation(
     )
     if result.status != "ok":
         raise IdentificationError(f"excitation episode {result.status}: {result.reason}")
+    from pipeline.experiment.assemble import spec_as_dict
     from pipeline.identify.model_file import spec_document
-    from pipeline.stages.assemble import spec_as_dict
 
     excitation = {
         "variant": variant,
@@ -492,9 +492,9 @@ def scenario_plant(
     Returns:
         The plant's robot (drawn links, armature), its MuJoCo options, and plain settings.
     """
+    from pipeline.experiment.assemble import draw_scenario_plant
     from pipeline.model.uncertainty import link_inertials
     from pipeline.settings import per_joint
-    from pipeline.stages.assemble import draw_scenario_plant
 
     p = scenario.plant
     plant_spec, plant, uncertainty = draw_scenario_plant(spec, scenario, seed=seed)

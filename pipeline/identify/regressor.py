@@ -27,9 +27,9 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from pipeline.errors import IdentificationError
-from pipeline.model.chain import chain
-from pipeline.model.urdf import build_pinocchio_model
+from pipeline.robots.chain import chain
 from pipeline.robots.spec import Inertial, RobotSpec
+from pipeline.robots.urdf import build_pinocchio_model
 
 F64 = NDArray[np.float64]
 

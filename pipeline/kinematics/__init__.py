@@ -14,7 +14,8 @@ posture), fewer solve for the flange position only (:func:`position_only`).
 from __future__ import annotations
 
 from pipeline.kinematics.analytic import AnalyticURSolver, BatchSolutions, URGeometry, ur_geometry
-from pipeline.kinematics.base import (
+from pipeline.kinematics.fk import flange_pose
+from pipeline.kinematics.ik import (
     DEFAULT_TOL_M,
     DEFAULT_TOL_RAD,
     FULL_POSE_DOF,
@@ -30,11 +31,10 @@ from pipeline.kinematics.base import (
     task_dim,
     verify_solution,
 )
-from pipeline.kinematics.fk import flange_pose
 from pipeline.kinematics.jacobian import is_singular, jacobian, manipulability, min_singular_value
 from pipeline.kinematics.limits import check_joint_limits, within_limits, wrap_to_limits
 from pipeline.kinematics.numeric import NumericLMSolver
-from pipeline.kinematics.registry import SOLVERS, make_solver, solve_pose_nearest, solver_names
+from pipeline.kinematics.solvers import SOLVERS, make_solver, solve_pose_nearest, solver_names
 
 __all__ = [
     "DEFAULT_TOL_M",

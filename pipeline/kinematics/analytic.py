@@ -44,7 +44,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import KinematicsError
-from pipeline.kinematics.base import (
+from pipeline.kinematics.ik import (
     IKOptions,
     IKResult,
     as_pose,

@@ -31,9 +31,9 @@ from numpy.typing import NDArray
 
 from pipeline.errors import KinematicsError
 from pipeline.fileio import atomic_write_bytes
-from pipeline.kinematics.base import IKOptions, pose_error, position_only
 from pipeline.kinematics.fk import flange_pose
-from pipeline.kinematics.registry import make_solver
+from pipeline.kinematics.ik import IKOptions, pose_error, position_only
+from pipeline.kinematics.solvers import make_solver
 from pipeline.robots.spec import RobotSpec
 
 POSITION_TARGET_M = 1e-4

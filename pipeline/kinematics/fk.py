@@ -16,9 +16,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import KinematicsError
 from pipeline.kinematics.limits import joint_vector
-from pipeline.model.chain import FLANGE
-from pipeline.model.urdf import pinocchio_model
+from pipeline.robots.chain import FLANGE
 from pipeline.robots.spec import RobotSpec
+from pipeline.robots.urdf import pinocchio_model
 
 Array = NDArray[np.float64]
 

@@ -1,6 +1,6 @@
 """Iterative IK for any serial arm: Levenberg-Marquardt on Pinocchio Jacobians.
 
-Any joint count (:mod:`pipeline.kinematics.base` says what IK means for it):
+Any joint count (:mod:`pipeline.kinematics.ik` says what IK means for it):
 
 - 6 or more joints, full pose: each attempt minimises F(q) = 1/2 |e(q)|^2 with
   e = log6(base_T_flange(q)^-1 target) (flange-frame twist: linear [m], angular
@@ -67,7 +67,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import lapack
 
 from pipeline.errors import KinematicsError
-from pipeline.kinematics.base import (
+from pipeline.kinematics.ik import (
     IKOptions,
     IKResult,
     as_pose,
@@ -78,9 +78,9 @@ from pipeline.kinematics.base import (
 )
 from pipeline.kinematics.limits import nearest_representative
 from pipeline.kinematics.seeds import seed_table
-from pipeline.model.chain import FLANGE
-from pipeline.model.urdf import build_pinocchio_model
+from pipeline.robots.chain import FLANGE
 from pipeline.robots.spec import RobotSpec
+from pipeline.robots.urdf import build_pinocchio_model
 
 Array = NDArray[np.float64]
 

@@ -24,8 +24,8 @@ import pinocchio as pin
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from pipeline.kinematics.base import position_only
 from pipeline.kinematics.fk import flange_model
+from pipeline.kinematics.ik import position_only
 from pipeline.robots.spec import RobotSpec
 
 Array = NDArray[np.float64]

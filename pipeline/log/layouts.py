@@ -43,7 +43,7 @@ from pipeline.constants import (
     TYPE_JOINT_STATE,
 )
 from pipeline.log.topics import TOPICS
-from pipeline.model.chain import FLANGE
+from pipeline.robots.chain import FLANGE
 
 FOXGLOVE_FILE = "foxglove.json"
 PLOTJUGGLER_FILE = "plotjuggler.xml"

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline import transforms
 from pipeline.constants import (
     TOPIC_CONTROLLER_STATE,
     TOPIC_GROUND_TRUTH,
@@ -43,9 +44,8 @@ from pipeline.log import cdr
 from pipeline.log.decode import Want
 from pipeline.log.schemas import QOS_LATCHED, QOS_STREAM, QOS_TF, Qos, message_types
 from pipeline.log.streams import EpisodeStreams
-from pipeline.model import transforms
-from pipeline.model.chain import then_joint_motions
 from pipeline.model.frames import tf_edges
+from pipeline.robots.chain import then_joint_motions
 from pipeline.robots.spec import RobotSpec
 
 __all__ = [
@@ -125,7 +125,7 @@ def _first(ep: EpisodeStreams) -> I64:
 
 def _robot_description(ep: EpisodeStreams) -> Fill:
     # Imported here: the URDF module pulls in Pinocchio, which readers of pipeline.log skip.
-    from pipeline.model.urdf import build_urdf
+    from pipeline.robots.urdf import build_urdf
 
     return Fill(_first(ep), {"data": ep.spec.description or build_urdf(ep.spec)})
 
@@ -252,7 +252,7 @@ def tf_poses(
 
     Every joint edge of :func:`pipeline.model.frames.tf_edges` is its transform at q = 0
     followed by the joint's motion (a rotation about, or a translation along, its axis:
-    :func:`pipeline.model.chain.then_joint_motions`); the flange edge is constant.
+    :func:`pipeline.robots.chain.then_joint_motions`); the flange edge is constant.
 
     Returns:
         (parent, child) frame pairs; (M, E, 3) translations [m]; (M, E, 4) quaternions

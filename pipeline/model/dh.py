@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import KinematicsError
-from pipeline.model.chain import chain_arrays, joint_motion
+from pipeline.robots.chain import chain_arrays, joint_motion
 from pipeline.robots.spec import IDENTITY, DHRow, RobotSpec, pose_matrix
 
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pipeline.model.chain import FLANGE, chain, joint_motion
+from pipeline.robots.chain import FLANGE, chain, joint_motion
 from pipeline.robots.spec import IDENTITY, RobotSpec, pose_matrix
 
 
@@ -22,7 +22,7 @@ class TfEdge:
 
 def tf_edges(spec: RobotSpec, q: ArrayLike) -> list[TfEdge]:
     """URDF tree transforms at joint positions ``q`` (base link ... tool0), as in
-    :func:`pipeline.model.urdf.build_urdf` (named frames left out).
+    :func:`pipeline.robots.urdf.build_urdf` (named frames left out).
 
     Composing them gives the same flange pose as forward kinematics.
     """

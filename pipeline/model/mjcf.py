@@ -18,11 +18,11 @@ from xml.sax.saxutils import quoteattr
 import mujoco
 import numpy as np
 
+from pipeline import transforms as tf
 from pipeline.constants import FRICTION_IMPEDANCE, PLANT_INTEGRATOR
 from pipeline.errors import ModelError
-from pipeline.model import transforms as tf
-from pipeline.model.chain import FLANGE, chain
 from pipeline.model.scene import Box
+from pipeline.robots.chain import FLANGE, chain
 from pipeline.robots.spec import IDENTITY, Pose, RobotSpec, Shape, pose_matrix
 
 ROBOT_BIT, GROUND_BIT, OBSTACLE_BIT = 1, 2, 4

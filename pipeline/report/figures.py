@@ -30,8 +30,9 @@ from matplotlib.ticker import (
 )
 from numpy.typing import NDArray
 
+from pipeline.analysis.measure import cs_times_s, cs_wide, times_s, wide
 from pipeline.log.reader import Recording
-from pipeline.report.inputs import ReportData, cs_times_s, cs_wide, times_s, wide
+from pipeline.report.inputs import ReportData
 
 FIGURES_DIR = "figures"
 MAX_PLOT_POINTS = 4000

@@ -12,7 +12,7 @@ from pathlib import Path
 import polars as pl
 
 from pipeline.analysis import catalog
-from pipeline.analysis.campaign import TABLE_DIR, condition_values, verdict_flips
+from pipeline.analysis.campaign_tables import TABLE_DIR, condition_values, verdict_flips
 
 # Flipping verdicts listed per assumption (all are in the CSV file).
 MAX_FLIPS_SHOWN = 30

@@ -18,38 +18,11 @@ from pipeline.analysis.aggregate import (
 )
 from pipeline.analysis.checks import duplicate_stamp_notes
 from pipeline.analysis.consistency import MixedSetting, mixed_settings
-from pipeline.analysis.episodes import comparable
+from pipeline.analysis.measure import cs_times_s, cs_wide, sample_roles
 from pipeline.analysis.protocol import ProtocolView
 from pipeline.analysis.task_space import TaskSpace, tcp_errors
 from pipeline.log.reader import Recording
 from pipeline.report.colors import controller_colors
-
-# A (group, controller) with at most this many episodes is shown whole in the .rrd and the
-# plot CSVs; a larger one by its labelled sample (median and worst episode).
-SHOW_ALL_UP_TO = 3
-
-
-def sample_roles(metrics: pl.DataFrame, episodes: pl.DataFrame) -> dict[str, str]:
-    """:attr:`ReportData.sample_roles` from the metric frame and the episode table alone
-    (a campaign run uses it on its partials to know which episodes the report shows)."""
-    worst = metrics.group_by("episode").agg(score=pl.col("max_abs_error").max())
-    eps = episodes.join(worst, on="episode", how="left").sort("episode")
-    key = "group" if "group" in eps.columns else "scenario"
-    roles: dict[str, str] = {}
-    for _, grp in eps.group_by(key, "controller", maintain_order=True):
-        if grp.height <= SHOW_ALL_UP_TO:
-            roles.update(dict.fromkeys(grp["episode"].to_list(), ""))
-            continue
-        # a salvaged episode cut before its motion end is neither a median nor a worst run
-        ok = grp.filter(comparable(grp) & pl.col("score").is_not_null())
-        ok = ok.sort("score", "episode")
-        if ok.height:
-            roles[ok["episode"][(ok.height - 1) // 2]] = "median"
-            roles[ok["episode"][-1]] = "worst"
-        failed = grp.filter(pl.col("status") != "ok")
-        if failed.height:
-            roles[failed["episode"][0]] = "failed"
-    return roles
 
 
 @dataclass(frozen=True)
@@ -206,10 +179,10 @@ class ReportData:
         """The episodes shown one by one (.rrd, plot CSVs) and their role.
 
         Per group (scenario, or campaign/condition) and controller: every episode when
-        there are at most :data:`SHOW_ALL_UP_TO` (role ""), else the completed episode
-        with the median and the one with the worst max |error| over joints ("median",
-        "worst") and the first failed one ("failed"), so the outputs stay bounded
-        whatever N is.
+        there are at most :data:`~pipeline.analysis.measure.SHOW_ALL_UP_TO` (role ""), else
+        the completed episode with the median and the one with the worst max |error| over
+        joints ("median", "worst") and the first failed one ("failed"), so the outputs stay
+        bounded whatever N is.
         """
         return sample_roles(self.metrics, self.episodes)
 
@@ -258,33 +231,3 @@ class ReportData:
         rec = self.recording(episode)
         same = [r for r in self.in_scenario(rec.scenario) if r.controller == rec.controller]
         return rec.controller if len(same) == 1 else f"{rec.controller} ({episode})"
-
-
-def _columns(frame: pl.DataFrame, n_joints: int, column: str) -> NDArray[np.float64]:
-    """(rows / n, n) array of a tidy one-row-per-joint frame's column, NaN where missing."""
-    values = frame.get_column(column).to_numpy()
-    return np.asarray(values, dtype=np.float64).reshape(-1, n_joints)
-
-
-def _times(frame: pl.DataFrame, n_joints: int) -> NDArray[np.float64]:
-    return np.asarray(frame.get_column("time_s").to_numpy()[::n_joints], dtype=np.float64)
-
-
-def wide(rec: Recording, column: str) -> NDArray[np.float64]:
-    """(N, n) array of one ``/joint_states`` sample column, joints in the recording's order."""
-    return _columns(rec.samples, len(rec.joint_names), column)
-
-
-def times_s(rec: Recording) -> NDArray[np.float64]:
-    """(N,) ``/joint_states`` sample times [s]."""
-    return _times(rec.samples, len(rec.joint_names))
-
-
-def cs_wide(rec: Recording, column: str) -> NDArray[np.float64]:
-    """(M, n) array of one ``/controller_state`` column (full rate)."""
-    return _columns(rec.controller_states, len(rec.joint_names), column)
-
-
-def cs_times_s(rec: Recording) -> NDArray[np.float64]:
-    """(M,) ``/controller_state`` times [s]."""
-    return _times(rec.controller_states, len(rec.joint_names))

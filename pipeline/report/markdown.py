@@ -3,7 +3,7 @@
 This module assembles the report and writes the sections that are tables of the metric
 frames (episodes, tracking, repeated runs, recordings); the others have a module each:
 :mod:`pipeline.report.setup`, :mod:`pipeline.report.physical_checks`,
-:mod:`pipeline.report.paper` and :mod:`pipeline.report.definitions`. Every number they
+:mod:`pipeline.report.paper_section` and :mod:`pipeline.report.definitions`. Every number they
 show is computed in :mod:`pipeline.analysis`; shared helpers are in :mod:`pipeline.report.md`.
 """
 
@@ -27,7 +27,7 @@ from pipeline.analysis.findings import (
 )
 from pipeline.log.reader import Recording
 from pipeline.report import md
-from pipeline.report.campaigns import CampaignSection
+from pipeline.report.campaign_section import CampaignSection
 from pipeline.report.definitions import definitions_section
 from pipeline.report.figures import FigureFile
 from pipeline.report.inputs import ReportData
@@ -40,10 +40,10 @@ from pipeline.report.md import (
     NOT_RECORDED,
     SALVAGE_CUT,
 )
-from pipeline.report.paper import versus_paper
+from pipeline.report.paper_section import versus_paper
 from pipeline.report.physical_checks import check_banner, physical_checks_section
 from pipeline.report.setup import setup_section
-from pipeline.report.summary import summary_section
+from pipeline.report.summary_section import summary_section
 from pipeline.sim.settling import SETTLING
 
 REPORT_FILE = "report.md"

@@ -10,12 +10,13 @@ from typing import Any
 import numpy as np
 import polars as pl
 
-from pipeline.analysis import summary
+from pipeline.analysis import headline as summary
 from pipeline.analysis.aggregate import CONFIDENCE
 from pipeline.analysis.catalog import BY_NAME, COMPARED_METRICS, METRIC_SOURCES, METRICS
+from pipeline.analysis.measure import cs_times_s, cs_wide, times_s, wide
 from pipeline.analysis.metrics import ERROR_FLOOR_RAD, SETTLING_TOLERANCE_RAD
 from pipeline.constants import FINAL_WINDOW_S
-from pipeline.report.inputs import ReportData, cs_times_s, cs_wide, times_s, wide
+from pipeline.report.inputs import ReportData
 
 METRICS_FILE = "metrics.json"
 # The declared DVC metric: the headline reductions only (metrics.json is a plain output).
@@ -210,7 +211,7 @@ def write_metrics(data: ReportData, out_dir: Path) -> str:
 
 
 def headline_json(data: ReportData) -> dict[str, Any]:
-    """headline.json's content: :func:`pipeline.analysis.summary.headline_document` of the
+    """headline.json's content: :func:`pipeline.analysis.headline.headline_document` of the
     report's questions."""
     joints = {g: list(r[0].joint_names) for g in data.groups() if (r := data.in_group(g))}
     return summary.headline_document(summary.questions(data.reduction_summary, joints))

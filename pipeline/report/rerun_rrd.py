@@ -34,12 +34,13 @@ import rerun.blueprint as rrb
 import rerun_bindings as rr_bindings
 from numpy.typing import NDArray
 
+from pipeline.analysis.measure import cs_times_s, cs_wide, times_s, wide
 from pipeline.log.reader import Recording
 from pipeline.report import entities as ent
 from pipeline.report import rrd_scene as scene
 from pipeline.report.colors import REFERENCE_RGB, color_name, hex_color
 from pipeline.report.figures import MAX_FIGURE_JOINTS
-from pipeline.report.inputs import ReportData, cs_times_s, cs_wide, times_s, wide
+from pipeline.report.inputs import ReportData
 
 RRD_FILE = "recording.rrd"
 APPLICATION_ID = "armlab_report"

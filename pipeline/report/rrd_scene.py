@@ -11,13 +11,13 @@ import rerun as rr
 from numpy.typing import NDArray
 
 from pipeline.analysis.episodes import robot_spec
+from pipeline.analysis.measure import times_s, wide
 from pipeline.log.reader import Recording
-from pipeline.model.chain import chain
 from pipeline.model.dh import link_frames
 from pipeline.report import entities as ent
-from pipeline.report.inputs import times_s, wide
 from pipeline.report.rrd_meshes import LinkMeshes, link_meshes, send_link_meshes
 from pipeline.robots import RobotSpec
+from pipeline.robots.chain import chain
 
 ARM_RATE_HZ = 30.0
 # Episodes stand this far apart in the 3D view [m] (a UR5 reaches ~0.85 m).

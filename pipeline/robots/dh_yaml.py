@@ -237,7 +237,7 @@ def _dh_ops(row: DHRow, convention: str) -> tuple[list[_Op], list[_Op]]:
 
 def _compose(ops: list[_Op]) -> tuple[np.ndarray, list[np.ndarray]]:
     """Matrix of a sequence of elementary ops, and the polyline its translations trace."""
-    from pipeline.model import transforms as tf
+    from pipeline import transforms as tf
 
     t = np.eye(4)
     points = [t[:3, 3].copy()]
@@ -271,7 +271,7 @@ def dh_joint_geometry(
     """Per DH row: the joint origin (``pre``, in DH frame i-1), ``post`` (rotated joint
     frame -> DH frame i, the link frame) and the link's capsules in DH frame i, which follow
     the translations of ``post_i`` (moving with link i) and of ``pre_{i+1}``."""
-    from pipeline.model import transforms as tf
+    from pipeline import transforms as tf
 
     decomposed = [_dh_ops(r, convention) for r in rows]
     out = []

@@ -87,7 +87,7 @@ def derived_acceleration_limits(spec: RobotSpec) -> NDArray[np.float64]:
         return np.full(spec.dof, DEFAULT_ACCELERATION)
     import pinocchio as pin
 
-    from pipeline.model.urdf import build_pinocchio_model
+    from pipeline.robots.urdf import build_pinocchio_model
 
     model = build_pinocchio_model(spec)
     data = model.createData()

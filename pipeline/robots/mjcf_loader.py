@@ -29,8 +29,8 @@ from xml.etree import ElementTree
 import mujoco
 import numpy as np
 
+from pipeline import transforms as tf
 from pipeline.errors import SpecError
-from pipeline.model import transforms as tf
 from pipeline.robots import caps
 from pipeline.robots.link_facts import link_capsules, merged_inertial
 from pipeline.robots.sidecar import (

@@ -192,7 +192,7 @@ class JointSpec:
     damping_nm_s_rad: float = 0.0
     """Viscous joint friction the robot states [N m s/rad] (a sidecar's ``damping``, else
     the URDF's ``<dynamics damping>``): the simulated plant's default where the scenario's
-    ``plant.damping`` is not given (:func:`pipeline.stages.assemble.plant_friction`)."""
+    ``plant.damping`` is not given (:func:`pipeline.experiment.assemble.plant_friction`)."""
     frictionloss_nm: float = 0.0
     """Coulomb joint friction the robot states [N m] (a sidecar's ``frictionloss``, else the
     URDF's ``<dynamics friction>``), a plant default as ``damping_nm_s_rad``."""

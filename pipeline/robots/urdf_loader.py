@@ -28,8 +28,8 @@ from xml.etree import ElementTree
 
 import numpy as np
 
+from pipeline import transforms as tf
 from pipeline.errors import SpecError
-from pipeline.model import transforms as tf
 from pipeline.robots import caps
 from pipeline.robots.link_facts import check_physical, link_capsules, merged_inertial
 from pipeline.robots.packages import package_search_path

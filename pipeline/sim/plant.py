@@ -162,7 +162,7 @@ def plant_model(
         return compiled(plant_spec)
     if not _same_robot_but_inertials(spec, plant_spec):
         return compiled(plant_spec)
-    from pipeline.model.chain import link_name
+    from pipeline.robots.chain import link_name
 
     extra = list(plant.armature) or [0.0]
     extra = extra * spec.dof if len(extra) == 1 else extra

@@ -34,7 +34,7 @@ import mujoco
 import numpy as np
 
 from pipeline.constants import PLANT_FRICTION, PLANT_INTEGRATOR
-from pipeline.control.base import Controller
+from pipeline.control.controller import Controller
 from pipeline.errors import SimulationError
 from pipeline.model.mjcf import PlantOptions
 from pipeline.model.published import SigmoidFriction

@@ -39,16 +39,16 @@ import numpy as np
 import pinocchio as pin
 
 from pipeline.control import Controller, controller_entry, make_controller
-from pipeline.control.base import (
+from pipeline.control.controller import (
     DEFAULT_OMEGA_N_RAD_S,
     DEFAULT_ZETA,
     F64,
     RECORDED_TUNING_KEYS,
 )
 from pipeline.errors import ParamsError, PipelineError
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.loaders import load_spec
 from pipeline.robots.spec import RobotSpec
+from pipeline.robots.urdf import build_pinocchio_model
 
 ROBOT = "ur5"
 """The kit's arm: the smallest shipped robot with dynamics."""

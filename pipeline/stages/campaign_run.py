@@ -45,7 +45,7 @@ from pipeline.params import (
     RandomGoals,
     SimParams,
 )
-from pipeline.stages.campaign import episode_fingerprint, expand
+from pipeline.stages.campaign_expand import episode_fingerprint, expand
 from pipeline.stages.provenance import git_commit
 
 if TYPE_CHECKING:
@@ -539,8 +539,7 @@ def keep_partial(
     Raises:
         PipelineError: the bag cannot be read, or the recording not measured.
     """
-    from pipeline.stages.partials import partial_path, write_partial
-    from pipeline.stages.report import measure_bag, measure_recording
+    from pipeline.stages.partials import measure_bag, measure_recording, partial_path, write_partial
 
     if recording is not None:
         partial = measure_recording(recording, measure_code=measure_code)
@@ -551,7 +550,7 @@ def keep_partial(
 
 def sample_without_bags(run: CampaignRun) -> list[str]:
     """Keys of the episodes the report will show one by one (the median and the worst per
-    condition and controller, or all of a small group: :func:`pipeline.report.inputs.
+    condition and controller, or all of a small group: :func:`pipeline.analysis.measure.
     sample_roles`, from the episodes' partials) whose bag was not kept: re-run them by
     key (:func:`plan_run` ``only``) to keep their bags. Episodes with neither a partial
     nor a bag (failed) are left out, as the report leaves them out.
@@ -559,9 +558,8 @@ def sample_without_bags(run: CampaignRun) -> list[str]:
     Raises:
         ReportError: a partial is unreadable.
     """
-    from pipeline.report.inputs import sample_roles
-    from pipeline.stages.partials import partial_path, read_partial
-    from pipeline.stages.report import measure_bag
+    from pipeline.analysis.measure import sample_roles
+    from pipeline.stages.partials import measure_bag, partial_path, read_partial
 
     rows: list[pl.DataFrame] = []
     metrics: list[pl.DataFrame] = []

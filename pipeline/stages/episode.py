@@ -21,11 +21,7 @@ import numpy as np
 
 from pipeline.constants import FINAL_EDGE_S, FINAL_WINDOW_S
 from pipeline.errors import PipelineError
-from pipeline.fsutil import remove_stale
-from pipeline.memory import out_of_memory
-from pipeline.params import Episode
-from pipeline.planning import PlannedPath, TimedTrajectory
-from pipeline.stages.assemble import (
+from pipeline.experiment.assemble import (
     bag_metadata,
     draw_scenario_plant,
     episode_settings,
@@ -33,6 +29,10 @@ from pipeline.stages.assemble import (
     plant_run_options,
     scenario_spec,
 )
+from pipeline.fsutil import remove_stale
+from pipeline.memory import out_of_memory
+from pipeline.params import Episode
+from pipeline.planning import PlannedPath, TimedTrajectory
 from pipeline.stages.plans import ScenarioPlan, obstacle_boxes
 
 
@@ -130,8 +130,8 @@ def _run_and_write(
     before_write: Callable[[], None] | None = None,
 ) -> EpisodeOutcome:
     from pipeline.control import make_controller
-    from pipeline.control.base import with_planned_path
     from pipeline.control.contain import contained_controller
+    from pipeline.control.controller import with_planned_path
     from pipeline.identify.model_file import nominal_path, nominal_spec, with_nominal_friction
 
     scenario = episode.scenario

@@ -2,14 +2,14 @@
 
 A campaign with ``keep_bags: {every: k}`` keeps the full bag of every k-th episode. Each
 episode it records is also measured by the report's own code
-(:func:`pipeline.stages.report.measure_recording`) from the recording its bag reads back
-as, made in memory from the episode's streams
-(:func:`pipeline.log.whole.episode_recording`: no encoding, compression, file or read),
-and kept as ``<campaign>/.partials/<key>.arrow``: what the report keeps of an episode once
-its frames are let go (the recording's facts and settings, the protocol view, the episode
-row, the metric frame and the thinned error series). The report reads these instead of the
-missing bags, so the campaign table is the same, exactly; re-running the episode by its
-key reproduces the bag byte for byte (a recording depends on its params and seed alone).
+(:func:`pipeline.stages.partials.measure_recording`) from the recording its bag reads back
+as, made in memory from the episode's arrays (:mod:`pipeline.log.direct`: no encoding,
+compression, file or read), and kept as ``<campaign>/.partials/<key>.arrow``: what the
+report keeps of an episode once its frames are let go (the recording's facts and
+settings, the protocol view, the episode row, the metric frame and the thinned error
+series). The report reads these instead of the missing bags, so the campaign table is
+the same, exactly; re-running the episode by its key reproduces the bag byte for byte (a
+recording depends on its params and seed alone).
 
 The format (no pickle: nothing in it runs code when read):
 
@@ -41,17 +41,17 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from pipeline.analysis.measure import Measured, Measurement
+from pipeline.analysis.task_space import FLANGE_TOOL
 from pipeline.errors import ReportError
+from pipeline.log.reader import read_recording
 
-if TYPE_CHECKING:  # only this file's types: a full-bag campaign loads no report code
-    import numpy as np
+if TYPE_CHECKING:
     import polars as pl
-    from numpy.typing import NDArray
 
-    from pipeline.analysis.protocol import ProtocolView
-    from pipeline.analysis.task_space import TaskSpace, ToolOffset
+    from pipeline.analysis.task_space import ToolOffset
     from pipeline.log.reader import Recording
-    from pipeline.report.campaigns import CampaignSection
+    from pipeline.report.campaign_section import CampaignSection
 
 PARTIAL_DIR = ".partials"
 PARTIAL_SUFFIX = ".arrow"
@@ -85,30 +85,6 @@ def partial_fingerprint(fingerprint: str, measure_code: str) -> str:
     """The completion mark of an episode kept as its partial: its recording's
     ``fingerprint`` with the measuring code's commit folded in."""
     return hashlib.sha256(f"{fingerprint}:{measure_code}".encode()).hexdigest()
-
-
-@dataclass(frozen=True)
-class Measurement:
-    """What the report keeps of one recording once it is measured (what a report worker
-    sends back, and what a partial holds).
-
-    Attributes:
-        recording: the recording as kept (a campaign episode's frames let go: settings,
-            notes, counts).
-        view: its protocol view (``view.recording`` is ``recording``).
-        row: its row of :func:`pipeline.analysis.episodes.episode_table`.
-        metrics: its rows of :func:`pipeline.analysis.metrics.joint_metrics`.
-        errors: the thinned error series (times [s], errors [rad]) of a campaign episode,
-            for the .rrd's bands; else None.
-        task_space: episode -> its FK model (empty when the bag has no robot model).
-    """
-
-    recording: Recording
-    view: ProtocolView
-    row: pl.DataFrame
-    metrics: pl.DataFrame
-    errors: tuple[NDArray[np.float64], NDArray[np.float64]] | None
-    task_space: dict[str, TaskSpace]
 
 
 @dataclass(frozen=True)
@@ -465,7 +441,7 @@ def bags_listed(
     into ``staging``) and one line saying so."""
     import polars as pl
 
-    from pipeline.analysis.campaign import TABLE_DIR
+    from pipeline.analysis.campaign_tables import TABLE_DIR
 
     rel = f"{TABLE_DIR}/{stem}.bags.csv"
     pl.DataFrame(
@@ -480,3 +456,37 @@ def bags_listed(
         "re-runs one into its bag, byte for byte."
     )
     return replace(section, lines=(*section.lines, "", line), files=(*section.files, rel))
+
+
+def measure_bag(
+    bag_dir: Path, *, tool: ToolOffset = FLANGE_TOOL, measure_code: str | None = None
+) -> Partial:
+    """Read a bag and measure it exactly as ``pipeline report`` does: its partial
+    (:class:`Partial`).
+
+    Raises:
+        RecordingError: the bag cannot be read.
+    """
+    measured = Measured(tool)
+    rec = measured.add(read_recording(bag_dir, None, sink=measured))
+    return _partial(measured, rec, bag_dir.name, tool, measure_code)
+
+
+def measure_recording(
+    rec: Recording, *, tool: ToolOffset = FLANGE_TOOL, measure_code: str | None = None
+) -> Partial:
+    """Measure a recording read whole (or made in memory as its bag would read back:
+    :func:`pipeline.log.direct.episode_recording`) exactly as ``pipeline report`` does."""
+    measured = Measured(tool)
+    return _partial(measured, measured.add(rec), rec.source.name, tool, measure_code)
+
+
+def _partial(
+    measured: Measured, rec: Recording, bag: str, tool: ToolOffset, measure_code: str | None
+) -> Partial:
+    return Partial.of(
+        measured.take(rec.episode),
+        measure_code=measure_commit() if measure_code is None else measure_code,
+        bag=bag,
+        tool=tool,
+    )

@@ -13,10 +13,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from pipeline.errors import PipelineError
+from pipeline.experiment.goals import resolve_goal
 from pipeline.params import Episode, Params, ScenarioParams
 from pipeline.planning import PlannedPath, TimedTrajectory
 from pipeline.robots.loaders import load_spec
-from pipeline.stages.goals import resolve_goal
 
 if TYPE_CHECKING:
     from pipeline.model.scene import Box

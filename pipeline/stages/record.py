@@ -1,6 +1,6 @@
 """The record stage: params -> plan per scenario -> episodes -> one ROS 2 bag each.
 
-Glue over the pieces: :mod:`~pipeline.stages.goals` (start and goal),
+Glue over the pieces: :mod:`~pipeline.experiment.goals` (start and goal),
 :mod:`~pipeline.stages.plans` (one plan per distinct plan input, shared by every
 controller that tracks it), :mod:`~pipeline.stages.budget` (memory and time, before
 any work), :mod:`~pipeline.stages.executors` (where the episodes run) and
@@ -18,14 +18,14 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.errors import ParamsError, PipelineError, SimulationError
+from pipeline.experiment.goals import resolve_goal
 from pipeline.fsutil import ensure_dir
 from pipeline.params import Episode, Params
 from pipeline.robots.loaders import load_spec
 from pipeline.stages.budget import check_budget
 from pipeline.stages.episode import EpisodeOutcome, remove_work_folders
 from pipeline.stages.executors import make_executor
-from pipeline.stages.executors.base import interrupted
-from pipeline.stages.goals import resolve_goal
+from pipeline.stages.executors.executor import interrupted
 from pipeline.stages.plans import plan_all
 from pipeline.stages.provenance import git_commit
 
@@ -110,7 +110,7 @@ def _check_profile(params: Params, spec: Any, scenario: Any, where: str) -> None
     """A published plant profile that does not describe the robot, or a friction spread
     the plant's friction law lacks: refused before any work (one line)."""
     from pipeline.errors import ModelError
-    from pipeline.stages.assemble import draw_scenario_plant
+    from pipeline.experiment.assemble import draw_scenario_plant
 
     if not scenario.plant.profile and not scenario.plant.uncertainty.transition_rel:
         return
@@ -168,8 +168,8 @@ def _probe_plugin(name: str, build: Callable[[], object]) -> None:
 
 def _check_loop(params: Params, episode: Episode, where: str) -> None:
     """The scenario's loop against the physics step (a delay is whole physics steps)."""
+    from pipeline.experiment.assemble import loop_settings
     from pipeline.sim.loop import check_loop
-    from pipeline.stages.assemble import loop_settings
 
     try:
         check_loop(
@@ -204,8 +204,8 @@ def prepare(
 def missing_fact_lines(episodes: Sequence[Episode]) -> list[str]:
     """The warnings for the facts the episodes' robots do not state (armature, acceleration
     and velocity limits), one line per robot and field (:mod:`pipeline.robots.facts`)."""
+    from pipeline.experiment.assemble import scenario_spec
     from pipeline.robots.facts import fact_warnings, missing_facts
-    from pipeline.stages.assemble import scenario_spec
 
     scenarios = {ep.scenario.robot: ep.scenario for ep in episodes}
     facts = tuple(f for sc in scenarios.values() for f in missing_facts(scenario_spec(sc)))

@@ -1,4 +1,3 @@
-# long: the report stage and how it measures each recording as read (Measured, also for partials)
 """The report stage: recordings -> metrics.json, plot CSVs, figures, report.md, recording.rrd.
 
 Everything is written into a fresh staging folder beside ``out``; when all of it
@@ -18,37 +17,24 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-import numpy as np
 import polars as pl
-from numpy.typing import NDArray
 
-from pipeline.analysis.campaign import TABLE_DIR, campaign_tables
+from pipeline.analysis.campaign_tables import TABLE_DIR, campaign_tables
 from pipeline.analysis.checks import (
-    Duplicates,
-    duplicate_note,
-    duplicate_stamp_notes,
-    duplicate_stamps,
     merged_label_notes,
 )
-from pipeline.analysis.episodes import episode_table, limits_table, shown_status
+from pipeline.analysis.episodes import shown_status
+from pipeline.analysis.measure import Measured
 from pipeline.analysis.metrics import (
     check_baseline,
     comparisons,
-    finish_metrics,
-    joint_metrics,
-    metric_partials,
 )
 from pipeline.analysis.protocol import (
-    Protocol,
-    ProtocolView,
-    protocol_of,
     protocol_view,
-    start_state,
 )
-from pipeline.analysis.task_space import FLANGE_TOOL, TaskSpace, ToolOffset, task_space_of
-from pipeline.constants import TOPIC_CONTROLLER_STATE, TOPIC_JOINT_STATES
+from pipeline.analysis.task_space import FLANGE_TOOL, ToolOffset
 from pipeline.errors import PipelineError, RecordingError, ReportError
 from pipeline.fsutil import OutputLock, check_out_dir, remove_stale
 from pipeline.log.reader import (
@@ -58,10 +44,8 @@ from pipeline.log.reader import (
     find_recordings,
     read_recording,
 )
-from pipeline.report.inputs import ReportData, Skipped, cs_times_s, cs_wide
+from pipeline.report.inputs import ReportData, Skipped
 from pipeline.stages.partials import (
-    Measurement,
-    Partial,
     bags_listed,
     find_partials,
     measure_commit,
@@ -77,7 +61,7 @@ from pipeline.stages.report_commit import (
 from pipeline.stages.report_pool import default_jobs, measure_in_workers
 
 if TYPE_CHECKING:  # the writers load when a report is written (see _writers)
-    from pipeline.report.campaigns import CampaignSection
+    from pipeline.report.campaign_section import CampaignSection
     from pipeline.report.figures import FigureFile
 
 # the baseline when none is named; recordings of one other controller are fine with it
@@ -290,7 +274,7 @@ def _run_report_locked(
         measured=measured,
         jobs=jobs,
     )
-    recordings = measured.with_partials(recordings, recordings_dir)
+    recordings = with_partials(measured, recordings, recordings_dir)
     recordings = merged_label_notes(recordings, options)
     episodes = pl.concat([measured.rows[r.episode] for r in recordings], how="vertical")
     if not check_baseline(episodes, baseline) and baseline != DEFAULT_BASELINE:
@@ -314,7 +298,7 @@ def _run_report_locked(
         error_series=measured.errors,
         task_space=measured.task_space,
     )
-    data = measured.with_sample_frames(first, options)
+    data = with_sample_frames(measured, first, options)
     # The writers (matplotlib, Rerun) load here, not with this module: a report worker
     # imports this module to read and measure, and does not pay for them.
     from pipeline.report.figures import MAX_FIGURE_SCENARIOS, scenario_figures, scenario_slugs
@@ -375,267 +359,70 @@ def _run_report_locked(
     )
 
 
-# Thinned error series kept per campaign episode for the .rrd's percentile bands.
-BAND_POINTS = 250
-
-
-class _Streamed:
-    """A long recording's windows as they are read: the protocol applied to each, their
-    partial metrics, counts and duplicate stamps, and the exact state at the motion start."""
-
-    def __init__(self, header: Recording, tool: ToolOffset) -> None:
-        self.protocol: Protocol = protocol_of(header)[0]
-        self.task_space = task_space_of(header, tool)
-        view, _ = protocol_view(header)
-        # the episode row as far as the metrics need it (motion end, end, completed)
-        self.row = episode_table([view.recording], {header.episode: view})
-        self.limits = limits_table([header])
-        self.joints = max(len(header.joint_names), 1)
-        self.partials: list[pl.DataFrame] = []
-        self.counts = [0, 0]
-        self.start: list[float | None] = [None, None]
-        self.started = [False, False]
-        self.duplicates: dict[str, Duplicates] = {}
-        self.empty = self.protocol.frames(header.samples, header.controller_states)
-
-    def window(self, samples: pl.DataFrame, controller_states: pl.DataFrame) -> None:
-        js, cs = self.protocol.frames(samples, controller_states)
-        first = start_state(js, cs)
-        for k, (frame, value) in enumerate(((cs, first[0]), (js, first[1]))):
-            if frame.height and not self.started[k]:
-                self.started[k], self.start[k] = True, value
-        self.counts[0] += js.height // self.joints
-        self.counts[1] += cs.height // self.joints
-        for topic, frame in ((TOPIC_JOINT_STATES, js), (TOPIC_CONTROLLER_STATE, cs)):
-            dup = duplicate_stamps(frame)
-            if dup is not None:
-                old = self.duplicates.get(topic)
-                self.duplicates[topic] = dup if old is None else old + dup
-        if js.height or cs.height:
-            self.partials.append(
-                metric_partials(js, cs, self.row, self.limits, task_space=self.task_space)
-            )
-
-    def view(self, raw: Recording) -> tuple[ProtocolView, pl.DataFrame]:
-        """The recording's view (decimated frames, exact counts and start state) and its
-        metrics over every window."""
-        view, _ = protocol_view(
-            raw, start=(self.start[0], self.start[1]), counts=(self.counts[0], self.counts[1])
-        )
-        rec = view.recording
-        span = rec.end_s + view.motion_start_s if rec.end_s is not None else 0.0
-        length = f"{span / 3600:.3g}-hour" if span >= 3600 else f"{span / 60:.3g}-minute"
-        topics = (TOPIC_JOINT_STATES, TOPIC_CONTROLLER_STATE)
-        notes = [duplicate_note(t, self.duplicates[t]) for t in topics if t in self.duplicates]
-        notes.append(
-            f"{length} recording: metrics over all {self.counts[1]:,} controller-state and "
-            f"{self.counts[0]:,} joint-state samples, streamed in {rec.windows} windows; "
-            f"figures, series CSVs and the .rrd show every {rec.decimation}-th sample"
-        )
-        view = dataclasses.replace(
-            view, recording=dataclasses.replace(rec, notes=(*rec.notes, *notes))
-        )
-        # nothing after the motion start: the metrics of empty frames, as a whole read has
-        parts = self.partials or [
-            metric_partials(*self.empty, self.row, self.limits, task_space=self.task_space)
-        ]
-        return view, finish_metrics(pl.concat(parts, how="vertical_relaxed"))
-
-
-class Measured:
-    """What the report keeps of each recording as it is read: its protocol view, episode
-    row and metrics; a campaign episode's frames are let go (only a bounded sample of
-    them is drawn, re-read afterwards) after keeping a thinned error series.
-
-    It is also the reader's :class:`WindowSink`: a long recording's metrics are computed
-    window by window as it is read (:class:`_Streamed`); its frames are decimated."""
-
-    def __init__(self, tool: ToolOffset = FLANGE_TOOL) -> None:
-        self.tool = tool
-        self.task_space: dict[str, TaskSpace] = {}
-        self.views: dict[str, ProtocolView] = {}
-        self.rows: dict[str, pl.DataFrame] = {}
-        self.metrics: dict[str, pl.DataFrame] = {}
-        self.errors: dict[str, tuple[NDArray[np.float64], NDArray[np.float64]]] = {}
-        self.streamed: _Streamed | None = None
-        self.bagless: set[str] = set()  # measured from their partials (keep_bags)
-
-    def with_partials(self, recordings: list[Recording], recordings_dir: Path) -> list[Recording]:
-        """``recordings`` plus the campaign episodes kept as metric partials only (an
-        episode whose bag is there too is read from its bag), sorted by episode.
-
-        Raises:
-            ReportError: a partial is unreadable or was measured with another --tool.
-        """
-        have = {r.episode for r in recordings}
-        out = list(recordings)
-        code = None
-        for path in find_partials(recordings_dir):
-            if path.stem in have:  # its bag was read (a partial is named by its key)
-                continue
-            p = read_partial(path)
-            episode = p.recording.episode
-            if episode in have:
-                continue
-            code = measure_commit() if code is None else code
-            if p.measure_code != code:
-                raise ReportError(
-                    f"{path}: measured by other report code ({p.measure_code or 'no git'}, "
-                    f"now {code or 'no git'}); re-run its campaign (`pipeline record "
-                    "--campaign`) to measure it again, or keep full bags"
-                )
-            if p.tool != self.tool:
-                raise ReportError(
-                    f"{path}: measured with the TCP at {p.tool}, not at --tool {self.tool}; "
-                    "report without --tool, or re-run the campaign with full bags"
-                )
-            have.add(episode)
-            self.bagless.add(episode)
-            out.append(self.merge(p))
-        return sorted(out, key=lambda r: r.episode)
-
-    def begin(self, header: Recording) -> None:
-        self.streamed = _Streamed(header, self.tool)
-
-    def window(self, samples: pl.DataFrame, controller_states: pl.DataFrame) -> None:
-        assert self.streamed is not None
-        self.streamed.window(samples, controller_states)
-
-    def add(self, raw: Recording) -> Recording:
-        streamed, self.streamed = self.streamed, None
-        self.task_space.update(task_space_of(raw, self.tool))
-        if raw.windows:
-            assert streamed is not None
-            view, metrics = streamed.view(raw)
-            rec = view.recording
-            row = episode_table([rec], {rec.episode: view})
-        else:
-            view, _ = protocol_view(raw)
-            rec = view.recording
-            row = episode_table([rec], {rec.episode: view})
-            metrics = joint_metrics(
-                rec.samples,
-                rec.controller_states,
-                row,
-                limits_table([rec]),
-                task_space=self.task_space,
-            )
-        self.rows[rec.episode] = row
-        self.metrics[rec.episode] = metrics
-        if view.settings is not None and view.settings.campaign is not None:
-            t = cs_times_s(rec)
-            step = max(1, int(np.ceil(t.size / BAND_POINTS)))
-            self.errors[rec.episode] = (t[::step], cs_wide(rec, "error_rad")[::step])
-            rec = dataclasses.replace(
-                rec,
-                samples=rec.samples.clear(),
-                controller_states=rec.controller_states.clear(),
-                notes=(*rec.notes, *duplicate_stamp_notes(rec)),
-            )
-            view = dataclasses.replace(view, recording=rec)
-        self.views[rec.episode] = view
-        return rec
-
-    def measure(self, source: Path, options: ReadOptions | None) -> tuple[str, Any]:
-        """Read and measure one recording and hand its measurement over (this object
-        keeps nothing of it): ("ok", :class:`Measurement`), or ("bad", the text of the
-        :class:`RecordingError` that refused it). What a report worker does per recording.
-        """
-        try:
-            raw = read_recording(source, options, sink=self)
-        except RecordingError as err:
-            self.streamed = None
-            return ("bad", str(err))
-        return ("ok", self.take(self.add(raw).episode))
-
-    def take(self, episode: str) -> Measurement:
-        """Hand over what this object keeps of ``episode`` (measured by :meth:`add`); it
-        keeps nothing of it after."""
-        view = self.views.pop(episode)
-        task_space = self.task_space.pop(episode, None)
-        return Measurement(
-            recording=view.recording,
-            view=view,
-            row=self.rows.pop(episode),
-            metrics=self.metrics.pop(episode),
-            errors=self.errors.pop(episode, None),
-            task_space={} if task_space is None else {episode: task_space},
-        )
-
-    def merge(self, m: Measurement) -> Recording:
-        """Keep ``m`` (measured elsewhere, or a partial read back) as :meth:`add` would
-        have kept it; returns its recording."""
-        episode = m.recording.episode
-        self.task_space.update(m.task_space)
-        self.rows[episode] = m.row
-        self.metrics[episode] = m.metrics
-        if m.errors is not None:
-            self.errors[episode] = m.errors
-        self.views[episode] = m.view
-        return m.recording
-
-    def with_sample_frames(self, data: ReportData, options: ReadOptions | None) -> ReportData:
-        """``data`` with the frames of the sampled campaign episodes read back."""
-        recordings = list(data.recordings)
-        for k, rec in enumerate(recordings):
-            if (
-                rec.episode in data.sample_roles
-                and rec.episode in self.errors
-                and rec.episode not in self.bagless
-            ):
-                raw = read_recording(rec.source, options)
-                if raw.windows:  # as measured from its windows, with the notes they gave
-                    was = self.views[rec.episode]
-                    view, _ = protocol_view(
-                        raw,
-                        start=(was.start_abs_error_rad, was.start_abs_effort_nm),
-                        counts=(rec.sample_count or 0, rec.controller_sample_count or 0),
-                    )
-                    view = dataclasses.replace(
-                        view, recording=dataclasses.replace(view.recording, notes=rec.notes)
-                    )
-                else:
-                    view, _ = protocol_view(raw)
-                self.views[rec.episode] = view
-                recordings[k] = view.recording
-        return dataclasses.replace(data, recordings=tuple(recordings), protocol=self.views)
-
-
-_Measured = Measured  # the former name (benches, tests)
-
-
-def measure_bag(
-    bag_dir: Path, *, tool: ToolOffset = FLANGE_TOOL, measure_code: str | None = None
-) -> Partial:
-    """Read a bag and measure it exactly as ``pipeline report`` does: its partial
-    (:mod:`pipeline.stages.partials`).
+def with_partials(
+    measured: Measured, recordings: list[Recording], recordings_dir: Path
+) -> list[Recording]:
+    """``recordings`` plus the campaign episodes kept as metric partials only (an
+    episode whose bag is there too is read from its bag), sorted by episode.
 
     Raises:
-        RecordingError: the bag cannot be read.
+        ReportError: a partial is unreadable or was measured with another --tool.
     """
-    measured = Measured(tool)
-    rec = measured.add(read_recording(bag_dir, None, sink=measured))
-    return _partial(measured, rec, bag_dir.name, tool, measure_code)
+    have = {r.episode for r in recordings}
+    out = list(recordings)
+    code = None
+    for path in find_partials(recordings_dir):
+        if path.stem in have:  # its bag was read (a partial is named by its key)
+            continue
+        p = read_partial(path)
+        episode = p.recording.episode
+        if episode in have:
+            continue
+        code = measure_commit() if code is None else code
+        if p.measure_code != code:
+            raise ReportError(
+                f"{path}: measured by other report code ({p.measure_code or 'no git'}, "
+                f"now {code or 'no git'}); re-run its campaign (`pipeline record "
+                "--campaign`) to measure it again, or keep full bags"
+            )
+        if p.tool != measured.tool:
+            raise ReportError(
+                f"{path}: measured with the TCP at {p.tool}, not at --tool {measured.tool}; "
+                "report without --tool, or re-run the campaign with full bags"
+            )
+        have.add(episode)
+        measured.bagless.add(episode)
+        out.append(measured.merge(p))
+    return sorted(out, key=lambda r: r.episode)
 
 
-def measure_recording(
-    rec: Recording, *, tool: ToolOffset = FLANGE_TOOL, measure_code: str | None = None
-) -> Partial:
-    """Measure a recording read whole (or made in memory as its bag would read back:
-    :func:`pipeline.log.whole.episode_recording`) exactly as ``pipeline report`` does."""
-    measured = Measured(tool)
-    return _partial(measured, measured.add(rec), rec.source.name, tool, measure_code)
-
-
-def _partial(
-    measured: Measured, rec: Recording, bag: str, tool: ToolOffset, measure_code: str | None
-) -> Partial:
-    return Partial.of(
-        measured.take(rec.episode),
-        measure_code=measure_commit() if measure_code is None else measure_code,
-        bag=bag,
-        tool=tool,
-    )
+def with_sample_frames(
+    measured: Measured, data: ReportData, options: ReadOptions | None
+) -> ReportData:
+    """``data`` with the frames of the sampled campaign episodes read back."""
+    recordings = list(data.recordings)
+    for k, rec in enumerate(recordings):
+        if (
+            rec.episode in data.sample_roles
+            and rec.episode in measured.errors
+            and rec.episode not in measured.bagless
+        ):
+            raw = read_recording(rec.source, options)
+            if raw.windows:  # as measured from its windows, with the notes they gave
+                was = measured.views[rec.episode]
+                view, _ = protocol_view(
+                    raw,
+                    start=(was.start_abs_error_rad, was.start_abs_effort_nm),
+                    counts=(rec.sample_count or 0, rec.controller_sample_count or 0),
+                )
+                view = dataclasses.replace(
+                    view, recording=dataclasses.replace(view.recording, notes=rec.notes)
+                )
+            else:
+                view, _ = protocol_view(raw)
+            measured.views[rec.episode] = view
+            recordings[k] = view.recording
+    return dataclasses.replace(data, recordings=tuple(recordings), protocol=measured.views)
 
 
 def _campaigns(
@@ -645,7 +432,7 @@ def _campaigns(
     with a lazy scan: the summary is the table's numbers. A campaign some of whose
     episodes were measured from their partials (``bagless``) also lists which episodes
     have bags (``<stem>.bags.csv``)."""
-    from pipeline.report.campaigns import campaign_section
+    from pipeline.report.campaign_section import campaign_section
     from pipeline.report.figures import MAX_FIGURE_SCENARIOS, scenario_slugs
 
     settings = {ep: view.settings for ep, view in data.protocol.items()}

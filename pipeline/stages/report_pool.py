@@ -1,6 +1,6 @@
 """The report's reading and measuring on worker processes (``pipeline report --jobs N``).
 
-Each recording is read and measured (:meth:`pipeline.stages.report.Measured.measure`:
+Each recording is read and measured (:meth:`pipeline.analysis.measure.Measured.measure`:
 protocol view, episode row, metrics, the thinned error series) on one of ``jobs`` worker
 processes; what comes back is the :class:`~pipeline.stages.partials.Measurement` the report
 keeps of it (a campaign episode without its frames). The parent merges the measurements in
@@ -70,7 +70,7 @@ def _sendable(err: BaseException) -> BaseException:
 
 class Measurer(Protocol):
     """What measures recordings one by one (the report's
-    :class:`~pipeline.stages.report.Measured`)."""
+    :class:`~pipeline.analysis.measure.Measured`)."""
 
     def measure(self, source: Path, options: ReadOptions | None) -> Outcome:
         """Read and measure ``source``; keep nothing of it."""

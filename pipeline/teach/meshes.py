@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 import trimesh
 
+from pipeline import transforms as tf
 from pipeline.errors import SpecError
-from pipeline.model import transforms as tf
 from pipeline.robots import RobotSpec
 from pipeline.robots.link_geometry import LinkGeometry, link_geometry
 from pipeline.robots.mesh_glb import mesh_glb

@@ -1,7 +1,7 @@
 """The teach page: a viser server drawing a :class:`TeachSession` and wiring its events.
 
 The arm is drawn from the same capsules as the MJCF/URDF models
-(:func:`pipeline.model.chain.chain`), or, for a robot loaded from a URDF, from its own
+(:func:`pipeline.robots.chain.chain`), or, for a robot loaded from a URDF, from its own
 visual meshes (:mod:`pipeline.teach.meshes`), one node per link frame posed by forward
 kinematics. A transform gizmo sets the flange target; joint sliders drive FK.
 Every event goes through one lock (the solvers' Pinocchio data is not
@@ -39,6 +39,7 @@ import trimesh
 import viser
 from numpy.typing import ArrayLike, NDArray
 
+from pipeline import transforms as tf
 from pipeline.errors import PipelineError, TeachError
 from pipeline.kinematics.check import (
     ORIENTATION_TARGET_RAD,
@@ -46,10 +47,9 @@ from pipeline.kinematics.check import (
     TIME_TARGET_MS,
     sample_round_trips,
 )
-from pipeline.model import transforms as tf
-from pipeline.model.chain import chain
 from pipeline.model.dh import link_frames
 from pipeline.model.mjcf import FLOOR_Z_M
+from pipeline.robots.chain import chain
 from pipeline.teach.goal import GoalKind, goal_from_state, write_goal
 from pipeline.teach.meshes import add_link_meshes
 from pipeline.teach.origin import guard_incoming_messages, origin_checked_serve

@@ -18,16 +18,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import KinematicsError
-from pipeline.kinematics.base import IKSolver, as_pose, pose_error, position_only
 from pipeline.kinematics.check import (
     ORIENTATION_TARGET_RAD,
     POSITION_TARGET_M,
     TIME_TARGET_MS,
 )
+from pipeline.kinematics.ik import IKSolver, as_pose, pose_error, position_only
 from pipeline.kinematics.jacobian import manipulability, min_singular_value
 from pipeline.kinematics.limits import check_joint_limits
-from pipeline.kinematics.registry import make_solver, solver_names
 from pipeline.kinematics.seeds import seed_table
+from pipeline.kinematics.solvers import make_solver, solver_names
 from pipeline.model.dh import forward_kinematics
 from pipeline.robots.spec import RobotSpec
 

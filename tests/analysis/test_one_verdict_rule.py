@@ -11,9 +11,11 @@ from pathlib import Path
 import polars as pl
 import pytest
 
-from pipeline.analysis import catalog, paper, summary
+from pipeline.analysis import catalog
+from pipeline.analysis import headline as summary
+from pipeline.analysis import paper_claims as paper
 from pipeline.analysis.aggregate import reduction_aggregates
-from pipeline.analysis.campaign import WIN_LOSS_WORDS, win_loss
+from pipeline.analysis.campaign_tables import WIN_LOSS_WORDS, win_loss
 from pipeline.analysis.metrics import comparisons
 from pipeline.analysis.verdict import (
     ENCODER_RESOLUTION_RAD,

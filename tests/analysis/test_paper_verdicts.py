@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from pipeline.analysis import paper
+from pipeline.analysis import paper_claims as paper
 from pipeline.analysis.findings import DeadBandFinding
 from pipeline.analysis.metrics import ERROR_FLOOR_RAD
 from pipeline.analysis.verdict import MIN_PAIRS, compare

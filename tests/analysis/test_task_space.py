@@ -21,10 +21,10 @@ from pipeline.analysis.protocol import protocol_view
 from pipeline.analysis.task_space import TCP, TaskSpace, ToolOffset, task_space_of
 from pipeline.constants import FINAL_WINDOW_S
 from pipeline.log.reader import read_recording
-from pipeline.model.chain import FLANGE
 from pipeline.model.mjcf import build_mjcf
-from pipeline.model.urdf import build_urdf
 from pipeline.robots import load_spec
+from pipeline.robots.chain import FLANGE
+from pipeline.robots.urdf import build_urdf
 from tests.analysis.bagfactory import Episode, paper_like, write_bag
 
 TOL_M = 1e-9

@@ -374,8 +374,8 @@ def _plain_ctc(spec, g, state, z, dt, *, integral):
     """Eq. 18 (with ctc_pid's clamped integral) as the plain expressions, on Pinocchio."""
     import pinocchio as pin
 
-    from pipeline.control.base import friction_feedforward
-    from pipeline.model.urdf import build_pinocchio_model
+    from pipeline.control.controller import friction_feedforward
+    from pipeline.robots.urdf import build_pinocchio_model
 
     q, qd, q_ref, qd_ref, qdd_ref = state
     model = build_pinocchio_model(spec)

@@ -10,8 +10,9 @@ import pytest
 import yaml
 
 from pipeline.control import make_controller
-from pipeline.control.base import friction_feedforward
+from pipeline.control.controller import friction_feedforward
 from pipeline.errors import ParamsError
+from pipeline.experiment.assemble import draw_scenario_plant, scenario_spec
 from pipeline.identify.model_file import (
     FORMAT,
     nominal_path,
@@ -20,7 +21,6 @@ from pipeline.identify.model_file import (
 )
 from pipeline.params import load_params
 from pipeline.robots.loaders import load_spec
-from pipeline.stages.assemble import draw_scenario_plant, scenario_spec
 
 REPO = Path(__file__).parents[2]
 FC = [3.0, 3.0, 2.0, 0.8, 0.8, 0.8]  # params.yaml's paper-realistic plant

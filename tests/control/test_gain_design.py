@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from pipeline.control import make_controller
-from pipeline.control.base import with_planned_path
+from pipeline.control.controller import with_planned_path
 from pipeline.errors import ParamsError
 from pipeline.model.mjcf import build_mujoco_model
 from pipeline.params import load_params

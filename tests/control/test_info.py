@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pipeline.control import controller_names, default_gains, make_controller, pd_gravity
-from pipeline.control.base import NominalPDController
+from pipeline.control.controller import NominalPDController
 from pipeline.control.info import builtin_info, controller_info, info_of
 from pipeline.control.registry import controller_entry_of_class
 from pipeline.model.uncertainty import draw_plant

@@ -19,7 +19,7 @@ from pipeline.control import (
 from pipeline.control.info import declared_color, stiffness_gains
 from pipeline.errors import KinematicsError, ParamsError
 from pipeline.kinematics.numeric import NumericLMSolver
-from pipeline.kinematics.registry import installed_solvers, make_solver, solver_factory
+from pipeline.kinematics.solvers import installed_solvers, make_solver, solver_factory
 from pipeline.report.colors import FIXED, PALETTE, controller_colors
 from pipeline.settings import ControllerSettings
 

@@ -16,7 +16,7 @@ from pipeline.control import adaptive, make_controller, pid_humble
 from pipeline.control.adaptive import nominal_parameters
 from pipeline.errors import ParamsError
 from pipeline.model.mjcf import PlantOptions, build_mujoco_model
-from pipeline.model.urdf import build_pinocchio_model
+from pipeline.robots.urdf import build_pinocchio_model
 from pipeline.sim.references import PAPER_GOAL_RAD, PAPER_START_RAD, QuinticReference
 from pipeline.sim.runner import run_episode
 

@@ -17,7 +17,7 @@ import pinocchio as pin
 import pytest
 
 from pipeline.control import controller_names, ctc
-from pipeline.control.base import F64, GainSpec, NominalPDController
+from pipeline.control.controller import F64, GainSpec, NominalPDController
 from pipeline.control.pd_gravity import default_gains as pd_default_gains
 from pipeline.robots.loaders import load_spec
 from pipeline.sim.testkit import (

@@ -93,8 +93,8 @@ def test_the_sigmoid_model_file_validates_with_its_own_friction(
 
 
 def test_friction_options_are_checked_before_reading() -> None:
+    from pipeline.cli.identify_app import _transition_speed
     from pipeline.errors import IdentificationError
-    from pipeline.identify.cli import _transition_speed
     from pipeline.identify.stage import FIT_TRANSITION_SPEED
 
     assert _transition_speed("sigmoid", None) == 0.1

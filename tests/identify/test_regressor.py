@@ -15,8 +15,8 @@ from pipeline.identify.regressor import (
     random_samples,
     standard_parameters,
 )
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.loaders import load_spec
+from pipeline.robots.urdf import build_pinocchio_model
 
 
 @pytest.fixture(scope="module")

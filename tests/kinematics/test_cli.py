@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from pipeline import transforms as tf
 from pipeline.cli import app
 from pipeline.kinematics import pose_error
-from pipeline.model import transforms as tf
 from pipeline.model.dh import forward_kinematics
 from pipeline.robots import load_spec
 

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from pipeline import transforms as tf
 from pipeline.errors import KinematicsError
 from pipeline.kinematics import (
     AnalyticURSolver,
@@ -19,7 +20,6 @@ from pipeline.kinematics import (
     within_limits,
     wrap_to_limits,
 )
-from pipeline.model import transforms as tf
 from pipeline.model.dh import forward_kinematics
 from pipeline.robots import load_spec
 

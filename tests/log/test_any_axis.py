@@ -18,14 +18,14 @@ from numpy.typing import NDArray
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
+from pipeline import transforms as tf
 from pipeline.analysis.task_space import TaskSpace
 from pipeline.constants import TOPIC_JOINT_STATES, TOPIC_TF
 from pipeline.log.bag import tf_poses
-from pipeline.model import transforms as tf
-from pipeline.model.chain import FLANGE, joint_motion, joint_motions, then_joint_motions
 from pipeline.model.dh import forward_kinematics, link_frames
 from pipeline.model.frames import tf_edges
 from pipeline.robots import RobotSpec, load_spec
+from pipeline.robots.chain import FLANGE, joint_motion, joint_motions, then_joint_motions
 from pipeline.robots.packages import package_search_path
 from pipeline.robots.spec import JointKind, JointLimits, JointSpec
 from tests.test_bad_input import run_cli, run_cli_out

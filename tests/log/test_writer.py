@@ -28,6 +28,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.interfaces import QosDurability
 from rosbags.typesys import Stores, get_typestore
 
+from pipeline import transforms
 from pipeline.constants import (
     METADATA_EPISODE,
     TOPIC_CONTROLLER_STATE,
@@ -42,10 +43,9 @@ from pipeline.errors import RecordingError
 from pipeline.log import bag, rosbag2
 from pipeline.log.schemas import QOS_LATCHED, TYPE_HASHES, full_definition
 from pipeline.log.topics import TOPICS
-from pipeline.model import transforms
 from pipeline.model.frames import tf_edges
-from pipeline.model.urdf import build_urdf
 from pipeline.robots import RobotSpec
+from pipeline.robots.urdf import build_urdf
 from pipeline.sim.result import EpisodeResult, TrajectorySamples
 
 DT_NS = 1_000_000  # 1 kHz control

@@ -9,10 +9,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pipeline.model.chain import FLANGE
 from pipeline.model.dh import forward_kinematics, link_frames
 from pipeline.model.mjcf import build_mujoco_model
-from pipeline.model.urdf import build_pinocchio_model, build_urdf
+from pipeline.robots.chain import FLANGE
+from pipeline.robots.urdf import build_pinocchio_model, build_urdf
 
 N_SAMPLES = 50
 

@@ -30,7 +30,7 @@ def test_models_come_from_one_compile_but_each_caller_gets_its_own_copy(ur5):
 
 
 def test_pinocchio_models_are_private_copies_of_one_build(ur5):
-    from pipeline.model.urdf import build_pinocchio_model, pinocchio_model
+    from pipeline.robots.urdf import build_pinocchio_model, pinocchio_model
 
     pinocchio_model.cache_clear()
     a, b = build_pinocchio_model(ur5), build_pinocchio_model(ur5)

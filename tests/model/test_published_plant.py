@@ -13,9 +13,9 @@ import pytest
 from pipeline.errors import ModelError
 from pipeline.model.mjcf import build_mujoco_model
 from pipeline.model.published import GAZ_PANDA, gaz_links, profile_plant
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots import load_spec
 from pipeline.robots.packages import package_search_path
+from pipeline.robots.urdf import build_pinocchio_model
 from pipeline.sim.plant import SigmoidForce
 from tests.model.gaz_reference import G0, MASS_MATRICES, gravity_nm
 

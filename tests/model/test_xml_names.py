@@ -17,11 +17,11 @@ import pytest
 import yaml
 
 from pipeline.errors import SpecError
-from pipeline.model.chain import link_name
 from pipeline.model.mjcf import Box, build_mjcf, build_mujoco_model
-from pipeline.model.urdf import build_pinocchio_model, build_urdf
 from pipeline.robots import load_spec
+from pipeline.robots.chain import link_name
 from pipeline.robots.dh_yaml import parse_spec
+from pipeline.robots.urdf import build_pinocchio_model, build_urdf
 
 NASTY = ['a"b', "c<d>", "e&f", "g'h", "i&amp;j", "k l", "m\tn"]
 

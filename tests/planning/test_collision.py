@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from pipeline.errors import PlanningError
-from pipeline.model.chain import chain
 from pipeline.model.dh import forward_kinematics, link_frames
 from pipeline.model.mjcf import FLOOR_Z_M, build_mjcf
 from pipeline.model.scene import Box
@@ -17,6 +16,7 @@ from pipeline.planning import (
     motion_check_step_rad,
     reach_bound_m,
 )
+from pipeline.robots.chain import chain
 from tests.planning.scenarios import PAPER_GOAL, blocking_box
 
 

@@ -18,8 +18,8 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from pipeline.analysis import catalog
-from pipeline.analysis.campaign import by_parameter
-from pipeline.report.campaigns import (
+from pipeline.analysis.campaign_tables import by_parameter
+from pipeline.report.campaign_section import (
     distribution_figure,
     drawing_order,
     ecdf_figure,

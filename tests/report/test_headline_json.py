@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 import yaml
 
-from pipeline.analysis.summary import HEADLINE_MAX_SCALARS
+from pipeline.analysis.headline import HEADLINE_MAX_SCALARS
 from pipeline.stages.report import run_report
 from tests.analysis.bagfactory import paper_like, write_bag
 

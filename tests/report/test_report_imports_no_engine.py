@@ -34,14 +34,14 @@ def test_importing_every_report_module_in_turn_loads_no_physics_engine() -> None
         "    assert not bad, f'{m} loads {bad}'\n"
     )
     done = subprocess.run(
-        [sys.executable, "-c", code, *MODULES, "pipeline.cli.report"],
+        [sys.executable, "-c", code, *MODULES, "pipeline.cli.report_cmd"],
         capture_output=True, text=True,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr.strip().splitlines()[-1]
 
 
 @pytest.mark.slow  # one interpreter per module (~1 s each)
-@pytest.mark.parametrize("module", [*MODULES, "pipeline.cli.report"])
+@pytest.mark.parametrize("module", [*MODULES, "pipeline.cli.report_cmd"])
 def test_importing_a_report_module_alone_loads_no_physics_engine(module: str) -> None:
     done = subprocess.run([sys.executable, "-c", _PROBE, module], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr.strip().splitlines()[-1]
@@ -49,6 +49,8 @@ def test_importing_a_report_module_alone_loads_no_physics_engine(module: str) ->
 
 def test_the_probe_sees_an_engine_loaded_through_an_import() -> None:
     done = subprocess.run(
-        [sys.executable, "-c", _PROBE, "pipeline.control.base"], capture_output=True, text=True
+        [sys.executable, "-c", _PROBE, "pipeline.control.controller"],
+        capture_output=True,
+        text=True,
     )
     assert done.returncode != 0 and "pinocchio" in done.stderr

@@ -13,7 +13,7 @@ import numpy as np
 import polars as pl
 import pytest
 
-from pipeline.analysis import paper
+from pipeline.analysis import paper_claims as paper
 from pipeline.report import entities as ent
 from pipeline.stages.report import ReportResult, run_report
 from tests.analysis.bagfactory import UR5_JOINTS, paper_like, write_bag

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import polars as pl
 
-from pipeline.report.inputs import SHOW_ALL_UP_TO, ReportData
+from pipeline.analysis.measure import SHOW_ALL_UP_TO
+from pipeline.report.inputs import ReportData
 
 
 def _data(rows: list[tuple[str, float, str, bool, bool]]) -> ReportData:

@@ -37,7 +37,7 @@ def test_the_gain_design_is_recorded_typed_and_shown_in_the_setup() -> None:
     from types import SimpleNamespace
 
     from pipeline.control import make_controller
-    from pipeline.control.base import with_planned_path
+    from pipeline.control.controller import with_planned_path
     from pipeline.report.setup import _design_lines
     from pipeline.robots.loaders import load_spec
     from pipeline.settings import ControllerSettings, GainDesign

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import polars as pl
 
-from pipeline.analysis.campaign import condition_values, verdict_flips, win_loss
-from pipeline.report.campaigns import campaign_section
+from pipeline.analysis.campaign_tables import condition_values, verdict_flips, win_loss
+from pipeline.report.campaign_section import campaign_section
 from tests.report.campaignfactory import table_frame, table_row
 
 JOINTS = ("j1", "j2")

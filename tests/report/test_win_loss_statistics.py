@@ -11,8 +11,8 @@ import polars as pl
 import pytest
 
 from pipeline.analysis import catalog
-from pipeline.analysis.campaign import TOO_FEW, holm, smallest_p, win_loss
-from pipeline.report.campaigns import campaign_section
+from pipeline.analysis.campaign_tables import TOO_FEW, holm, smallest_p, win_loss
+from pipeline.report.campaign_section import campaign_section
 from tests.report.campaignfactory import table_frame, table_row
 
 JOINTS = ("j1", "j2", "j3")

@@ -9,7 +9,6 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots import load_spec
 from pipeline.robots.facts import (
     ACCELERATION_EFFORT_FRACTION,
@@ -18,6 +17,7 @@ from pipeline.robots.facts import (
     fact_warnings,
     missing_facts,
 )
+from pipeline.robots.urdf import build_pinocchio_model
 from tests.robots.test_urdf_loader import THREE_JOINT
 from tests.test_bad_input import run_cli
 

@@ -15,8 +15,8 @@ import pytest
 from pipeline.errors import SpecError
 from pipeline.model.dh import forward_kinematics
 from pipeline.model.mjcf import build_mujoco_model
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots import RobotSpec, load_spec
+from pipeline.robots.urdf import build_pinocchio_model
 from tests.robots.test_urdf_loader import PANDA_URDF, SHARE, _bad, _urdf
 
 pytestmark = pytest.mark.skipif(SHARE is None, reason="example-robot-data share not found")

@@ -21,8 +21,8 @@ import yaml
 from pipeline.errors import SpecError
 from pipeline.model.dh import forward_kinematics
 from pipeline.model.mjcf import build_mujoco_model
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.dh_yaml import parse_spec
+from pipeline.robots.urdf import build_pinocchio_model
 
 UR5 = yaml.safe_load((resources.files("pipeline.robots") / "ur5.yaml").read_text())
 SPECIAL: list[Any] = [0.0, -0.0, 1e-300, -1e-300, 1e308, -1e308, float("nan"), float("inf"),

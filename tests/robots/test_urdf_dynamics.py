@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from pipeline.errors import SpecError
+from pipeline.experiment.assemble import draw_scenario_plant, scenario_spec
 from pipeline.model.mjcf import build_mujoco_model
 from pipeline.params import ScenarioParams
 from pipeline.robots import load_spec
-from pipeline.stages.assemble import draw_scenario_plant, scenario_spec
 from tests.robots.test_urdf_loader import THREE_JOINT
 
 # j1 states both, j2 damping only, j3 nothing (0)
@@ -94,7 +94,7 @@ def test_a_urdf_without_dynamics_keeps_the_scenarios_default(tmp_path):
 
 def test_a_campaign_keeps_the_robots_friction_where_its_scenario_gives_none(tmp_path):
     from pipeline.params import parse_params
-    from pipeline.stages.campaign import expand
+    from pipeline.stages.campaign_expand import expand
 
     robot = _robot(tmp_path)
     params = parse_params(

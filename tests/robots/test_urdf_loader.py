@@ -14,10 +14,10 @@ import pytest
 from pipeline.errors import SpecError
 from pipeline.model.dh import forward_kinematics
 from pipeline.model.mjcf import build_mujoco_model
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots import RobotSpec, load_spec
 from pipeline.robots.packages import package_search_path
 from pipeline.robots.spec import pose_matrix
+from pipeline.robots.urdf import build_pinocchio_model
 
 SHARE = next(
     (p / "example-robot-data" / "robots" for p in package_search_path() if

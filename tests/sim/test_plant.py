@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pipeline.experiment.assemble import draw_scenario_plant
 from pipeline.model.mjcf import build_mujoco_model
 from pipeline.params import load_params
 from pipeline.robots import load_spec
 from pipeline.sim.plant import plant_model, principal_axes
-from pipeline.stages.assemble import draw_scenario_plant
 from pipeline.stages.plans import obstacle_boxes
 
 

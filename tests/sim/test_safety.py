@@ -10,9 +10,9 @@ import pytest
 
 from pipeline.control import make_controller
 from pipeline.errors import PipelineError, SimulationError
-from pipeline.model.chain import chain
 from pipeline.model.dh import link_frames
 from pipeline.model.mjcf import FLOOR_Z_M, Box
+from pipeline.robots.chain import chain
 from pipeline.sim.references import PAPER_GOAL_RAD, PAPER_START_RAD, QuinticReference
 from pipeline.sim.runner import run_episode
 from pipeline.sim.safety import ExecutionSafety, assess_execution

@@ -12,10 +12,10 @@ import polars as pl
 import pytest
 import yaml
 
+from pipeline.experiment.assemble import scenario_spec, spec_as_dict
 from pipeline.log.reader import read_recording
 from pipeline.params import load_params
 from pipeline.robots.loaders import load_spec
-from pipeline.stages.assemble import scenario_spec, spec_as_dict
 from pipeline.stages.campaign_run import completion_marker, plan_run
 from pipeline.stages.record import record
 

@@ -13,7 +13,7 @@ import yaml
 
 from pipeline.errors import ParamsError
 from pipeline.params import load_params, parse_params
-from pipeline.stages.campaign import campaign_axes, episode_fingerprint, expand
+from pipeline.stages.campaign_expand import campaign_axes, episode_fingerprint, expand
 
 REPO = Path(__file__).parents[2]
 

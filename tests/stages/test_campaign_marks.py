@@ -29,7 +29,7 @@ def campaign(tmp_path: Path) -> tuple[Path, Path]:
         bag.mkdir(parents=True)
         (bag / "metadata.yaml").write_text(f"episode: {e.name}\n")
         (bag / f"{e.name}_0.mcap").write_bytes(MCAP_MAGIC + bytes([k]) * 64 + MCAP_MAGIC)
-        from pipeline.stages.campaign import episode_fingerprint
+        from pipeline.stages.campaign_expand import episode_fingerprint
 
         mark_done(run.out_dir, e.name, episode_fingerprint(e, commit=run.commit))
     return params, run.out_dir

@@ -12,7 +12,7 @@ import yaml
 
 from pipeline.errors import ParamsError
 from pipeline.params import EXTRA_RECORDINGS_DIR, load_params, parse_params
-from pipeline.stages.campaign import expand
+from pipeline.stages.campaign_expand import expand
 from tests.test_bad_input import run_cli
 
 REPO = Path(__file__).parents[2]

@@ -10,10 +10,10 @@ import pytest
 import yaml
 
 from pipeline.errors import ParamsError
+from pipeline.experiment.goals import resolve_goal
 from pipeline.params import parse_params
 from pipeline.robots import load_spec
 from pipeline.robots.packages import package_search_path
-from pipeline.stages.goals import resolve_goal
 
 REPO = Path(__file__).parents[2]
 PARAMS = yaml.safe_load((REPO / "params.yaml").read_text())

@@ -22,11 +22,11 @@ from pipeline.stages.partials import (
     PARTIAL_DIR,
     SHARED_DIR,
     Partial,
+    measure_bag,
     partial_path,
     read_partial,
 )
 from pipeline.stages.record import record
-from pipeline.stages.report import measure_bag
 
 REPO = Path(__file__).parents[2]
 
@@ -116,7 +116,7 @@ def test_partial_made_in_memory_equals_the_one_from_its_bag(tmp_path, monkeypatc
 
     def keep(out_dir: Path, name: str, **kw: Any) -> None:
         assert kw.get("recording") is not None  # made in memory, not read from the bag
-        from pipeline.stages.report import measure_recording
+        from pipeline.stages.partials import measure_recording
 
         made[name] = measure_recording(kw["recording"], measure_code=kw["measure_code"])
         original(out_dir, name, **kw)

@@ -11,11 +11,11 @@ import pytest
 import yaml
 
 from pipeline.errors import ModelError, ParamsError
+from pipeline.experiment.assemble import draw_scenario_plant, scenario_friction
 from pipeline.log.reader import read_recording
 from pipeline.params import parse_params
 from pipeline.robots import load_spec
 from pipeline.robots.packages import package_search_path
-from pipeline.stages.assemble import draw_scenario_plant, scenario_friction
 from pipeline.stages.record import record, validate_episodes
 
 REPO = Path(__file__).parents[2]

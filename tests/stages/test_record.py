@@ -201,11 +201,11 @@ def test_bad_params_exit_1_with_one_line(tmp_path):
 
 
 def test_cartesian_goal_becomes_the_ik_solution_nearest_the_start(ur5):
+    from pipeline import transforms as tf
+    from pipeline.experiment.goals import resolve_goal
     from pipeline.kinematics import make_solver
-    from pipeline.model import transforms as tf
     from pipeline.model.dh import forward_kinematics
     from pipeline.params import load_params
-    from pipeline.stages.goals import resolve_goal
 
     paper_goal = np.array([-0.15, -0.5, 0.785, -1.15, -0.3925, 0.0])
     pose = forward_kinematics(ur5, paper_goal)
@@ -267,9 +267,9 @@ def test_a_soft_pid_landing_on_a_shelf_is_flagged_in_summary_recording_and_repor
     """A shelf 20 mm under the elbow at the start pose; a PID tuned to 10 rad/s sags onto
     it while holding the start (kp ~ m w^2, 16x softer than the default). The contact is
     named in the record summary, the recording's settings and the report."""
-    from pipeline.model.chain import chain
     from pipeline.model.dh import link_frames
     from pipeline.robots import load_spec
+    from pipeline.robots.chain import chain
 
     spec = load_spec("ur5")
     frame = link_frames(spec, np.zeros(6))[2]

@@ -306,7 +306,7 @@ def test_summary_fits_80_columns_without_cutting_names_or_numbers(
 ) -> None:
     from rich.console import Console
 
-    import pipeline.cli.report as cli
+    import pipeline.cli.report_cmd as cli
 
     long_names = ("mismatch-payload-pd_gravity-seed-12", "mismatch-payload-pid-seed-12")
     for name, ctrl in zip(long_names, ("pd_gravity", "pid"), strict=True):

@@ -15,10 +15,11 @@ from polars.testing import assert_frame_equal
 from rosbags.rosbag2 import StoragePlugin
 
 from pipeline.analysis.checks import duplicate_stamp_notes
+from pipeline.analysis.measure import Measured
 from pipeline.log import bag, windowed
 from pipeline.log.reader import ReadOptions, Recording
 from pipeline.robots import RobotSpec
-from pipeline.stages.report import _Measured, read_all, run_report
+from pipeline.stages.report import read_all, run_report
 from tests.analysis.bagfactory import paper_like, write_bag
 from tests.log.test_external_bags import write_external_bag
 from tests.log.test_salvage import chunk_offsets
@@ -31,7 +32,7 @@ DECIMATION_NOTE = "recording: metrics over all"
 def measured(
     folder: Path, options: ReadOptions
 ) -> tuple[list[Recording], pl.DataFrame, pl.DataFrame]:
-    m = _Measured()
+    m = Measured()
     recs, _ = read_all(folder, skip_bad=False, options=options, measure=m.add, sink=m)
     episodes = pl.concat([m.rows[r.episode] for r in recs])
     metrics = pl.concat([m.metrics[r.episode] for r in recs], how="vertical_relaxed")
@@ -136,8 +137,9 @@ from pathlib import Path
 from pipeline.log import windowed
 windowed.MAX_KEPT_STEPS = 1000
 from pipeline.log.reader import ReadOptions
-from pipeline.stages.report import _Measured, read_all
-m = _Measured()
+from pipeline.analysis.measure import Measured
+from pipeline.stages.report import read_all
+m = Measured()
 options = ReadOptions(stream_above_bytes=int(sys.argv[2]), window_steps=1000)
 read_all(Path(sys.argv[1]), skip_bad=False, options=options, measure=m.add, sink=m)
 # VmHWM, not ru_maxrss: Linux carries the parent's peak over fork + exec into ru_maxrss

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.model import transforms as tf
+from pipeline import transforms as tf
 from pipeline.model.dh import forward_kinematics
 from pipeline.teach.wire import PageClient
 from tests.teach.chromium import Chromium

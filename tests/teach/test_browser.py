@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from pipeline.model import transforms as tf
+from pipeline import transforms as tf
 from pipeline.model.dh import forward_kinematics
 from pipeline.teach.wire import PageClient
 from tests.teach.chromium import Chromium, chromium_path

@@ -12,7 +12,7 @@ import msgspec
 import numpy as np
 import pytest
 
-from pipeline.model import transforms as tf
+from pipeline import transforms as tf
 from pipeline.model.dh import forward_kinematics
 from pipeline.teach.wire import PageClient
 from tests.teach.conftest import start_server

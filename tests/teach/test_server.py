@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from pipeline import transforms as tf
 from pipeline.errors import TeachError
-from pipeline.model import transforms as tf
 from pipeline.model.dh import forward_kinematics, link_frames
 from pipeline.robots import load_spec
 from pipeline.teach.server import (

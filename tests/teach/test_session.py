@@ -171,7 +171,7 @@ def test_joint_near_its_limit_is_flagged(ur5: RobotSpec) -> None:
 def test_a_three_joint_robot_is_judged_on_position_only() -> None:
     """arm3's IK is position-only: a target whose orientation it cannot reach is solved,
     its orientation error shown but not judged (no FAIL); a 6-joint robot still is."""
-    from pipeline.model import transforms as tf
+    from pipeline import transforms as tf
     from pipeline.teach.server import readout_html
 
     spec = load_spec("arm3_example")

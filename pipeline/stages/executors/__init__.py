@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from pipeline.errors import PipelineError
-from pipeline.stages.executors.base import Executor, Interrupted
+from pipeline.stages.executors.executor import Executor, Interrupted
 from pipeline.stages.executors.local import LocalExecutor
 from pipeline.stages.executors.ray import RayExecutor
 

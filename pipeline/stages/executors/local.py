@@ -21,7 +21,7 @@ from typing import Any
 from pipeline.control.contain import is_builtin
 from pipeline.params import Episode
 from pipeline.stages.episode import EpisodeOutcome, remove_work_folders, run_one
-from pipeline.stages.executors.base import Emit, interrupted
+from pipeline.stages.executors.executor import Emit, interrupted
 from pipeline.stages.plans import ScenarioPlan
 from pipeline.stages.workers import WorkerPool, become_worker, ready, tasks
 
@@ -44,7 +44,7 @@ class LocalExecutor:
         commit: str,
         emit: Emit,
     ) -> dict[str, EpisodeOutcome]:
-        """See :meth:`pipeline.stages.executors.base.Executor.run`."""
+        """See :meth:`pipeline.stages.executors.executor.Executor.run`."""
         started_s = time.time()
         # plug-in code runs in a worker even at jobs 1: an os._exit, a crash or a C loop
         # in it fails its episode instead of ending (or hanging) this process
@@ -132,7 +132,7 @@ def _run_pool(
     and is replaced. Ctrl-C cancels the run: workers abandon their episodes at the next
     progress report (or just before writing), those already writing get
     :data:`CANCEL_GRACE_S` to finish, then every worker is killed and
-    :class:`~pipeline.stages.executors.base.Interrupted` raised.
+    :class:`~pipeline.stages.executors.executor.Interrupted` raised.
     """
     ctx = _mp_context()
     cancel = ctx.Event()

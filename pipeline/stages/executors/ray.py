@@ -23,7 +23,7 @@ from typing import Any
 from pipeline.errors import PipelineError
 from pipeline.params import Episode
 from pipeline.stages.episode import EpisodeOutcome, failed_outcome, run_one
-from pipeline.stages.executors.base import Emit, interrupted
+from pipeline.stages.executors.executor import Emit, interrupted
 from pipeline.stages.plans import ScenarioPlan
 
 
@@ -94,7 +94,7 @@ class RayExecutor:
         commit: str,
         emit: Emit,
     ) -> dict[str, EpisodeOutcome]:
-        """See :meth:`pipeline.stages.executors.base.Executor.run`; a lost task fails its own.
+        """See :meth:`pipeline.stages.executors.executor.Executor.run`; a lost task fails its own.
 
         Raises:
             PipelineError: Ray is not installed or the cluster cannot be reached.

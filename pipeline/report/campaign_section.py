@@ -24,7 +24,7 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from pipeline.analysis import catalog
-from pipeline.analysis.campaign import (
+from pipeline.analysis.campaign_tables import (
     ALPHA,
     MIN_PAIRS,
     SWEPT_PREFIX,
@@ -34,7 +34,7 @@ from pipeline.analysis.campaign import (
     swept_axes,
     win_loss,
 )
-from pipeline.analysis.summary import HEADLINE_TASK_METRICS
+from pipeline.analysis.headline import HEADLINE_TASK_METRICS
 from pipeline.analysis.verdict import EQUIVALENCE_REL
 from pipeline.report import md
 from pipeline.report.colors import controller_colors, mpl
@@ -247,7 +247,7 @@ def parameter_figure(
     baseline: str,
 ) -> Figure:
     """Mean with its 95 % CI band against one swept parameter, per joint and controller
-    (``stats``: :func:`~pipeline.analysis.campaign.by_parameter` of ``table``): where the
+    (``stats``: :func:`~pipeline.analysis.campaign_tables.by_parameter` of ``table``): where the
     bands cross is where one controller stops winning. The baseline is drawn first."""
     joints = _joints(table)
     controllers = drawing_order(stats.get_column("controller").to_list(), baseline)

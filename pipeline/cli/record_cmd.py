@@ -3,8 +3,9 @@ campaigns, and list the campaigns of a params file."""
 
 from __future__ import annotations
 
+import contextlib
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import typer
@@ -35,7 +36,7 @@ def check_params(params: str) -> None:
     from pathlib import Path
 
     from pipeline.params import load_params
-    from pipeline.stages.campaign import expand
+    from pipeline.stages.campaign_expand import expand
     from pipeline.stages.campaign_run import check_campaign_count, distinct_settings
     from pipeline.stages.record import validate_episodes
 
@@ -257,96 +258,12 @@ def _record_with_progress(
                       executor=executor, address=address)  # fmt: skip
 
 
-def _run_campaign(
-    loaded: Any, run: Any, *, jobs: int, executor: str, address: str | None
-) -> list[Any] | None:
-    """Run a planned campaign under one progress bar with ETA (None: nothing to run)."""
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
-    from pipeline.stages.campaign_run import completion_marker
-    from pipeline.stages.record import record
-
-    err = Console(stderr=True)
-    name = run.name
-    if run.skipped:
-        err.print(f"{name}: {len(run.skipped)} of {len(run.episodes)} episode(s) already "
-                  f"recorded with these settings and code; running {len(run.pending)}")  # fmt: skip
-    if run.changed:
-        more = f" (and {len(run.changed) - 1} more)" if len(run.changed) > 1 else ""
-        err.print(f"warning: {run.out_dir}: {run.changed[0]}{more}: the recording does not "
-                  "match its completion mark (replaced or altered); recording it again",
-                  markup=False, highlight=False)  # fmt: skip
-    if run.stray:
-        more = f" (and {len(run.stray) - 1} more)" if len(run.stray) > 1 else ""
-        err.print(f"warning: {run.out_dir}: {run.stray[0]}{more} is not an episode of "
-                  f"campaign {name} (left in place; the report will read it)")  # fmt: skip
-    if not run.pending:
-        console.print(f"campaign {name}: all {len(run.episodes)} episode(s) recorded in "
-                      f"{run.out_dir}/")  # fmt: skip
-        return None
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TextColumn("ETA"),
-        TimeRemainingColumn(),
-        console=err,
-        disable=not err.is_terminal,  # no bar spam in logs (dvc repro, CI)
-    ) as bars:
-        task = bars.add_task(f"{name}", total=len(run.pending))
-        running: dict[str, float] = {}
-        finished = [0]
-
-        def on_event(kind: str, episode: str, value: float) -> None:
-            if kind == "episode":
-                running[episode] = value
-            elif kind == "done":
-                running.pop(episode, None)
-                finished[0] += 1
-            elif kind == "plan":
-                return
-            bars.update(task, completed=finished[0] + sum(running.values()))
-
-        outcomes: list[Any] = record(
-            loaded, run.pending, out_dir=run.out_dir, jobs=jobs, force=True,
-            on_event=completion_marker(run, on_event), executor=executor, address=address,
-            commit=run.commit,
-        )  # fmt: skip
-    return outcomes
-
-
 def _ros_distro(name: str) -> Literal["jazzy", "humble"]:
     if name not in ("jazzy", "humble"):
         from pipeline.errors import ParamsError
 
         raise ParamsError(f"--ros-distro: {name!r}, expected jazzy or humble")
     return "humble" if name == "humble" else "jazzy"
-
-
-def _keep_sample_bags(
-    loaded: Any, run: Any, *, jobs: int, executor: str, address: str | None
-) -> None:
-    """After a ``keep_bags`` campaign: re-run by key the episodes the report shows one by
-    one (median and worst per condition and controller) whose bags were not kept."""
-    from pipeline.stages.campaign_run import plan_run, sample_without_bags
-
-    keys = sample_without_bags(run)
-    if not keys:
-        return
-    Console(stderr=True).print(
-        f"{run.name}: keeping the bags of {len(keys)} sampled episode(s) (median and worst "
-        "per condition): re-running them by key"
-    )
-    rerun = plan_run(loaded, run.name, out=run.out_dir.parent, only=keys)
-    _run_campaign(loaded, rerun, jobs=jobs, executor=executor, address=address)
 
 
 SUMMARY_TABLE_MAX = 30  # larger campaigns: counts and the failures, not a row per episode
@@ -360,6 +277,61 @@ def _warn_missing_facts(episodes: Sequence[Episode]) -> None:
         sys.stderr.write(f"warning: {line}\n")
 
 
+class _CampaignView:
+    """A campaign run on the terminal: messages on stderr (the result line on stdout) and
+    one progress bar with ETA over the pending episodes."""
+
+    def __init__(self) -> None:
+        self.err = Console(stderr=True)
+
+    def say(self, text: str, *, kind: str = "status") -> None:
+        if kind == "line":
+            sys.stderr.write(text + "\n")
+        elif kind == "warning":
+            self.err.print(text, markup=False, highlight=False)
+        elif kind == "stdout":
+            console.print(text)
+        else:
+            self.err.print(text)
+
+    @contextlib.contextmanager
+    def progress(self, run: Any) -> Iterator[Callable[[str, str, float], None]]:
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
+
+        with Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            TextColumn("ETA"),
+            TimeRemainingColumn(),
+            console=self.err,
+            disable=not self.err.is_terminal,  # no bar spam in logs (dvc repro, CI)
+        ) as bars:
+            task = bars.add_task(f"{run.name}", total=len(run.pending))
+            running: dict[str, float] = {}
+            finished = [0]
+
+            def on_event(kind: str, episode: str, value: float) -> None:
+                if kind == "episode":
+                    running[episode] = value
+                elif kind == "done":
+                    running.pop(episode, None)
+                    finished[0] += 1
+                elif kind == "plan":
+                    return
+                bars.update(task, completed=finished[0] + sum(running.values()))
+
+            yield on_event
+
+
 def _record_campaign(
     params: str, name: str, *, out: str | None, jobs: int, force: bool, executor: str,
     address: str | None, ros_distro: str | None = None, episodes: list[str] | None = None,
@@ -367,37 +339,17 @@ def _record_campaign(
     """``pipeline record --campaign NAME``: one progress bar with ETA over the campaign."""
     from pathlib import Path
 
-    from pipeline.fsutil import OutputLock, ensure_dir
-    from pipeline.params import EXTRA_RECORDINGS_DIR, load_params
-    from pipeline.stages.campaign_run import (
-        check_campaign_count,
-        check_campaign_size,
-        distinct_settings,
-        plan_run,
-    )
-    from pipeline.stages.record import check_outputs_free, validate_episodes
+    from pipeline.params import load_params
+    from pipeline.stages.campaign_record import record_campaign
 
     loaded = load_params(params)
-    # an extra campaign stays out of the DVC report's recordings/
-    default = EXTRA_RECORDINGS_DIR if name in loaded.extra_campaigns else "recordings"
-    out_dir = Path(default if out is None else out)
     if ros_distro is not None:
         loaded = loaded.with_ros_distro(_ros_distro(ros_distro))
-    check_campaign_count(loaded, name, out=out_dir, jobs=jobs)  # before expanding: counted
-    run = plan_run(loaded, name, out=out_dir, force=force, only=episodes)
-    # every input error first: a refused run creates nothing
-    validate_episodes(loaded, distinct_settings(run.pending))
-    _warn_missing_facts(run.pending)
-    check_campaign_size(loaded, run, motion_s=0.0, jobs=jobs)
-    ensure_dir(run.out_dir)
-    # one run per campaign folder at a time (two would write the same episodes)
-    with OutputLock(run.out_dir, command=f"`pipeline record --campaign {name}`"):
-        # what is done now that we own it
-        run = plan_run(loaded, name, out=out_dir, force=force, only=episodes)
-        check_outputs_free(run.pending, run.out_dir, force=True)  # sweeps dead runs' work
-        outcomes = _run_campaign(loaded, run, jobs=jobs, executor=executor, address=address)
-        if run.sampled and not episodes:
-            _keep_sample_bags(loaded, run, jobs=jobs, executor=executor, address=address)
+    done = record_campaign(
+        loaded, name, out=None if out is None else Path(out), jobs=jobs, force=force,
+        executor=executor, address=address, only=episodes, view=_CampaignView(),
+    )  # fmt: skip
+    run, outcomes = done.run, done.outcomes
     if outcomes is None:
         return
     failed = [o for o in outcomes if o.status != "ok"]
@@ -436,7 +388,7 @@ def campaigns_cmd(
     """List the campaigns in PARAMS: size, base scenario, and what each sweeps (those
     under extra_campaigns are not DVC stages: `make demo` does not run them)."""
     from pipeline.params import load_params
-    from pipeline.stages.campaign import campaign_axes
+    from pipeline.stages.campaign_expand import campaign_axes
 
     loaded = load_params(params)
     rows: list[dict[str, Any]] = []

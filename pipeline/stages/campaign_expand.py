@@ -24,6 +24,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from pipeline.errors import ParamsError, PipelineError, unknown_name_message
+from pipeline.experiment.goals import resolve_goal
 from pipeline.params import (
     CampaignParams,
     ControllerParams,
@@ -35,7 +36,6 @@ from pipeline.params import (
 )
 from pipeline.robots.dh_yaml import format_validation_error
 from pipeline.settings import CampaignInfo
-from pipeline.stages.goals import resolve_goal
 
 GOAL_AXIS = "goal"
 MAX_GOAL_ATTEMPTS = 1000  # draws per random goal before giving up (region mostly blocked)
@@ -209,7 +209,7 @@ def _scenario_for(
     params: Params, campaign: Campaign, picks: Sequence[tuple[Axis, int]]
 ) -> ScenarioParams:
     # what the scenario gives, not its defaults: a key it leaves out keeps meaning "not
-    # given" (the robot's own joint friction applies, stages/assemble.py plant_friction)
+    # given" (the robot's own joint friction applies, experiment/assemble.py plant_friction)
     data = params.scenarios[campaign.scenario_name].model_dump(exclude_unset=True)
     for axis, i in picks:
         if axis.path == GOAL_AXIS:
@@ -230,7 +230,7 @@ def _controller_for(
     """The controller with the swept gains: ``gains.K`` for every controller,
     ``controllers.NAME.gains.K`` for one. Sweeping a tuning knob (``omega_n_rad_s``,
     ``zeta``) drops the explicit gains it derives, so the knob takes effect."""
-    from pipeline.control.base import TUNING_KEYS
+    from pipeline.control.controller import TUNING_KEYS
 
     base = params.controllers[name]
     gains = dict(base.gains)

@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import KinematicsError
 from pipeline.kinematics.analytic import AnalyticURSolver
-from pipeline.kinematics.base import (
+from pipeline.kinematics.ik import (
     IKOptions,
     IKSolver,
     meets_tolerance,

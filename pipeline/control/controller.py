@@ -19,8 +19,8 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from pipeline.errors import ParamsError, unknown_name_message
-from pipeline.model.urdf import build_pinocchio_model
 from pipeline.robots.spec import RobotSpec
+from pipeline.robots.urdf import build_pinocchio_model
 
 F64 = NDArray[np.float64]
 

@@ -1,11 +1,11 @@
-"""The report's "Versus the paper" sections: :class:`pipeline.analysis.paper.PaperComparison`
-beside the paper's numbers (:mod:`pipeline.analysis.paper`), in words and tables."""
+"""The report's "Versus the paper" sections: :class:`pipeline.analysis.paper_claims.PaperComparison`
+beside the paper's numbers (:mod:`pipeline.analysis.paper_claims`), in words and tables."""
 
 from __future__ import annotations
 
-from pipeline.analysis import paper
+from pipeline.analysis import paper_claims as paper
 from pipeline.analysis.aggregate import CONFIDENCE, MeanCI
-from pipeline.analysis.paper import JointComparison, PaperComparison
+from pipeline.analysis.paper_claims import JointComparison, PaperComparison
 from pipeline.analysis.verdict import ALPHA, MIN_PAIRS
 from pipeline.constants import FINAL_WINDOW_S
 from pipeline.report import md

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from pipeline.model import transforms as tf
+from pipeline import transforms as tf
 from pipeline.robots.spec import IDENTITY, JointSpec, RobotSpec, Segment, pose_matrix
 
 __all__ = [

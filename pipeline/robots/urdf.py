@@ -18,9 +18,9 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
+from pipeline import transforms as tf
 from pipeline.errors import ModelError
-from pipeline.model import transforms as tf
-from pipeline.model.chain import FLANGE, chain
+from pipeline.robots.chain import FLANGE, chain
 from pipeline.robots.spec import IDENTITY, RobotSpec, pose_matrix
 
 

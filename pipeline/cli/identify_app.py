@@ -56,7 +56,7 @@ TOPIC_HELP = (
 
 
 def _topics(items: list[str] | None) -> dict[str, str]:
-    from pipeline.cli.report import topic_remaps
+    from pipeline.cli.report_cmd import topic_remaps
 
     return topic_remaps(items or [])
 

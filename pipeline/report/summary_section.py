@@ -1,13 +1,13 @@
 """The report's opening: the answer first (headline table, one verdict per question).
 
-Every number comes from :mod:`pipeline.analysis.summary`; this module words it.
+Every number comes from :mod:`pipeline.analysis.headline`; this module words it.
 """
 
 from __future__ import annotations
 
 from typing import get_args
 
-from pipeline.analysis import summary
+from pipeline.analysis import headline as summary
 from pipeline.analysis.aggregate import CONFIDENCE, MeanCI
 from pipeline.analysis.catalog import BY_NAME
 from pipeline.analysis.verdict import ALPHA, ENCODER_RESOLUTION_RAD, EQUIVALENCE_REL, MIN_PAIRS

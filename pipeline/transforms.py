@@ -33,7 +33,7 @@ def rot_axis(axis: Mat, angle: float) -> Mat:
 def motion(kind: str, axis: tuple[float, float, float], q: float) -> Mat:
     """The motion of a joint of ``kind`` (revolute, continuous, prismatic) about / along the
     unit ``axis`` (joint frame) at ``q`` [rad or m], as a 4x4. Every frame computation composes
-    joints through it, or through its batched forms in :mod:`pipeline.model.chain`."""
+    joints through it, or through its batched forms in :mod:`pipeline.robots.chain`."""
     if kind == "prismatic":
         return trans(*(q * np.array(axis, dtype=float)))
     if tuple(axis) == (0.0, 0.0, 1.0):

@@ -24,9 +24,9 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from pipeline import transforms as tf
 from pipeline.errors import KinematicsError
 from pipeline.kinematics.fk import flange_pose
-from pipeline.model import transforms as tf
 from pipeline.robots.spec import RobotSpec
 
 Array = NDArray[np.float64]
