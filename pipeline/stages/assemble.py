@@ -241,7 +241,7 @@ def episode_settings(
     scenario = episode.scenario
     sim = episode.sim
     p = scenario.plant
-    k0 = int(result.extra["motion_start_row"])
+    k0 = result.motion_start_row
     at_start = min(k0, len(result.stamp_ns) - 1)
     damping, frictionloss = plant_friction(spec, scenario)
     design, recorded_gains = GainDesign.split_from(gains)
@@ -258,8 +258,8 @@ def episode_settings(
         uncertainty=uncertainty,
         physics_dt_s=sim.physics_dt_s,
         control_period_s=sim.physics_dt_s * sim.control_period_steps,
-        integrator=str(result.extra["integrator"]),
-        friction_model=str(result.extra["friction_model"]),
+        integrator=result.integrator,
+        friction_model=result.friction_model,
     )
     # planning_time_s is wall clock: printed, never recorded (recordings are byte-reproducible)
     return EpisodeSettings(
@@ -293,7 +293,7 @@ def episode_settings(
             goal=tuple(float(x) for x in path.goal),
         ),
         protocol=ProtocolSettings(
-            motion_start_s=float(result.extra["motion_start_s"]),
+            motion_start_s=result.motion_start_s,
             hold_s=scenario.hold_s,
             start_abs_error_rad=tuple(
                 float(x) for x in np.abs(result.q_ref[at_start] - result.q_true[at_start])
@@ -304,8 +304,8 @@ def episode_settings(
             if result.stamp_ns.size
             else (),
             reproduces_paper=scenario.reproduces_paper,
-            preroll_settled=bool(result.extra.get("preroll_settled", True)),
-            hold_settled=result.extra.get("hold_settled") if result.ok else None,
+            preroll_settled=result.preroll_settled,
+            hold_settled=result.hold_settled if result.ok else None,
         ),
         safety=safety,
         seed=episode.seed,
