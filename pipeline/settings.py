@@ -19,11 +19,15 @@ Times are from the recording's first sample: the motion starts at
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import json
+import math
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Annotated, Any, Literal, Self
+from types import MappingProxyType
+from typing import Annotated, Any, ClassVar, Literal, Self
 
 from pydantic import PlainValidator
+from pydantic_core import CoreSchema, core_schema
 
 from pipeline.contract import (
     Contract,
@@ -38,16 +42,23 @@ from pipeline.contract import (
     Numbers,
     Plain,
     Positive,
-    Scalar,
     Text,
     expected_error,
     guard,
     is_mapping,
+    is_scalar,
+    knob,
     listed,
     plain,
     rule,
 )
 from pipeline.contract import SettingsError as SettingsError
+from pipeline.knobs import VELOCITY_SOURCES as VELOCITY_SOURCES
+from pipeline.knobs import CampaignInfo as CampaignInfo
+from pipeline.knobs import LoopSettings as LoopSettings
+from pipeline.knobs import Uncertainty as Uncertainty
+from pipeline.knobs import VelocitySource as VelocitySource
+from pipeline.params import RecordedScenario
 
 SETTINGS_VERSION = 2
 LEGACY_FRICTION = "frictionloss at MuJoCo's default softness (creeps under the breakaway torque)"
@@ -74,28 +85,31 @@ Version = Annotated[
 ]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PlannerSettings(Contract):
-    """The planned path and its timing (what the planner and TOPP-RA produced)."""
+    """The planned path and its timing (what the planner and TOPP-RA produced).
+
+    The report's planner line lists the shown fields in this order (the path's shape,
+    ``direct`` .. ``simplify``, in words when recorded)."""
 
     _where = "planner"
 
     planner: Text
-    seed: Count
     time_limit_s: Positive
-    simplify: Flag
-    direct: Flag
-    n_waypoints: CountFromOne
-    n_states_before_simplify: Count
     path_length_rad: NonNegative
-    padding_m: NonNegative
-    check_step_rad: NonNegative
-    interpolation: Text
     trajectory_duration_s: NonNegative
     velocity_scaling: Positive
     acceleration_scaling: Positive
-    start: Numbers
-    goal: Numbers
+    check_step_rad: NonNegative
+    direct: Flag
+    interpolation: Text
+    n_states_before_simplify: Count
+    n_waypoints: CountFromOne
+    padding_m: NonNegative
+    seed: Count
+    simplify: Flag
+    start: Numbers = knob(shown=False, description="the joint-space start it planned from")
+    goal: Numbers = knob(shown=False, description="the joint-space goal it planned to")
 
 
 @dataclass(frozen=True)
@@ -119,31 +133,7 @@ class LinkInertial(Contract):
     ]
 
 
-@dataclass(frozen=True)
-class Uncertainty(Contract):
-    """How far the plant may differ from the nominal model (uniform draws per episode seed).
-
-    Attributes:
-        mass_rel: link mass factor in ``[1 - r, 1 + r]``.
-        com_m: centre-of-mass offset per axis in ``[-r, r]`` [m].
-        inertia_rel: per-axis scale of the link's second moments in ``[1 - r, 1 + r]``
-            (keeps the tensor physical: positive definite, triangle inequality).
-        armature_rel: rotor armature factor in ``[1 - r, 1 + r]``.
-    """
-
-    _where = "plant.uncertainty"
-
-    mass_rel: NonNegative = 0.0
-    com_m: NonNegative = 0.0
-    inertia_rel: NonNegative = 0.0
-    armature_rel: NonNegative = 0.0
-
-    @property
-    def any(self) -> bool:
-        return any(v > 0 for v in (self.mass_rel, self.com_m, self.inertia_rel, self.armature_rel))
-
-
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PlantSettings(Contract):
     """The simulated plant, exactly enough to rebuild it (with the robot's geometry).
 
@@ -160,6 +150,8 @@ class PlantSettings(Contract):
         physics_dt_s, control_period_s: MuJoCo step and control period [s].
         integrator, engine: MuJoCo's integrator, "mujoco".
         friction_model: the joint friction law the plant ran (``frictionloss`` and ``damping``).
+
+    The report's plant line lists the shown fields in this order.
     """
 
     _where = "plant"
@@ -167,64 +159,22 @@ class PlantSettings(Contract):
     _may_be_absent = frozenset({"friction_model"})
 
     exact: Flag
-    links: Annotated[tuple[LinkInertial, ...], listed("a list of link inertials", tuples=False)]
-    armature: NonNegatives
-    nominal_armature: NonNegatives
     damping: NonNegatives
     frictionloss: NonNegatives
+    armature: NonNegatives
+    nominal_armature: NonNegatives
     payload_kg: NonNegative
     position_noise_std_rad: NonNegative
     velocity_noise_std_rad_s: NonNegative
     uncertainty: Uncertainty
     physics_dt_s: Positive
-    control_period_s: Positive
     integrator: Text = "Euler"
+    control_period_s: Positive
     engine: Text = "mujoco"
     friction_model: Text = LEGACY_FRICTION
-
-
-VelocitySource = Literal["plant", "encoder"]
-VELOCITY_SOURCES: tuple[VelocitySource, ...] = ("plant", "encoder")
-
-
-@dataclass(frozen=True)
-class LoopSettings(Contract):
-    """The loop between the plant and the controller (the defaults: an ideal loop).
-
-    Attributes:
-        delay_s: pure actuation delay: a command reaches the motors this long after
-            the instant it was computed for [s] (a whole number of physics steps).
-        jitter_s: most extra delay per control period, drawn uniformly in whole
-            physics steps ``{0, .., jitter_s / physics_dt_s}`` from the episode seed [s].
-        encoder_counts_per_rev: encoder resolution; the measured position is rounded
-            to the nearest count (0: not quantised).
-        velocity: ``plant``: the plant's velocity plus the independent velocity noise;
-            ``encoder``: the measured position differenced over the control period, then
-            low-passed (first order, ``velocity_cutoff_hz``).
-        velocity_cutoff_hz: the low-pass cutoff for ``encoder`` velocity (0: unfiltered).
-    """
-
-    _where = "loop"
-
-    delay_s: NonNegative = 0.0
-    jitter_s: NonNegative = 0.0
-    encoder_counts_per_rev: Count = 0
-    velocity: Annotated[
-        VelocitySource,
-        rule(f"one of {', '.join(VELOCITY_SOURCES)}", lambda v: v in VELOCITY_SOURCES),
-    ] = "plant"
-    velocity_cutoff_hz: NonNegative = 0.0
-
-    @property
-    def ideal(self) -> bool:
-        """No delay, no jitter, no quantisation, the plant's velocity (the loop before
-        issue 18; ``velocity_cutoff_hz`` then plays no part)."""
-        return (
-            self.delay_s == 0
-            and self.jitter_s == 0
-            and self.encoder_counts_per_rev == 0
-            and self.velocity == "plant"
-        )
+    links: Annotated[tuple[LinkInertial, ...], listed("a list of link inertials", tuples=False)] = (
+        knob(shown=False, description="the plant's link inertials")
+    )
 
 
 @dataclass(frozen=True)
@@ -302,6 +252,99 @@ class GainDesign(Contract):
         return design, rest
 
 
+def _is_json(value: Any) -> bool:
+    if isinstance(value, Mapping):
+        return all(isinstance(k, str) and _is_json(v) for k, v in value.items())
+    if isinstance(value, list | tuple):
+        return all(_is_json(v) for v in value)
+    if isinstance(value, float):
+        return math.isfinite(value)
+    return is_scalar(value)
+
+
+def _per_joint(value: Any) -> bool:
+    return isinstance(value, list | tuple) and all(
+        not isinstance(v, bool) and isinstance(v, int | float) and math.isfinite(v) for v in value
+    )
+
+
+class Gains(Mapping[str, Any]):
+    """Every gain a controller ran with, in the order recorded (``gains_in_effect()``
+    less its design keys), read only.
+
+    The per-joint gains the built-in laws share are typed (``kp``, ``kd``, ``ki``: one
+    number per joint, None when the law has none or records it otherwise); every gain,
+    a plug-in's included, is also there by name as recorded (JSON values: numbers,
+    flags, text, lists, mappings; a mapping reads like the dict the law returned).
+    """
+
+    PER_JOINT: ClassVar[tuple[str, ...]] = ("kp", "kd", "ki")
+
+    __slots__ = ("_values",)
+
+    def __init__(self, values: Mapping[str, Any] = MappingProxyType({})) -> None:
+        """Raises:
+        SettingsError: a gain that is not a JSON value (names it)."""
+        for key, value in values.items():
+            if not isinstance(key, str) or not _is_json(value):
+                raise SettingsError(f"controller.gains.{key}: expected a JSON value, got {value!r}")
+        self._values = MappingProxyType(dict(plain(dict(values))))
+
+    @classmethod
+    def __get_pydantic_core_schema__(cls, source: Any, handler: Any) -> CoreSchema:
+        def check(value: Any) -> Gains:
+            if isinstance(value, Gains):
+                return value
+            if not isinstance(value, Mapping):
+                raise expected_error("a mapping")
+            bad = next((k for k, v in value.items() if not _is_json(v)), None)
+            if bad is not None:
+                raise expected_error(f"JSON gain values ({bad}: {value[bad]!r})")
+            return cls(value)
+
+        return core_schema.no_info_plain_validator_function(check)
+
+    def _typed(self, key: str) -> tuple[float, ...] | None:
+        value: Any = self._values.get(key)
+        return tuple(float(v) for v in value) if _per_joint(value) else None
+
+    @property
+    def kp(self) -> tuple[float, ...] | None:
+        """Proportional gain per joint (its unit is the law's: ``stiffness_gains``)."""
+        return self._typed("kp")
+
+    @property
+    def kd(self) -> tuple[float, ...] | None:
+        """Derivative gain per joint."""
+        return self._typed("kd")
+
+    @property
+    def ki(self) -> tuple[float, ...] | None:
+        """Integral gain per joint."""
+        return self._typed("ki")
+
+    def __getitem__(self, key: str) -> Any:
+        return self._values[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._values)
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def __eq__(self, other: object) -> bool:
+        return dict(self._values) == (dict(other) if isinstance(other, Mapping) else other)
+
+    def __hash__(self) -> int:
+        return hash(json.dumps(dict(self._values), sort_keys=True))
+
+    def __repr__(self) -> str:
+        return f"Gains({dict(self._values)!r})"
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> Gains:
+        return self  # immutable
+
+
 @dataclass(frozen=True)
 class ControllerSettings(Contract):
     """The controller as run: its params name, registry type, every gain in effect, where
@@ -314,9 +357,13 @@ class ControllerSettings(Contract):
 
     name: Text
     type: Text
-    gains: Plain
+    gains: Gains
     origin: Plain = field(default_factory=lambda: {"kind": "builtin"})
     design: GainDesign | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.gains, Gains):  # a plain mapping (the recorder's dict)
+            object.__setattr__(self, "gains", Gains(self.gains))
 
 
 @dataclass(frozen=True)
@@ -452,33 +499,14 @@ class ExecutionSafety(Contract):
 
 
 @dataclass(frozen=True)
-class CampaignInfo(Contract):
-    """Where an episode sits in a campaign (a sweep), for the report's summaries.
-
-    Attributes:
-        name: the campaign's name in params.
-        condition: stable key of the swept values other than the controller and the
-            seed (e.g. ``"payload_kg=0.5,frictionloss=1"``; ``""`` when only those vary):
-            episodes of one condition differ only by controller and seed.
-        swept: every swept axis and this episode's value (controller and seed included),
-            JSON scalars, keyed by the params path (``plant.payload_kg``).
-    """
-
-    _where = "campaign"
-
-    name: Text
-    condition: Text
-    swept: Annotated[Mapping[str, Scalar], guard("a mapping", is_mapping)]
-
-
-@dataclass(frozen=True)
 class EpisodeSettings(Contract):
     """Everything a recording says about how it was made (its ``settings`` JSON).
 
     Attributes:
         episode: the episode key (the recording's name).
         robot: the robot spec as plain data (YAML form, radians).
-        scenario: the scenario's params as given (with ``name``).
+        scenario: the scenario's params as given, with its ``name``
+            (:class:`pipeline.params.RecordedScenario`).
         controller: the controller as run.
         plant: the plant as simulated.
         planner: the planned path and timing.
@@ -499,7 +527,7 @@ class EpisodeSettings(Contract):
 
     episode: Text
     robot: Plain
-    scenario: Plain
+    scenario: RecordedScenario
     controller: ControllerSettings
     plant: PlantSettings
     planner: PlannerSettings
@@ -517,9 +545,14 @@ class EpisodeSettings(Contract):
     loop: LoopSettings = field(default_factory=LoopSettings)
     version: Version = SETTINGS_VERSION
 
+    def __post_init__(self) -> None:
+        if isinstance(self.scenario, Mapping):  # plain data (a test fixture's scenario)
+            object.__setattr__(self, "scenario", RecordedScenario.model_validate(self.scenario))
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready plain data (lists, not tuples)."""
         out: dict[str, Any] = plain(asdict(self))
+        out["scenario"] = self.scenario.recorded()
         out["safety"] = self.safety.to_dict()  # with its derived keys, for readers of the JSON
         return out
 

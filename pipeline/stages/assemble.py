@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from pipeline import __version__
-from pipeline.params import Episode, ScenarioParams
+from pipeline.params import Episode, RecordedScenario, ScenarioParams
 from pipeline.planning import PlannedPath, TimedTrajectory
 from pipeline.robots.spec import JointSpec, RobotSpec
 from pipeline.settings import (
@@ -23,6 +23,7 @@ from pipeline.settings import (
     EpisodeSettings,
     ExecutionSafety,
     GainDesign,
+    Gains,
     LoopSettings,
     PlannerSettings,
     PlantSettings,
@@ -177,7 +178,7 @@ def draw_scenario_plant(
     from pipeline.model.uncertainty import draw_plant, link_inertials, with_plant
 
     p = scenario.plant
-    uncertainty = Uncertainty(**p.uncertainty.model_dump())
+    uncertainty = p.uncertainty
     drawn = draw_plant(spec, uncertainty, seed=seed)
     extra = per_joint(param_values(p.armature), spec.dof)
     plant_spec = with_plant(
@@ -190,7 +191,7 @@ def draw_scenario_plant(
 
 def loop_settings(scenario: ScenarioParams) -> LoopSettings:
     """The scenario's loop (delay, jitter, encoder, velocity estimate) as recorded."""
-    return LoopSettings(**scenario.loop.model_dump())
+    return scenario.loop
 
 
 def _plant_is_exact(spec: RobotSpec, plant_spec: RobotSpec, scenario: ScenarioParams) -> bool:
@@ -265,11 +266,11 @@ def episode_settings(
     return EpisodeSettings(
         episode=episode.name,
         robot=spec_as_dict(spec),
-        scenario={"name": episode.scenario_name, **scenario.model_dump()},
+        scenario=RecordedScenario.of(episode.scenario_name, scenario),
         controller=ControllerSettings(
             name=episode.controller_name,
             type=episode.controller.type,
-            gains=recorded_gains,
+            gains=Gains(recorded_gains),
             origin=origin,
             design=design,
         ),

@@ -171,7 +171,9 @@ def default_settings(ep: Episode) -> dict[str, Any]:
         robot=ur5_robot_dict(),
         scenario={
             "name": ep.scenario,
+            "robot": "ur5",
             "start": [float(v) for v in ep.q_ref[0]],
+            "goal": {"joints": [float(v) for v in ep.q_ref[-1]]},
             "obstacles": [],
             "hold_s": ep.hold_s,
         },
