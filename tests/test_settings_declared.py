@@ -91,7 +91,7 @@ def test_the_recorded_scenario_is_typed_and_written_as_given() -> None:
     assert settings.scenario.name == "paper" and settings.scenario.robot == "ur5"
     assert isinstance(settings.scenario.loop, LoopSettings)
     written = settings.to_dict()["scenario"]
-    assert list(written)[0] == "name"
+    assert next(iter(written)) == "name"
     rest = {k: v for k, v in written.items() if k != "name"}
     params = ScenarioParams.model_validate(rest)
     assert params.model_dump(mode="json") == rest
