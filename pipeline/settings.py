@@ -19,12 +19,10 @@ Times are from the recording's first sample: the motion starts at
 
 from __future__ import annotations
 
-import json
 import math
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from types import MappingProxyType
-from typing import Annotated, Any, ClassVar, Literal, Self
+from typing import Annotated, Any, ClassVar, Literal, NoReturn, Self
 
 from pydantic import PlainValidator
 from pydantic_core import CoreSchema, core_schema
@@ -268,27 +266,26 @@ def _per_joint(value: Any) -> bool:
     )
 
 
-class Gains(Mapping[str, Any]):
+class Gains(dict[str, Any]):
     """Every gain a controller ran with, in the order recorded (``gains_in_effect()``
     less its design keys), read only.
 
     The per-joint gains the built-in laws share are typed (``kp``, ``kd``, ``ki``: one
     number per joint, None when the law has none or records it otherwise); every gain,
     a plug-in's included, is also there by name as recorded (JSON values: numbers,
-    flags, text, lists, mappings; a mapping reads like the dict the law returned).
+    flags, text, lists, mappings). A ``dict`` (read only), so it is written as one.
     """
 
     PER_JOINT: ClassVar[tuple[str, ...]] = ("kp", "kd", "ki")
 
-    __slots__ = ("_values",)
-
-    def __init__(self, values: Mapping[str, Any] = MappingProxyType({})) -> None:
+    def __init__(self, values: Mapping[str, Any] | Iterable[tuple[str, Any]] = ()) -> None:
         """Raises:
         SettingsError: a gain that is not a JSON value (names it)."""
-        for key, value in values.items():
+        items = dict(values)
+        for key, value in items.items():
             if not isinstance(key, str) or not _is_json(value):
                 raise SettingsError(f"controller.gains.{key}: expected a JSON value, got {value!r}")
-        self._values = MappingProxyType(dict(plain(dict(values))))
+        super().__init__(plain(items))
 
     @classmethod
     def __get_pydantic_core_schema__(cls, source: Any, handler: Any) -> CoreSchema:
@@ -305,7 +302,7 @@ class Gains(Mapping[str, Any]):
         return core_schema.no_info_plain_validator_function(check)
 
     def _typed(self, key: str) -> tuple[float, ...] | None:
-        value: Any = self._values.get(key)
+        value: Any = self.get(key)
         return tuple(float(v) for v in value) if _per_joint(value) else None
 
     @property
@@ -323,26 +320,18 @@ class Gains(Mapping[str, Any]):
         """Integral gain per joint."""
         return self._typed("ki")
 
-    def __getitem__(self, key: str) -> Any:
-        return self._values[key]
+    def _read_only(self, *args: Any, **kwargs: Any) -> NoReturn:
+        raise TypeError("recorded gains are read only")
 
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._values)
+    __setitem__ = __delitem__ = _read_only
+    clear = pop = popitem = setdefault = update = _read_only
+    __ior__ = _read_only
 
-    def __len__(self) -> int:
-        return len(self._values)
-
-    def __eq__(self, other: object) -> bool:
-        return dict(self._values) == (dict(other) if isinstance(other, Mapping) else other)
-
-    def __hash__(self) -> int:
-        return hash(json.dumps(dict(self._values), sort_keys=True))
+    def __reduce__(self) -> tuple[type[Gains], tuple[dict[str, Any]]]:
+        return (Gains, (dict(self),))  # pickled and copied whole (report workers)
 
     def __repr__(self) -> str:
-        return f"Gains({dict(self._values)!r})"
-
-    def __deepcopy__(self, memo: dict[int, Any]) -> Gains:
-        return self  # immutable
+        return f"Gains({super().__repr__()})"
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,11 @@ recorded form and its report line; gains and the scenario are typed in the setti
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+import json
 import math
+import pickle
 from dataclasses import dataclass
 from typing import Annotated
 
@@ -76,6 +80,12 @@ def test_gains_keep_their_recorded_order_and_type_the_per_joint_ones() -> None:
         Gains({"kd": [math.nan]})
     ctrl = ControllerSettings(name="a", type="pid", gains={"kp": [1.0]})
     assert isinstance(ctrl.gains, Gains)
+    with pytest.raises(TypeError, match="read only"):
+        ctrl.gains["kp"] = [2.0]
+    back = pickle.loads(pickle.dumps(ctrl))  # report workers send settings across processes
+    assert back == ctrl and isinstance(back.gains, Gains)
+    assert copy.deepcopy(gains) == gains
+    assert json.loads(json.dumps(dataclasses.asdict(ctrl)))["gains"] == {"kp": [1.0]}
 
 
 def test_a_bag_with_non_json_gains_is_refused_naming_the_field() -> None:

@@ -89,26 +89,27 @@ def _loop_lines(loop: LoopSettings | None) -> list[str]:
     return [f"- Loop (the same for every law): {_fields_line(loop, LoopSettings)}."]
 
 
-def _armature_lines(robot: Any, plant: PlantSettings | None, model: str | None) -> list[str]:
-    """The rotor armature the nominal model assumes, and where its values come from
-    (``model``: the scenario's identified ``nominal:`` model file, if any)."""
+def _armature_lines(robot: Any, nominal: Sequence[float] | None, model: str | None) -> list[str]:
+    """The rotor armature the nominal model assumes (``nominal``: as the plant records
+    it), and where its values come from (``model``: the scenario's identified
+    ``nominal:`` model file, if any)."""
     if not isinstance(robot, Mapping):
         return []
-    nominal: list[Any] | None = list(plant.nominal_armature) if plant is not None else None
-    if nominal is None:
+    shown: list[Any] | None = list(nominal) if nominal is not None else None
+    if shown is None:
         joints = robot.get("joints")
         if isinstance(joints, list):
-            nominal = [j.get("armature") for j in joints if isinstance(j, Mapping)]
+            shown = [j.get("armature") for j in joints if isinstance(j, Mapping)]
     source = _given(robot, "armature_source")
     sources = robot.get("settings_sources")
     if source is None and isinstance(sources, Mapping):  # a URDF/MJCF robot's sidecar facts
         source = _given(sources, "armature")
-    if nominal is None and source is None:
+    if shown is None and source is None:
         return []
     stated = source if source is not None else "not stated in the robot file"
     if model is not None:  # the controllers' model is an identified one, not the file
         stated = f"identified (`nominal: {model}`); the robot file's: {stated}"
-    values = md.value(nominal)
+    values = md.value(shown)
     return [f"- Rotor armature of the nominal model [kg m²]: {values}; source: {stated}."]
 
 
@@ -164,7 +165,9 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
         + (f" (in {first.episode}; settings differ, below)." if mixed else "."),
         f"- Planner: {_planner_line(planner)}.",
         *_armature_lines(
-            s.robot if s is not None else None, plant, s.scenario.nominal if s else None
+            s.robot if s is not None else None,
+            plant.nominal_armature if plant is not None else None,
+            s.scenario.nominal if s is not None else None,
         ),
         *_friction_lines(s.robot if s is not None else None),
         *_acceleration_lines(s.robot if s is not None else None),
