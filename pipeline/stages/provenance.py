@@ -17,6 +17,7 @@ RECORD_CODE = (
     "contract.py",
     "errors.py",
     "fsutil.py",
+    "knobs.py",
     "memory.py",
     "params.py",
     "plugins.py",
