@@ -73,7 +73,7 @@ def _record(out: Path, *, mode: str) -> tuple[float, list[float]]:
 
     def probe(*args: Any, **kwargs: Any) -> Any:
         result = original(*args, **kwargs)
-        starts.append(float(result.extra["motion_start_s"]))
+        starts.append(result.motion_start_s)
         return result
 
     runner._preroll = MODES[mode]  # type: ignore[assignment]

@@ -11,8 +11,8 @@ unknown keys are ignored.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
-from dataclasses import fields
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import MISSING, Field, dataclass, field, fields
 from typing import Annotated, Any, ClassVar, Self, cast
 
 from pydantic import BeforeValidator, GetCoreSchemaHandler, PlainValidator, TypeAdapter
@@ -120,6 +120,59 @@ NonNegatives = Annotated[tuple[NonNegative, ...], listed("a list of numbers")]
 Names = Annotated[tuple[Text, Text], listed("two names", length=2)]
 Plain = Annotated[Mapping[str, Any], rule("a mapping", is_mapping, dict)]
 Scalar = Annotated[Any, rule("a JSON scalar", is_scalar)]
+
+
+# --- what a field means, for people (the report's setup lines) and for params ---------
+
+
+@dataclass(frozen=True)
+class Meta:
+    """A settings field's declaration beyond its type, kept with it (``knob``).
+
+    Attributes:
+        label: its name in the report's setup lines ("": the field name, as recorded).
+        unit: its unit ("" for none; the name's suffix says it too: ``_s``, ``_kg``).
+        description: what it is, in one line.
+        shown: listed in its group's setup line (in declaration order).
+        bounds: the range params accept (pydantic ``Field`` keywords: ``ge``, ``le``,
+            ``lt``, ...); a recording's settings accept what the field's type does.
+    """
+
+    label: str = ""
+    unit: str = ""
+    description: str = ""
+    shown: bool = True
+    bounds: Mapping[str, float] = field(default_factory=dict)
+
+
+def knob(
+    default: Any = MISSING,
+    *,
+    label: str = "",
+    unit: str = "",
+    description: str = "",
+    shown: bool = True,
+    **bounds: float,
+) -> Any:
+    """A dataclass field with its :class:`Meta` (``delay_s: NonNegative = knob(0.0,
+    le=0.1, unit="s", description="...")``)."""
+    meta = Meta(label, unit, description, shown, dict(bounds))
+    return field(default=default, metadata={"meta": meta})
+
+
+def meta_of(f: Field[Any]) -> Meta:
+    """A field's :class:`Meta` (the defaults when it declares none)."""
+    found = f.metadata.get("meta")
+    return found if isinstance(found, Meta) else Meta()
+
+
+def shown_fields(cls: type) -> Iterator[tuple[str, str]]:
+    """(field name, label) of each field of a settings dataclass its group's setup line
+    shows, in declaration order."""
+    for f in fields(cls):
+        meta = meta_of(f)
+        if meta.shown:
+            yield f.name, meta.label or f.name
 
 
 class Contract:

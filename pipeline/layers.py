@@ -26,8 +26,10 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
         ),
     ),
     ("plumbing", ("contract", "fsutil", "plugins", "yamlio")),
-    ("descriptions", ("fileio", "robots", "settings")),
-    ("models", ("model", "params")),
+    ("descriptions", ("fileio", "knobs", "robots")),
+    ("params", ("params",)),
+    ("recorded", ("settings",)),
+    ("models", ("model",)),
     ("algorithms", ("control", "kinematics", "planning")),
     ("simulation", ("sim",)),
     ("episode", ("experiment", "log")),
@@ -36,12 +38,13 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("stages", ("stages", "teach")),
     ("cli", ("cli",)),
     ("entry", ("__main__",)),
+    ("tools", ("devtools",)),
 )
 """The layers, lowest first: ``(name, parts)``."""
 
-REPORT_MAY_REACH: frozenset[str] = frozenset({"control"})
-"""Parts ``report/`` may still reach although they load a physics engine: the plot colours
-read the controller registry (being replaced by a light info record; then this is empty)."""
+REPORT_MAY_REACH: frozenset[str] = frozenset()
+"""Parts `report/` may reach although they load a physics engine: none (the report reads
+the controllers' facts from `pipeline.control.info`, which imports no controller)."""
 
 PHYSICS_ENGINES: tuple[str, ...] = ("pinocchio", "mujoco")
 """Libraries ``report/`` never loads, directly or through another part of the package."""

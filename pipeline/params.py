@@ -8,32 +8,40 @@ paths in errors match the YAML (``params.yaml: scenarios.paper.hold_s: ...``).
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 import os
 import re
+import typing
 from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, cast
 
 from pydantic import (
     BaseModel,
     ConfigDict,
     Discriminator,
     Field,
+    GetCoreSchemaHandler,
     SerializerFunctionWrapHandler,
     Tag,
     ValidationError,
+    create_model,
     model_serializer,
     model_validator,
 )
+from pydantic_core import CoreSchema, core_schema
 
 from pipeline.constants import MAX_SEED
+from pipeline.contract import meta_of
 from pipeline.errors import ParamsError, unknown_name_message
+from pipeline.knobs import MAX_LOOP_DELAY_S as MAX_LOOP_DELAY_S
+from pipeline.knobs import UNUSED_DRAWS, CampaignInfo, LoopSettings, Uncertainty
 from pipeline.robots.dh_yaml import format_validation_error
 from pipeline.robots.spec import Name
-from pipeline.settings import CampaignInfo
 from pipeline.yamlio import parse_yaml, refuse_bool_numbers
 
 NonNegative = Annotated[float, Field(ge=0, le=1e6, allow_inf_nan=False)]
@@ -56,6 +64,50 @@ class _Strict(BaseModel):
     def _no_bool_numbers(cls, data: Any) -> Any:
         refuse_bool_numbers(cls.model_fields, data)  # `hold_s: true` is not 1.0 s
         return data
+
+
+@functools.cache
+def params_model(cls: type) -> type[BaseModel]:
+    """The params form of a shared settings dataclass (:mod:`pipeline.knobs`): each field
+    with its plain type, its default and the range its ``knob`` declares, unknown keys
+    refused, as every params model."""
+    hints = typing.get_type_hints(cls, include_extras=True)
+    fields_: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        hint = hints[f.name]
+        plain_type = typing.get_args(hint)[0] if typing.get_origin(hint) is Annotated else hint
+        declared: dict[str, Any] = {"default": f.default, **meta_of(f).bounds}
+        fields_[f.name] = (plain_type, Field(**declared))
+    return cast(type[BaseModel], create_model(f"{cls.__name__}Params", __base__=_Strict, **fields_))
+
+
+def _dump_knobs(value: Any) -> dict[str, Any]:
+    """A shared settings dataclass as params dump it: issue 28's draws left out while
+    unused (the same dumps, so the same campaign fingerprints, as before them)."""
+    out: dict[str, Any] = dataclasses.asdict(value)
+    return _omit_defaults(out, UNUSED_DRAWS) if isinstance(value, Uncertainty) else out
+
+
+class AsParams:
+    """``Annotated[LoopSettings, AsParams()]``: a params field holding a shared settings
+    dataclass, validated by :func:`params_model` (pydantic's errors and field paths, as
+    every params field) and kept as the dataclass itself (dumped as its fields)."""
+
+    def __get_pydantic_core_schema__(
+        self, source: type, handler: GetCoreSchemaHandler
+    ) -> CoreSchema:
+        model = params_model(source)
+
+        def validate(value: Any, inner: core_schema.ValidatorFunctionWrapHandler) -> Any:
+            if isinstance(value, source):  # already the dataclass (validated when made)
+                return value
+            return source(**dict(inner(value)))
+
+        return core_schema.no_info_wrap_validator_function(
+            validate,
+            handler.generate_schema(model),
+            serialization=core_schema.plain_serializer_function_ser_schema(_dump_knobs),
+        )
 
 
 class PoseGoal(_Strict):
@@ -121,7 +173,6 @@ class TimingParams(_Strict):
     acceleration_scaling: float = Field(default=1.0, ge=0.001, le=1)
 
 
-RelativeSpread = Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)]
 MAX_PREROLL_S = 60.0
 
 
@@ -132,33 +183,7 @@ def _omit_defaults(out: dict[str, Any], defaults: Mapping[str, Any]) -> dict[str
     return {k: v for k, v in out.items() if k not in defaults or v != defaults[k]}
 
 
-_NEW_UNCERTAINTY = {
-    "coulomb_rel": 0.0,
-    "viscous_rel": 0.0,
-    "transition_rel": 0.0,
-    "payload_kg": 0.0,
-}
 _NEW_PLANT = {"profile": None, "effort_offset_nm": 0.0, "effort_noise_std_nm": 0.0}
-
-
-class UncertaintyParams(_Strict):
-    """Link-parameter and armature uncertainty: the plant draws its values per episode seed."""
-
-    mass_rel: RelativeSpread = 0.0  # link mass x U[1 - r, 1 + r]
-    com_m: float = Field(default=0.0, ge=0, le=0.5, allow_inf_nan=False)  # per axis U[-r, r]
-    inertia_rel: RelativeSpread = 0.0  # second moments scaled per axis by U[1 - r, 1 + r]
-    armature_rel: RelativeSpread = 0.0  # rotor armature x U[1 - r, 1 + r]
-    # joint friction, per joint (pipeline.model.uncertainty.draw_friction): Coulomb
-    # (frictionloss, or a sigmoid's phi1), viscous (damping) and a sigmoid's steepness
-    # (phi2: its transition speed) x U[1 - r, 1 + r]; a payload U[0, r] kg on top
-    coulomb_rel: RelativeSpread = 0.0
-    viscous_rel: RelativeSpread = 0.0
-    transition_rel: RelativeSpread = 0.0
-    payload_kg: float = Field(default=0.0, ge=0, le=1000, allow_inf_nan=False)
-
-    @model_serializer(mode="wrap")
-    def _dump(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
-        return _omit_defaults(handler(self), _NEW_UNCERTAINTY)
 
 
 class PlantParams(_Strict):
@@ -167,7 +192,7 @@ class PlantParams(_Strict):
     damping: PerJoint = 0.0
     frictionloss: PerJoint = 0.0
     armature: PerJoint = 0.0  # added to the robot's own armature (the plant's only)
-    uncertainty: UncertaintyParams = UncertaintyParams()
+    uncertainty: Annotated[Uncertainty, AsParams()] = Uncertainty()
     payload_kg: float = Field(default=0.0, ge=0, le=1000)
     position_noise_std_rad: float = Field(default=0.0, ge=0, le=1.0)
     velocity_noise_std_rad_s: float = Field(default=0.0, ge=0, le=100.0)
@@ -184,20 +209,6 @@ class PlantParams(_Strict):
         return _omit_defaults(handler(self), _NEW_PLANT)
 
 
-MAX_LOOP_DELAY_S = 0.1  # a 100 ms actuation delay is a broken loop, not a setting
-
-
-class LoopParams(_Strict):
-    """The loop between plant and controller, the same for every law (``LoopSettings``;
-    the defaults are the ideal loop: no delay, exact position, the plant's velocity)."""
-
-    delay_s: float = Field(default=0.0, ge=0, le=MAX_LOOP_DELAY_S)  # whole physics steps
-    jitter_s: float = Field(default=0.0, ge=0, le=MAX_LOOP_DELAY_S)  # extra, per period
-    encoder_counts_per_rev: int = Field(default=0, ge=0, le=2**40)  # 0: not quantised
-    velocity: Literal["plant", "encoder"] = "plant"  # encoder: differenced, low-passed
-    velocity_cutoff_hz: float = Field(default=0.0, ge=0, le=1e6)  # 0: unfiltered
-
-
 class ScenarioParams(_Strict):
     robot: str = Field(min_length=1)
     start: list[float] | Annotated[str, Field(min_length=1)]  # joints, or a named state
@@ -206,7 +217,7 @@ class ScenarioParams(_Strict):
     planner: PlannerParams = PlannerParams()
     timing: TimingParams = TimingParams()
     plant: PlantParams = PlantParams()
-    loop: LoopParams = LoopParams()
+    loop: Annotated[LoopSettings, AsParams()] = LoopSettings()
     hold_s: float = Field(default=1.0, ge=0, le=MAX_HOLD_S)
     # the longest the controller holds the start pose before the motion: the pre-roll ends
     # once settled (pipeline.sim.settling); an episode still unsettled here is flagged
@@ -242,6 +253,24 @@ class ScenarioParams(_Strict):
                 "would not be used: set it to 0"
             )
         return self
+
+
+class RecordedScenario(ScenarioParams):
+    """A scenario as an episode records it (``settings.scenario``): its params as given
+    and its name. Read back from a bag, keys this version does not know are ignored."""
+
+    model_config = ConfigDict(extra="ignore")
+
+    name: str
+
+    @classmethod
+    def of(cls, name: str, scenario: ScenarioParams) -> RecordedScenario:
+        return cls(name=name, **{k: getattr(scenario, k) for k in ScenarioParams.model_fields})
+
+    def recorded(self) -> dict[str, Any]:
+        """The JSON form: ``name`` first, then the params as ``model_dump`` gives them."""
+        data = self.model_dump(mode="json")
+        return {"name": data.pop("name"), **data}
 
 
 class ControllerParams(_Strict):
@@ -504,6 +533,8 @@ def sweep_path_problem(path: str, controllers: Mapping[str, ControllerParams]) -
             extra = "; or gains.<key>, controllers.<name>.gains.<key>" if i == 0 else ""
             return f"'{part}' is not a field of {where} (valid: {', '.join(valid)}{extra})"
         annotation = fields_[part].annotation
+        if isinstance(annotation, type) and dataclasses.is_dataclass(annotation):
+            annotation = params_model(annotation)  # a shared settings dataclass (knobs)
         if isinstance(annotation, type) and issubclass(annotation, BaseModel):
             model = annotation
             if i == len(parts) - 1:

@@ -19,11 +19,13 @@ Times are from the recording's first sample: the motion starts at
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import math
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Annotated, Any, Literal, Self
+from typing import Annotated, Any, ClassVar, Literal, NoReturn, Self
 
 from pydantic import PlainValidator
+from pydantic_core import CoreSchema, core_schema
 
 from pipeline.contract import (
     Contract,
@@ -38,11 +40,12 @@ from pipeline.contract import (
     Numbers,
     Plain,
     Positive,
-    Scalar,
     Text,
     expected_error,
     guard,
     is_mapping,
+    is_scalar,
+    knob,
     listed,
     plain,
     rule,
@@ -50,6 +53,13 @@ from pipeline.contract import (
 )
 from pipeline.contract import SettingsError as SettingsError
 from pipeline.errors import SpecError
+from pipeline.knobs import UNUSED_DRAWS as _UNUSED_DRAWS
+from pipeline.knobs import VELOCITY_SOURCES as VELOCITY_SOURCES
+from pipeline.knobs import CampaignInfo as CampaignInfo
+from pipeline.knobs import LoopSettings as LoopSettings
+from pipeline.knobs import Uncertainty as Uncertainty
+from pipeline.knobs import VelocitySource as VelocitySource
+from pipeline.params import RecordedScenario
 from pipeline.robots.recorded import robot_from_dict, robot_to_dict
 from pipeline.robots.spec import RobotSpec
 
@@ -91,28 +101,31 @@ Version = Annotated[
 ]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PlannerSettings(Contract):
-    """The planned path and its timing (what the planner and TOPP-RA produced)."""
+    """The planned path and its timing (what the planner and TOPP-RA produced).
+
+    The report's planner line lists the shown fields in this order (the path's shape,
+    ``direct`` .. ``simplify``, in words when recorded)."""
 
     _where = "planner"
 
     planner: Text
-    seed: Count
     time_limit_s: Positive
-    simplify: Flag
-    direct: Flag
-    n_waypoints: CountFromOne
-    n_states_before_simplify: Count
     path_length_rad: NonNegative
-    padding_m: NonNegative
-    check_step_rad: NonNegative
-    interpolation: Text
     trajectory_duration_s: NonNegative
     velocity_scaling: Positive
     acceleration_scaling: Positive
-    start: Numbers
-    goal: Numbers
+    check_step_rad: NonNegative
+    direct: Flag
+    interpolation: Text
+    n_states_before_simplify: Count
+    n_waypoints: CountFromOne
+    padding_m: NonNegative
+    seed: Count
+    simplify: Flag
+    start: Numbers = knob(shown=False, description="the joint-space start it planned from")
+    goal: Numbers = knob(shown=False, description="the joint-space goal it planned to")
 
 
 @dataclass(frozen=True)
@@ -136,45 +149,18 @@ class LinkInertial(Contract):
     ]
 
 
-# issue 28's draws and plant fields at their unused values: left out of settings then
-_UNUSED_DRAWS: dict[str, Any] = dict.fromkeys(("coulomb_rel", "viscous_rel", "transition_rel"), 0)
-_UNUSED_DRAWS["payload_kg"] = 0
+# issue 28's plant fields at their unused values: left out of settings then
 _UNUSED_PLANT: dict[str, Any] = dict(profile="", sigmoid_friction=None, effort_offset_nm=[])
 _UNUSED_PLANT["effort_noise_std_nm"] = 0
 
 
-@dataclass(frozen=True)
-class Uncertainty(Contract):
-    """How far the plant may differ from the nominal model (uniform draws per episode seed).
-
-    Attributes:
-        mass_rel: link mass factor in ``[1 - r, 1 + r]``.
-        com_m: centre-of-mass offset per axis in ``[-r, r]`` [m].
-        inertia_rel: per-axis scale of the link's second moments in ``[1 - r, 1 + r]``
-            (keeps the tensor physical: positive definite, triangle inequality).
-        armature_rel: rotor armature factor in ``[1 - r, 1 + r]``.
-        coulomb_rel, viscous_rel, transition_rel: per-joint factors in ``[1 - r, 1 + r]``
-            on the Coulomb friction (``frictionloss`` or a sigmoid's ``phi1``), the viscous
-            damping and a sigmoid's steepness ``phi2``.
-        payload_kg: extra payload in ``[0, r]`` [kg].
-    """
-
-    _where = "plant.uncertainty"
-    _may_be_absent = frozenset(_UNUSED_DRAWS)  # bags written before issue 28: none drawn
-
-    mass_rel: NonNegative = 0.0
-    com_m: NonNegative = 0.0
-    inertia_rel: NonNegative = 0.0
-    armature_rel: NonNegative = 0.0
-    coulomb_rel: NonNegative = 0.0
-    viscous_rel: NonNegative = 0.0
-    transition_rel: NonNegative = 0.0
-    payload_kg: NonNegative = 0.0
-
-    @property
-    def any(self) -> bool:
-        """Any link parameter or armature drawn (the friction draws are not link draws)."""
-        return any(v > 0 for v in (self.mass_rel, self.com_m, self.inertia_rel, self.armature_rel))
+def plant_as_recorded(plant: dict[str, Any]) -> dict[str, Any]:
+    """A plant's plain data as recorded: issue 28's fields left out while unused, so plants
+    without them record the same settings as before (absent reads back as the default)."""
+    for part, unused in ((plant, _UNUSED_PLANT), (plant["uncertainty"], _UNUSED_DRAWS)):
+        for key in [k for k, v in unused.items() if part.get(k) == v]:
+            del part[key]
+    return plant
 
 
 @dataclass(frozen=True)
@@ -189,7 +175,7 @@ class SigmoidFrictionSettings(Contract):
     phi3_rad_s: Numbers
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PlantSettings(Contract):
     """The simulated plant, exactly enough to rebuild it (with the robot's geometry).
 
@@ -210,6 +196,8 @@ class PlantSettings(Contract):
         sigmoid_friction: the sigmoid friction the plant ran, None if none.
         effort_offset_nm, effort_noise_std_nm: the torque sensor's offset per joint and
             noise std on what is recorded as effort [N m] (empty, 0: exact).
+
+    The report's plant line lists the shown fields in this order.
     """
 
     _where = "plant"
@@ -218,68 +206,28 @@ class PlantSettings(Contract):
     _may_be_absent = frozenset({"friction_model", *_UNUSED_PLANT})
 
     exact: Flag
-    links: Annotated[tuple[LinkInertial, ...], listed("a list of link inertials", tuples=False)]
-    armature: NonNegatives
-    nominal_armature: NonNegatives
     damping: NonNegatives
     frictionloss: NonNegatives
+    armature: NonNegatives
+    nominal_armature: NonNegatives
     payload_kg: NonNegative
     position_noise_std_rad: NonNegative
     velocity_noise_std_rad_s: NonNegative
     uncertainty: Uncertainty
     physics_dt_s: Positive
-    control_period_s: Positive
     integrator: Text = "Euler"
+    control_period_s: Positive
     engine: Text = "mujoco"
     friction_model: Text = LEGACY_FRICTION
-    profile: Text = ""
-    sigmoid_friction: SigmoidFrictionSettings | None = None
-    effort_offset_nm: Numbers = ()
-    effort_noise_std_nm: NonNegative = 0.0
-
-
-VelocitySource = Literal["plant", "encoder"]
-VELOCITY_SOURCES: tuple[VelocitySource, ...] = ("plant", "encoder")
-
-
-@dataclass(frozen=True)
-class LoopSettings(Contract):
-    """The loop between the plant and the controller (the defaults: an ideal loop).
-
-    Attributes:
-        delay_s: pure actuation delay: a command reaches the motors this long after
-            the instant it was computed for [s] (a whole number of physics steps).
-        jitter_s: most extra delay per control period, drawn uniformly in whole
-            physics steps ``{0, .., jitter_s / physics_dt_s}`` from the episode seed [s].
-        encoder_counts_per_rev: encoder resolution; the measured position is rounded
-            to the nearest count (0: not quantised).
-        velocity: ``plant``: the plant's velocity plus the independent velocity noise;
-            ``encoder``: the measured position differenced over the control period, then
-            low-passed (first order, ``velocity_cutoff_hz``).
-        velocity_cutoff_hz: the low-pass cutoff for ``encoder`` velocity (0: unfiltered).
-    """
-
-    _where = "loop"
-
-    delay_s: NonNegative = 0.0
-    jitter_s: NonNegative = 0.0
-    encoder_counts_per_rev: Count = 0
-    velocity: Annotated[
-        VelocitySource,
-        rule(f"one of {', '.join(VELOCITY_SOURCES)}", lambda v: v in VELOCITY_SOURCES),
-    ] = "plant"
-    velocity_cutoff_hz: NonNegative = 0.0
-
-    @property
-    def ideal(self) -> bool:
-        """No delay, no jitter, no quantisation, the plant's velocity (the loop before
-        issue 18; ``velocity_cutoff_hz`` then plays no part)."""
-        return (
-            self.delay_s == 0
-            and self.jitter_s == 0
-            and self.encoder_counts_per_rev == 0
-            and self.velocity == "plant"
-        )
+    links: Annotated[tuple[LinkInertial, ...], listed("a list of link inertials", tuples=False)] = (
+        knob(shown=False, description="the plant's link inertials")
+    )
+    profile: Text = knob("", shown=False, description="the published plant's source")
+    sigmoid_friction: SigmoidFrictionSettings | None = knob(
+        None, shown=False, description="the sigmoid friction the plant ran"
+    )
+    effort_offset_nm: Numbers = knob((), shown=False, description="torque-sensor offset")
+    effort_noise_std_nm: NonNegative = knob(0.0, shown=False, description="torque-sensor noise")
 
 
 @dataclass(frozen=True)
@@ -357,6 +305,90 @@ class GainDesign(Contract):
         return design, rest
 
 
+def _is_json(value: Any) -> bool:
+    if isinstance(value, Mapping):
+        return all(isinstance(k, str) and _is_json(v) for k, v in value.items())
+    if isinstance(value, list | tuple):
+        return all(_is_json(v) for v in value)
+    if isinstance(value, float):
+        return math.isfinite(value)
+    return is_scalar(value)
+
+
+def _per_joint(value: Any) -> bool:
+    return isinstance(value, list | tuple) and all(
+        not isinstance(v, bool) and isinstance(v, int | float) and math.isfinite(v) for v in value
+    )
+
+
+class Gains(dict[str, Any]):
+    """Every gain a controller ran with, in the order recorded (``gains_in_effect()``
+    less its design keys), read only.
+
+    The per-joint gains the built-in laws share are typed (``kp``, ``kd``, ``ki``: one
+    number per joint, None when the law has none or records it otherwise); every gain,
+    a plug-in's included, is also there by name as recorded (JSON values: numbers,
+    flags, text, lists, mappings). A ``dict`` (read only), so it is written as one.
+    """
+
+    PER_JOINT: ClassVar[tuple[str, ...]] = ("kp", "kd", "ki")
+
+    def __init__(self, values: Mapping[str, Any] | Iterable[tuple[str, Any]] = ()) -> None:
+        """Raises:
+        SettingsError: a gain that is not a JSON value (names it)."""
+        items = dict(values)
+        for key, value in items.items():
+            if not isinstance(key, str) or not _is_json(value):
+                raise SettingsError(f"controller.gains.{key}: expected a JSON value, got {value!r}")
+        super().__init__(plain(items))
+
+    @classmethod
+    def __get_pydantic_core_schema__(cls, source: Any, handler: Any) -> CoreSchema:
+        def check(value: Any) -> Gains:
+            if isinstance(value, Gains):
+                return value
+            if not isinstance(value, Mapping):
+                raise expected_error("a mapping")
+            bad = next((k for k, v in value.items() if not _is_json(v)), None)
+            if bad is not None:
+                raise expected_error(f"JSON gain values ({bad}: {value[bad]!r})")
+            return cls(value)
+
+        return core_schema.no_info_plain_validator_function(check)
+
+    def _typed(self, key: str) -> tuple[float, ...] | None:
+        value: Any = self.get(key)
+        return tuple(float(v) for v in value) if _per_joint(value) else None
+
+    @property
+    def kp(self) -> tuple[float, ...] | None:
+        """Proportional gain per joint (its unit is the law's: ``stiffness_gains``)."""
+        return self._typed("kp")
+
+    @property
+    def kd(self) -> tuple[float, ...] | None:
+        """Derivative gain per joint."""
+        return self._typed("kd")
+
+    @property
+    def ki(self) -> tuple[float, ...] | None:
+        """Integral gain per joint."""
+        return self._typed("ki")
+
+    def _read_only(self, *args: Any, **kwargs: Any) -> NoReturn:
+        raise TypeError("recorded gains are read only")
+
+    __setitem__ = __delitem__ = _read_only
+    clear = pop = popitem = setdefault = update = _read_only
+    __ior__ = _read_only
+
+    def __reduce__(self) -> tuple[type[Gains], tuple[dict[str, Any]]]:
+        return (Gains, (dict(self),))  # pickled and copied whole (report workers)
+
+    def __repr__(self) -> str:
+        return f"Gains({super().__repr__()})"
+
+
 @dataclass(frozen=True)
 class ControllerSettings(Contract):
     """The controller as run: its params name, registry type, every gain in effect, where
@@ -369,9 +401,13 @@ class ControllerSettings(Contract):
 
     name: Text
     type: Text
-    gains: Plain
+    gains: Gains
     origin: Plain = field(default_factory=lambda: {"kind": "builtin"})
     design: GainDesign | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.gains, Gains):  # a plain mapping (the recorder's dict)
+            object.__setattr__(self, "gains", Gains(self.gains))
 
 
 @dataclass(frozen=True)
@@ -507,26 +543,6 @@ class ExecutionSafety(Contract):
 
 
 @dataclass(frozen=True)
-class CampaignInfo(Contract):
-    """Where an episode sits in a campaign (a sweep), for the report's summaries.
-
-    Attributes:
-        name: the campaign's name in params.
-        condition: stable key of the swept values other than the controller and the
-            seed (e.g. ``"payload_kg=0.5,frictionloss=1"``; ``""`` when only those vary):
-            episodes of one condition differ only by controller and seed.
-        swept: every swept axis and this episode's value (controller and seed included),
-            JSON scalars, keyed by the params path (``plant.payload_kg``).
-    """
-
-    _where = "campaign"
-
-    name: Text
-    condition: Text
-    swept: Annotated[Mapping[str, Scalar], guard("a mapping", is_mapping)]
-
-
-@dataclass(frozen=True)
 class EpisodeSettings(Contract):
     """Everything a recording says about how it was made (its ``settings`` JSON).
 
@@ -534,7 +550,8 @@ class EpisodeSettings(Contract):
         episode: the episode key (the recording's name).
         robot: the robot by value (:mod:`pipeline.robots.recorded`: a DH robot in its
             YAML form, radians; any other with every spec field).
-        scenario: the scenario's params as given (with ``name``).
+        scenario: the scenario's params as given, with its ``name``
+            (:class:`pipeline.params.RecordedScenario`).
         controller: the controller as run.
         plant: the plant as simulated.
         planner: the planned path and timing.
@@ -555,7 +572,7 @@ class EpisodeSettings(Contract):
 
     episode: Text
     robot: Robot
-    scenario: Plain
+    scenario: RecordedScenario
     controller: ControllerSettings
     plant: PlantSettings
     planner: PlannerSettings
@@ -573,17 +590,17 @@ class EpisodeSettings(Contract):
     loop: LoopSettings = field(default_factory=LoopSettings)
     version: Version = SETTINGS_VERSION
 
+    def __post_init__(self) -> None:
+        if isinstance(self.scenario, Mapping):  # plain data (a test fixture's scenario)
+            object.__setattr__(self, "scenario", RecordedScenario.model_validate(self.scenario))
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready plain data (lists, not tuples)."""
         out: dict[str, Any] = plain(asdict(self))
         out["robot"] = robot_to_dict(self.robot)  # by value: its own form
+        out["scenario"] = self.scenario.recorded()
         out["safety"] = self.safety.to_dict()  # with its derived keys, for readers of the JSON
-        # issue 28's fields left out while unused: the same settings as before for plants
-        # without them (absent reads back as the default)
-        plant = out["plant"]
-        for part, unused in ((plant, _UNUSED_PLANT), (plant["uncertainty"], _UNUSED_DRAWS)):
-            for key in [k for k, v in unused.items() if part.get(k) == v]:
-                del part[key]
+        out["plant"] = plant_as_recorded(out["plant"])
         return out
 
     @classmethod

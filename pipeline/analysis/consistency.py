@@ -94,7 +94,7 @@ def mixed_settings(groups: Mapping[str, Sequence[Recording]]) -> list[MixedSetti
             s = rec.settings
             if s is None or rec.status != "ok":  # a failed episode is compared with nothing
                 continue
-            scenario = {k: v for k, v in s.scenario.items() if k != "name"}
+            scenario = {k: v for k, v in s.scenario.recorded().items() if k != "name"}
             scenario_rows.append((rec.episode, dict(_flat(scenario))))
             gains = dict(s.controller.gains)
             gains_rows.setdefault(rec.controller, []).append(

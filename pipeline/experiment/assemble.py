@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from pipeline import __version__
-from pipeline.params import Episode, ScenarioParams
+from pipeline.params import Episode, RecordedScenario, ScenarioParams
 from pipeline.planning import PlannedPath, TimedTrajectory
 from pipeline.robots.recorded import robot_to_dict
 from pipeline.robots.spec import RobotSpec
@@ -23,6 +23,7 @@ from pipeline.settings import (
     EpisodeSettings,
     ExecutionSafety,
     GainDesign,
+    Gains,
     LoopSettings,
     PlannerSettings,
     PlantSettings,
@@ -121,7 +122,7 @@ def scenario_friction(spec: RobotSpec, scenario: ScenarioParams, *, seed: int) -
     else:
         damping, frictionloss = param_values(p.damping), param_values(p.frictionloss)
     return draw_friction(
-        Uncertainty(**p.uncertainty.model_dump()),
+        p.uncertainty,
         damping=_per_joint(damping, spec.dof, "damping"),
         frictionloss=_per_joint(frictionloss, spec.dof, "frictionloss"),
         sigmoid=profile.friction if profile else None,
@@ -160,7 +161,7 @@ def draw_scenario_plant(
     from pipeline.model.uncertainty import draw_plant, link_inertials, with_plant
 
     p = scenario.plant
-    uncertainty = Uncertainty(**p.uncertainty.model_dump())
+    uncertainty = p.uncertainty
     base = profile_plant(spec, p.profile, where=where) if p.profile else spec
     drawn = draw_plant(base, uncertainty, seed=seed)
     extra = per_joint(param_values(p.armature), spec.dof)
@@ -178,7 +179,7 @@ def draw_scenario_plant(
 
 def loop_settings(scenario: ScenarioParams) -> LoopSettings:
     """The scenario's loop (delay, jitter, encoder, velocity estimate) as recorded."""
-    return LoopSettings(**scenario.loop.model_dump())
+    return scenario.loop
 
 
 def _plant_is_exact(spec: RobotSpec, plant_spec: RobotSpec, scenario: ScenarioParams) -> bool:
@@ -253,7 +254,7 @@ def episode_settings(
     scenario = episode.scenario
     sim = episode.sim
     p = scenario.plant
-    k0 = int(result.extra["motion_start_row"])
+    k0 = result.motion_start_row
     at_start = min(k0, len(result.stamp_ns) - 1)
     drawn = scenario_friction(spec, scenario, seed=episode.seed)
     design, recorded_gains = GainDesign.split_from(gains)
@@ -270,19 +271,19 @@ def episode_settings(
         uncertainty=uncertainty,
         physics_dt_s=sim.physics_dt_s,
         control_period_s=sim.physics_dt_s * sim.control_period_steps,
-        integrator=str(result.extra["integrator"]),
-        friction_model=str(result.extra["friction_model"]),
+        integrator=result.integrator,
+        friction_model=result.friction_model,
         **_published(scenario, drawn),
     )
     # planning_time_s is wall clock: printed, never recorded (recordings are byte-reproducible)
     return EpisodeSettings(
         episode=episode.name,
         robot=spec,
-        scenario={"name": episode.scenario_name, **scenario.model_dump()},
+        scenario=RecordedScenario.of(episode.scenario_name, scenario),
         controller=ControllerSettings(
             name=episode.controller_name,
             type=episode.controller.type,
-            gains=recorded_gains,
+            gains=Gains(recorded_gains),
             origin=origin,
             design=design,
         ),
@@ -306,7 +307,7 @@ def episode_settings(
             goal=tuple(float(x) for x in path.goal),
         ),
         protocol=ProtocolSettings(
-            motion_start_s=float(result.extra["motion_start_s"]),
+            motion_start_s=result.motion_start_s,
             hold_s=scenario.hold_s,
             start_abs_error_rad=tuple(
                 float(x) for x in np.abs(result.q_ref[at_start] - result.q_true[at_start])
@@ -317,8 +318,8 @@ def episode_settings(
             if result.stamp_ns.size
             else (),
             reproduces_paper=scenario.reproduces_paper,
-            preroll_settled=bool(result.extra.get("preroll_settled", True)),
-            hold_settled=result.extra.get("hold_settled") if result.ok else None,
+            preroll_settled=result.preroll_settled,
+            hold_settled=result.hold_settled if result.ok else None,
         ),
         safety=safety,
         seed=episode.seed,

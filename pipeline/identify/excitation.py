@@ -419,7 +419,7 @@ def record_excitation(
         "condition_number_scaled": design.condition_number_scaled,
         "condition_number": design.condition_number,
     }
-    motion_start_s = float(result.extra["motion_start_s"])
+    motion_start_s = result.motion_start_s
     name = out.name
     settings = {
         "episode": name,

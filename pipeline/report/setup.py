@@ -9,41 +9,18 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from pipeline.analysis.findings import nominal_plant
+from pipeline.contract import shown_fields
 from pipeline.log.robot_facts import robot_facts
 from pipeline.report import md
 from pipeline.report.inputs import ReportData
 from pipeline.robots.spec import RobotSpec
-from pipeline.settings import LoopSettings
-
-# Settings shown first, in this order, when present; any others follow as recorded.
-_PLANNER_KEYS = (
-    "planner",
-    "time_limit_s",
-    "path_length_rad",
-    "trajectory_duration_s",
-    "velocity_scaling",
-    "acceleration_scaling",
-)
-_PLANT_KEYS = (
-    "exact",
-    "damping",
-    "frictionloss",
-    "armature",
-    "nominal_armature",
-    "payload_kg",
-    "position_noise_std_rad",
-    "velocity_noise_std_rad_s",
-    "uncertainty",
-    "physics_dt_s",
-    "integrator",
-    "control_period_s",
-)
+from pipeline.settings import LoopSettings, PlannerSettings, PlantSettings, plant_as_recorded
 
 
 def _as_recorded(node: Any) -> dict[str, Any]:
     """A settings dataclass as its recording holds it: plain JSON data, keys sorted."""
     data: dict[str, Any] = json.loads(json.dumps(dataclasses.asdict(node), sort_keys=True))
-    return data
+    return plant_as_recorded(data) if isinstance(node, PlantSettings) else data
 
 
 def _given(node: Mapping[str, Any], key: str) -> Any:
@@ -53,13 +30,14 @@ def _given(node: Mapping[str, Any], key: str) -> Any:
     return None if value == "" else value
 
 
-def _settings_line(node: Any, first: Sequence[str], *, skip: Sequence[str] = ()) -> str:
-    """``key = value`` for a settings dict: the known keys first, then the rest."""
-    if not isinstance(node, dict) or not node:
+def _fields_line(node: Any, cls: type, *, skip: Sequence[str] = ()) -> str:
+    """``label = value`` for each field of a settings value that its declaration shows
+    (:func:`pipeline.contract.shown_fields`), in declaration order, as recorded."""
+    if node is None:
         return md.NA
-    keys = [k for k in first if k in node and k not in skip]
-    keys += [k for k in node if k not in keys and k not in skip]
-    return "; ".join(f"{k} = {md.value(node[k])}" for k in keys) or md.NA
+    recorded = _as_recorded(node)
+    shown = [(k, label) for k, label in shown_fields(cls) if k not in skip]
+    return "; ".join(f"{label} = {md.value(recorded[k])}" for k, label in shown) or md.NA
 
 
 # Planner settings that the planner line states in words.
@@ -76,32 +54,30 @@ def _robot_source(robot: RobotSpec | None) -> str:
     return f"DH convention {md.value(robot.convention if robot else None)}"
 
 
-def _planner_line(planner: Any) -> str:
+def _planner_line(planner: PlannerSettings | None) -> str:
     """What the planner did, in words, then its settings.
 
     ``direct`` = the straight joint-space segment start -> goal was collision-free, so it
     is the path: RRTConnect did not search and there was nothing to simplify.
     """
-    if not isinstance(planner, dict) or not planner:
+    if planner is None:
         return md.NA
-    skip: tuple[str, ...] = ("start", "goal")
+    skip: tuple[str, ...] = ()
     head = None
-    direct = planner.get("direct")
+    direct = planner.direct
     if direct is True:
         head = "direct joint-space segment start → goal (collision-free; RRTConnect not needed)"
         skip += _PATH_KEYS
     elif direct is False:
-        name = md.value(planner.get("planner", "RRTConnect"))
-        n = md.value(planner.get("n_waypoints"))
-        raw = planner.get("n_states_before_simplify")
-        if planner.get("simplify"):
-            head = f"{name}, {n} waypoints after simplification" + (
-                f" (from {md.value(raw)} states)" if raw is not None else ""
-            )
+        name = md.value(planner.planner)
+        n = md.value(planner.n_waypoints)
+        if planner.simplify:
+            raw = planner.n_states_before_simplify
+            head = f"{name}, {n} waypoints after simplification (from {md.value(raw)} states)"
         else:
             head = f"{name}, {n} waypoints (not simplified)"
         skip += _PATH_KEYS
-    rest = _settings_line(planner, _PLANNER_KEYS, skip=skip)
+    rest = _fields_line(planner, PlannerSettings, skip=skip)
     if head is None:
         return rest
     return head if rest == md.NA else f"{head}; {rest}"
@@ -111,26 +87,25 @@ def _loop_lines(loop: LoopSettings | None) -> list[str]:
     """The loop between plant and controller, when it is not the ideal one (``loop:``)."""
     if loop is None or loop.ideal:
         return []
-    return [f"- Loop (the same for every law): {_settings_line(_as_recorded(loop), ())}."]
+    return [f"- Loop (the same for every law): {_fields_line(loop, LoopSettings)}."]
 
 
 def _armature_lines(
-    robot: RobotSpec | None, plant: Mapping[str, Any], scenario: Mapping[str, Any]
+    robot: RobotSpec | None, nominal: Sequence[float] | None, model: str | None
 ) -> list[str]:
-    """The rotor armature the nominal model assumes, and where its values come from."""
+    """The rotor armature the nominal model assumes (``nominal``: as the plant records
+    it), and where its values come from (``model``: the scenario's identified
+    ``nominal:`` model file, if any)."""
     if robot is None:
         return []
-    nominal = plant.get("nominal_armature")
-    if nominal is None:
-        nominal = [float(a) for a in robot.armature]
+    shown = list(nominal) if nominal is not None else [float(a) for a in robot.armature]
     # a DH robot states its armature's source; a URDF/MJCF robot among its sidecar facts
     stated_by = robot.armature_source if robot.dh_rows is not None else ""
     source = stated_by or dict(robot.settings_sources).get("armature") or None
     stated = source if source is not None else "not stated in the robot file"
-    model = _given(scenario, "nominal")
     if model is not None:  # the controllers' model is an identified one, not the file
         stated = f"identified (`nominal: {model}`); the robot file's: {stated}"
-    values = md.value(nominal)
+    values = md.value(shown)
     return [f"- Rotor armature of the nominal model [kg m²]: {values}; source: {stated}."]
 
 
@@ -162,32 +137,34 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
     exact = nominal_plant(recs, data.protocol)
     first = recs[0]
     s = first.settings
-    sc: Mapping[str, Any] = s.scenario if s is not None else {}
-    planner = _as_recorded(s.planner) if s is not None else {}
-    plant = _as_recorded(s.plant) if s is not None else {}
+    planner = s.planner if s is not None else None
+    plant = s.plant if s is not None else None
 
     def pose(key: str) -> str:
         # The planner records the joint-space start/goal it used.
-        return md.value(planner.get(key))
+        return md.value(_as_recorded(planner)[key] if planner is not None else None)
 
     robot = s.robot if s is not None else None
     # a bag without our settings: the robot its /robot_description describes, if any
     described = robot_facts(first).note if s is None else ""
-    obstacles = sc.get("obstacles") or []
     lines = [
         "### Setup",
         "",
         f"- Robot: **{first.robot}** ({len(first.joint_names)} joints: "
         f"{', '.join(first.joint_names)}), {described or _robot_source(robot)}.",
         f"- Start [rad]: {pose('start')}; goal [rad]: {pose('goal')}; "
-        f"obstacles: {len(obstacles) if isinstance(obstacles, list) else md.NA}; "
-        f"hold after the motion: {md.value(_given(sc, 'hold_s'))} s"
+        f"obstacles: {len(s.scenario.obstacles) if s is not None else 0}; "
+        f"hold after the motion: {md.value(s.scenario.hold_s if s is not None else None)} s"
         + (f" (in {first.episode}; settings differ, below)." if mixed else "."),
         f"- Planner: {_planner_line(planner)}.",
-        *_armature_lines(robot, plant, sc),
+        *_armature_lines(
+            robot,
+            plant.nominal_armature if plant is not None else None,
+            s.scenario.nominal if s is not None else None,
+        ),
         *_friction_lines(robot),
         *_acceleration_lines(robot),
-        f"- Plant: {_settings_line(plant, _PLANT_KEYS, skip=('links',))}"
+        f"- Plant: {_fields_line(plant, PlantSettings)}"
         + (
             "; link masses, centres of mass and inertias (and the armature above) drawn per "
             "episode seed, recorded in each bag's `settings.plant.links`."

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
+from pipeline.settings import LoopSettings
 from pipeline.trajectory import F64, Reference, TrajectorySamples
 
 # Reference and TrajectorySamples live in pipeline.trajectory (planning produces them, the
@@ -35,6 +37,19 @@ class EpisodeResult:
         status: "ok", or "diverged" when the episode was ended early.
         reason: why it diverged ("" when ok).
         mujoco_warnings: MuJoCo warning counters by name, non-zero ones only.
+        controller: the controller's registry name (``Controller.name``).
+        gains_in_effect: every gain the controller ran with (``gains_in_effect()``).
+        seed: the sensor-noise seed.
+        physics_dt_s, control_period_steps, control_period_s: MuJoCo step [s], physics
+            steps per control update, and their product [s].
+        integrator: MuJoCo's integrator; friction_model: the joint friction law it ran.
+        motion_start_row, motion_start_s: where the reference starts (after the pre-roll).
+        preroll_settled: the pre-roll ended settled, before its cap.
+        hold_settled: the hold's last window is settled.
+        rows_planned: rows the episode would have had without diverging.
+        loop: the loop between plant and controller as run.
+
+    The run's facts default to a hand-built result's (tests, benches): no pre-roll.
     """
 
     joint_names: tuple[str, ...]
@@ -52,8 +67,27 @@ class EpisodeResult:
     status: Literal["ok", "diverged"] = "ok"
     reason: str = ""
     mujoco_warnings: dict[str, int] = field(default_factory=dict)
-    extra: dict[str, Any] = field(default_factory=dict)
+    controller: str = ""
+    gains_in_effect: Mapping[str, Any] = field(default_factory=dict)
+    seed: int = 0
+    physics_dt_s: float = 0.001
+    control_period_steps: int = 1
+    control_period_s: float = 0.001
+    integrator: str = "RK4"
+    friction_model: str = ""
+    motion_start_row: int = 0
+    motion_start_s: float = 0.0
+    preroll_settled: bool = True
+    hold_settled: bool = True
+    rows_planned: int = 0
+    loop: LoopSettings = field(default_factory=LoopSettings)
 
     @property
     def ok(self) -> bool:
         return self.status == "ok"
+
+    @property
+    def saturation_counts(self) -> list[int]:
+        """Rows per joint whose commanded effort exceeded the limit."""
+        counts: list[int] = self.saturated.sum(axis=0).astype(int).tolist()
+        return counts

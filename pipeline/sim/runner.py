@@ -27,7 +27,6 @@ import itertools
 import math
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import asdict
 from typing import Any
 
 import mujoco
@@ -101,7 +100,7 @@ def run_episode(
     ``hold_max_s``, until settled). Row k of the result is control instant ``k *
     physics_dt_s * control_period_steps`` from the pre-roll's start (the last row is the
     state at the end, with the torque that would be applied next); the motion starts
-    at row ``extra["motion_start_row"]``, time ``extra["motion_start_s"]`` (the
+    at row ``motion_start_row``, time ``motion_start_s`` (the
     pre-roll rounded to whole control periods).
 
     Args:
@@ -117,12 +116,12 @@ def run_episode(
         hold_s: time kept at the goal after the reference ends [s].
         preroll_s: the longest the start pose is held before the reference starts [s]:
             the pre-roll ends at the first settled window (``pipeline.sim.settling``);
-            ``extra["preroll_settled"]`` says whether it did before this cap.
+            ``preroll_settled`` says whether it did before this cap.
         settle: end the pre-roll when settled; False: hold the start pose for the
             whole ``preroll_s`` (identification's excitation, whose data is not a metric).
         hold_max_s: the longest the goal is held [s]: after ``hold_s`` the hold goes on,
             a settling window at a time, until settled; None (or <= ``hold_s``): exactly
-            ``hold_s``. ``extra["hold_settled"]`` says whether the hold's last window is
+            ``hold_s``. ``hold_settled`` says whether the hold's last window is
             settled either way.
         plant_spec: the plant's robot (drawn link parameters, armature); None = ``spec``.
             The controller keeps its own nominal model either way.
@@ -300,32 +299,6 @@ def run_episode(
         for name, count in zip(_WARNING_NAMES, data.warning.number, strict=True)
         if count
     }
-    extra: dict[str, Any] = {
-        "controller": controller.name,
-        "controller_settings": controller.gains_in_effect(),
-        "seed": int(seed),
-        "physics_dt_s": float(physics_dt_s),
-        "control_period_steps": int(control_period_steps),
-        "control_period_s": float(control_dt_s),
-        "integrator": integrator,
-        "friction_model": PLANT_FRICTION if friction is None else SIGMOID_FRICTION,
-        "reference_duration_s": duration_s,
-        "hold_s": float(hold_s),
-        "preroll_s": float(preroll_s),
-        "motion_start_s": float(motion_start_s),
-        "motion_start_row": int(start_row),
-        "preroll_settled": bool(preroll_settled),
-        "hold_max_s": float(longest_hold_s),
-        "hold_settled": bool(hold_settled),
-        "position_noise_std_rad": float(position_noise_std_rad),
-        "velocity_noise_std_rad_s": float(velocity_noise_std_rad_s),
-        "divergence_speed_factor": float(divergence_speed_factor),
-        "loop": asdict(loop),
-        "plant": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(plant).items()},
-        "obstacles": [asdict(b) for b in obstacles],
-        "saturation_counts": saturated.sum(axis=0).astype(int).tolist(),
-        "rows_planned": int(rows if not reason else start_row + motion_rows),
-    }
     arrays: dict[str, Any] = {
         "stamp_ns": stamp_ns[:rows],
         "q": q_meas[:rows],
@@ -347,7 +320,20 @@ def run_episode(
         status="diverged" if reason else "ok",
         reason=reason,
         mujoco_warnings=warnings,
-        extra=extra,
+        controller=controller.name,
+        gains_in_effect=controller.gains_in_effect(),
+        seed=int(seed),
+        physics_dt_s=float(physics_dt_s),
+        control_period_steps=int(control_period_steps),
+        control_period_s=float(control_dt_s),
+        integrator=integrator,
+        friction_model=PLANT_FRICTION if friction is None else SIGMOID_FRICTION,
+        motion_start_row=int(start_row),
+        motion_start_s=float(motion_start_s),
+        preroll_settled=bool(preroll_settled),
+        hold_settled=bool(hold_settled),
+        rows_planned=int(rows if not reason else start_row + motion_rows),
+        loop=loop,
     )
 
 

@@ -3,7 +3,7 @@
 An episode holds its start pose before the motion (the pre-roll) so that metrics start
 from a settled state. The pre-roll ends at the first window of :data:`SETTLING` in
 which the arm is settled; at the cap (the scenario's ``preroll_s``) it ends anyway,
-and the episode says so (``EpisodeResult.extra["preroll_settled"]``, the report's
+and the episode says so (``EpisodeResult.preroll_settled``, the report's
 findings).
 
 Settled over a window of ``window_s`` (every row of it, every joint):

@@ -218,8 +218,8 @@ def _assess_and_write(
     scenario = episode.scenario
     sim = episode.sim
     plant_spec, uncertainty = drawn
-    k0 = int(result.extra["motion_start_row"])
-    motion_start_s = float(result.extra["motion_start_s"])
+    k0 = result.motion_start_row
+    motion_start_s = result.motion_start_s
     # contacts and clearance along the plant's true motion: every control step that is
     # not provably within SKIP_WITHIN_M of a checked one
     safety = assess_execution(

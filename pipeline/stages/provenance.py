@@ -43,6 +43,7 @@ RECORD_CODE = (
     "kinematics/numeric.py",
     "kinematics/seeds.py",
     "kinematics/solvers.py",
+    "knobs.py",
     "log/__init__.py",
     "log/bag.py",
     "log/cdr.py",

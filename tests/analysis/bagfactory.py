@@ -163,7 +163,9 @@ def default_settings(ep: Episode) -> dict[str, Any]:
         robot=spec,
         scenario={
             "name": ep.scenario,
+            "robot": "ur5",
             "start": [float(v) for v in ep.q_ref[0]],
+            "goal": {"joints": [float(v) for v in ep.q_ref[-1]]},
             "obstacles": [],
             "hold_s": ep.hold_s,
         },

@@ -36,7 +36,7 @@ def _max_error(spec, name, gains=None, **kwargs):
         **kwargs,
     )
     assert result.ok, result.reason
-    k0 = result.extra["motion_start_row"]
+    k0 = result.motion_start_row
     return np.abs(result.q_ref[k0:] - result.q_true[k0:]).max(axis=0)
 
 
@@ -259,9 +259,9 @@ def test_adaptive_estimates_move_toward_the_true_plant_on_a_realistic_plant(ur5)
     assert before > 0.3 and after < before / 3, (before, after)
     history = ctl.estimate_history()[:, k]
     assert len(history) > 100 and abs(history[len(history) // 2] - true[k]) < before
-    recorded = result.extra["controller_settings"]["estimates"]
+    recorded = result.gains_in_effect["estimates"]
     assert recorded["mass_kg"] == pytest.approx(ctl.estimates()[0:60:10].tolist())
-    assert json.loads(json.dumps(result.extra["controller_settings"]))
+    assert json.loads(json.dumps(result.gains_in_effect))
 
 
 def test_adaptive_projection_keeps_the_estimates_in_their_box_and_masses_positive(ur5):

@@ -64,7 +64,7 @@ def test_a_1ms_delay_applies_each_command_one_period_late(ur5, paper_motion):
     effort = ur5.effort_limits
     assert np.array_equal(result.tau_nm[0], np.zeros(ur5.dof))  # nothing arrived yet
     assert np.array_equal(result.tau_nm[1:], np.clip(result.tau_cmd_nm[:-1], -effort, effort))
-    assert result.extra["loop"]["delay_s"] == 0.001
+    assert result.loop.delay_s == 0.001
 
 
 def test_a_1ms_delay_measurably_changes_the_pids_error(ur5, quick_move):
@@ -73,7 +73,7 @@ def test_a_1ms_delay_measurably_changes_the_pids_error(ur5, quick_move):
     4-6 % of the error; the runs are deterministic, so this is not noise."""
     runs = [_run(ur5, quick_move, LoopSettings(delay_s=d)) for d in (0.0, 0.001)]
     assert all(r.ok for r in runs)
-    k0 = runs[0].extra["motion_start_row"]
+    k0 = runs[0].motion_start_row
     e0, e1 = ((r.q_ref - r.q_true)[k0:] for r in runs)
     peak0 = np.abs(e0).max(axis=0)
     assert (np.abs(e1).max(axis=0) > 1.01 * peak0).all()

@@ -34,7 +34,7 @@ def _run(spec, name, *, duration_s=1.0, preroll_s=PREROLL_S, **kwargs):
 
 
 def _true_error_from_motion_start(result):
-    k0 = result.extra["motion_start_row"]
+    k0 = result.motion_start_row
     return np.abs(result.q_ref[k0:] - result.q_true[k0:])
 
 
@@ -55,10 +55,10 @@ def test_pid_max_error_is_driven_by_the_motion_not_the_start(ur5):
 @pytest.mark.parametrize("name", controller_names())
 def test_every_controller_starts_the_motion_settled(ur5, name):
     result = _run(ur5, name, duration_s=1.0)
-    k0 = result.extra["motion_start_row"]
+    k0 = result.motion_start_row
     # settled before the cap: the motion starts then, not after a fixed pre-roll
-    assert result.extra["preroll_settled"] is True
-    assert 0 < result.extra["motion_start_s"] < PREROLL_S
+    assert result.preroll_settled is True
+    assert 0 < result.motion_start_s < PREROLL_S
     if not controller_info(name).holds_gravity:  # its class says why (e.g. no integral at
         # its defaults): it sags by g / kp and rests there, settled with a steady offset
         assert np.abs(result.q_ref[k0] - result.q_true[k0]).max() > 1e-3
@@ -74,7 +74,7 @@ def test_every_controller_starts_the_motion_settled(ur5, name):
 def test_true_state_error_is_below_the_sensor_noise_while_the_measured_one_is_not(ur5):
     sigma = 1e-3
     result = _run(ur5, "ctc", duration_s=1.0, position_noise_std_rad=sigma)
-    k0 = result.extra["motion_start_row"]
+    k0 = result.motion_start_row
     true_err = np.abs(result.q_ref[k0:] - result.q_true[k0:]).max()
     measured_err = np.abs(result.q_ref[k0:] - result.q[k0:]).max()
     assert true_err < 0.5 * sigma

@@ -61,8 +61,8 @@ def test_ctc_with_a_perfect_model_is_exactly_a_bank_of_double_integrators(dynami
     )
     result = _run(spec, reference, integrator="Euler")
     assert result.ok, result.reason
-    kp = np.array(result.extra["controller_settings"]["kp"])
-    kd = np.array(result.extra["controller_settings"]["kd"])
+    kp = np.array(result.gains_in_effect["kp"])
+    kd = np.array(result.gains_in_effect["kd"])
     ideal = _ideal_double_integrators(result, kp, kd, 0.001, 1)
     assert np.abs(result.q_true - ideal).max() < 1e-12
 
@@ -90,7 +90,7 @@ def test_rk4_plant_leaves_ctc_only_the_sampling_error(ur5, reference):
     errors = {}
     for steps in (1, 2, 4):
         result = _run(ur5, reference, physics_dt_s=0.001 / steps, control_period_steps=steps)
-        assert result.extra["integrator"] == "RK4"
+        assert result.integrator == "RK4"
         errors[steps] = np.abs(result.q_ref - result.q_true).max()
     assert errors[2] == pytest.approx(errors[4], rel=1e-3)
     assert errors[1] == pytest.approx(errors[4], rel=1e-3)
@@ -138,7 +138,7 @@ def test_ctc_with_payload_and_damping_settles_where_its_stiffness_predicts(ur5, 
 
     mass_n, gravity_n = mass_and_gravity(build_mujoco_model(ur5))
     _, gravity_p = mass_and_gravity(build_mujoco_model(ur5, plant=plant))
-    kp = np.array(result.extra["controller_settings"]["kp"])
+    kp = np.array(result.gains_in_effect["kp"])
     predicted = np.linalg.solve(mass_n, gravity_p - gravity_n) / kp
     error = result.q_ref[-1] - q
     np.testing.assert_allclose(error, predicted, atol=1e-6)
@@ -159,7 +159,7 @@ def test_absurd_gain_is_reported_as_diverged_not_raised(ur5, reference):
     assert "t=" in result.reason and "velocity limit" in result.reason
     assert any(name in result.reason for name in ur5.joint_names)
     rows = len(result.stamp_ns)
-    assert 0 < rows < result.extra["rows_planned"]
+    assert 0 < rows < result.rows_planned
     for arr in (result.q, result.q_true, result.tau_cmd_nm, result.tau_nm, result.saturated):
         assert len(arr) == rows
     assert np.isfinite(result.q_true).all()
@@ -252,8 +252,8 @@ def test_saturation_is_counted_per_joint_and_the_applied_torque_is_clipped(ur5):
     assert result.saturated.any()
     np.testing.assert_array_equal(result.saturated, np.abs(result.tau_cmd_nm) > effort)
     np.testing.assert_array_equal(result.tau_nm, np.clip(result.tau_cmd_nm, -effort, effort))
-    assert result.extra["saturation_counts"] == result.saturated.sum(axis=0).tolist()
-    assert result.extra["saturation_counts"][1] > 10
+    assert result.saturation_counts == result.saturated.sum(axis=0).tolist()
+    assert result.saturation_counts[1] > 10
 
 
 # --- noise, control period ------------------------------------------------------------
@@ -272,7 +272,7 @@ def test_sensor_noise_is_reproducible_with_the_seed_and_changes_with_another(ur5
     assert pos_noise.std() == pytest.approx(1e-4, rel=0.05)
     assert vel_noise.std() == pytest.approx(1e-3, rel=0.05)
     assert abs(pos_noise.mean()) < 1e-5
-    assert a.extra["seed"] == 1
+    assert a.seed == 1
 
 
 def test_noise_free_measurement_is_the_true_state(ur5, reference):
@@ -318,11 +318,10 @@ def test_result_rows_are_control_instants_from_rest_at_the_reference_start(ur5, 
     assert result.status == "ok" and result.reason == "" and result.mujoco_warnings == {}
     with pytest.raises(ValueError, match="read-only"):
         result.q[0, 0] = 1.0
-    extra = json.loads(json.dumps(result.extra))
-    assert extra["controller"] == "ctc"
-    assert extra["controller_settings"]["kp"] == [1600.0] * 6
-    assert extra["physics_dt_s"] == 0.001 and extra["control_period_steps"] == 1
-    assert extra["saturation_counts"] == [0] * 6
+    assert result.controller == "ctc"
+    assert json.loads(json.dumps(result.gains_in_effect))["kp"] == [1600.0] * 6
+    assert result.physics_dt_s == 0.001 and result.control_period_steps == 1
+    assert result.saturation_counts == [0] * 6
 
 
 def test_progress_rises_to_one_in_about_a_hundred_calls(ur5, reference):

@@ -67,21 +67,21 @@ def _episode(ur5, name, gains=None, *, preroll_s=2.0, seed=0, hold_max_s=None):
 def test_a_controller_too_soft_to_hold_the_arm_is_flagged_not_measured_as_settled(ur5):
     # a 2 rad/s PID cannot hold the UR5 against gravity within a 1 s pre-roll
     result = _episode(ur5, "pid", {"omega_n_rad_s": 2.0}, preroll_s=1.0)
-    k0 = result.extra["motion_start_row"]
-    assert result.extra["preroll_settled"] is False
-    assert result.extra["motion_start_s"] == pytest.approx(1.0)  # ran to the cap
+    k0 = result.motion_start_row
+    assert result.preroll_settled is False
+    assert result.motion_start_s == pytest.approx(1.0)  # ran to the cap
     assert np.abs(result.q_ref[k0] - result.q_true[k0]).max() > 1e-2  # sagging
     # the same law at the default bandwidth settles, and starts the motion earlier
     stiff = _episode(ur5, "pid", preroll_s=2.0)
-    assert stiff.extra["preroll_settled"] is True
-    assert stiff.extra["motion_start_s"] < 2.0
+    assert stiff.preroll_settled is True
+    assert stiff.motion_start_s < 2.0
 
 
 def test_a_settled_pre_roll_ends_on_a_window_holding_the_start_pose(ur5):
     result = _episode(ur5, "ctc")
-    k0 = result.extra["motion_start_row"]
-    window = round(SETTLING.window_s / result.extra["control_period_s"])
-    assert result.extra["preroll_settled"] is True
+    k0 = result.motion_start_row
+    window = round(SETTLING.window_s / result.control_period_s)
+    assert result.preroll_settled is True
     assert k0 > 0 and k0 % window == 0
     assert np.ptp(result.q_ref[: k0 + 1], axis=0).max() == 0.0
     assert np.abs(result.qd_ref[:k0]).max() == 0.0
@@ -89,12 +89,13 @@ def test_a_settled_pre_roll_ends_on_a_window_holding_the_start_pose(ur5):
     rows = slice(k0 - window, k0)
     assert settled(result.q_ref[rows] - result.q_true[rows], result.qd_true[rows])
     # the episode is the pre-roll used, the motion and the hold: nothing after
-    assert result.extra["rows_planned"] == len(result.stamp_ns)
+    assert result.rows_planned == len(result.stamp_ns)
 
 
 def test_the_settled_pre_roll_is_reproducible_bit_for_bit(ur5):
     a, b = _episode(ur5, "pid", seed=3), _episode(ur5, "pid", seed=3)
-    assert a.extra == b.extra
+    facts = ("motion_start_row", "motion_start_s", "preroll_settled", "hold_settled")
+    assert [getattr(a, f) for f in facts] == [getattr(b, f) for f in facts]
     for field in ("q", "q_true", "tau_cmd_nm", "stamp_ns"):
         assert np.array_equal(getattr(a, field), getattr(b, field))
 
@@ -102,13 +103,13 @@ def test_the_settled_pre_roll_is_reproducible_bit_for_bit(ur5):
 def test_the_hold_goes_on_until_settled_by_the_same_criterion_up_to_its_cap(ur5):
     # PID's integral is still pulling the error in 0.2 s after the motion
     short = _episode(ur5, "pid", preroll_s=0.0)
-    assert short.extra["hold_settled"] is False
+    assert short.hold_settled is False
     longer = _episode(ur5, "pid", preroll_s=0.0, hold_max_s=3.0)
-    assert longer.extra["hold_settled"] is True
-    extra_s = (len(longer.stamp_ns) - len(short.stamp_ns)) * longer.extra["control_period_s"]
+    assert longer.hold_settled is True
+    extra_s = (len(longer.stamp_ns) - len(short.stamp_ns)) * longer.control_period_s
     assert 0 < extra_s < 2.8
     # the last window meets the criterion the pre-roll ends on
-    window = round(SETTLING.window_s / longer.extra["control_period_s"])
+    window = round(SETTLING.window_s / longer.control_period_s)
     rows = slice(-window - 1, -1)
     assert settled(longer.q_ref[rows] - longer.q_true[rows], longer.qd_true[rows])
     # the same rows up to the shorter hold's end: the extension only appends
@@ -116,7 +117,7 @@ def test_the_hold_goes_on_until_settled_by_the_same_criterion_up_to_its_cap(ur5)
     assert np.array_equal(short.q_true[:n], longer.q_true[:n])
     # a cap it cannot meet: held to the cap, and said so
     capped = _episode(ur5, "pid", {"omega_n_rad_s": 5.0}, preroll_s=0.0, hold_max_s=0.4)
-    assert capped.extra["hold_settled"] is False
+    assert capped.hold_settled is False
     assert len(capped.stamp_ns) == len(short.stamp_ns) + round(0.2 / 0.001)
 
 
@@ -130,5 +131,5 @@ def test_settle_false_holds_the_whole_pre_roll_and_still_reports_the_last_window
         settle=False,
         seed=0,
     )
-    assert fixed.extra["motion_start_s"] == pytest.approx(0.5)
-    assert fixed.extra["preroll_settled"] is True  # a perfect-model CTC rests at once
+    assert fixed.motion_start_s == pytest.approx(0.5)
+    assert fixed.preroll_settled is True  # a perfect-model CTC rests at once
