@@ -97,3 +97,15 @@ def test_inseparable_armatures_are_reported_as_from_the_prior(
     assert "from the prior" in ident["torque_side"]["armature"]
     assert "elbow_joint.armature" in base_parameters(spec).names  # separable, identified
     assert "elbow_joint" not in ident["torque_side"]["armature"]
+
+
+def test_the_fft_long_run_covariance_is_the_sum_over_lags() -> None:
+    rng = np.random.default_rng(5)
+    g = [rng.normal(size=(300, 4)), rng.normal(size=(40, 4))]
+    for lags in (1, 7, 60):
+        np.testing.assert_allclose(
+            covariance.long_run_covariance(g, lags),
+            covariance.long_run_covariance_direct(g, lags),
+            rtol=1e-10,
+            atol=1e-9,
+        )
