@@ -423,7 +423,9 @@ def _identify(
         series.extend(e.T)
     lags = covariance.bandwidth(series)
     gram_inv = r_inv @ r_inv.T
-    correction = tau.size / max(tau.size - base.rank, 1)
+    # the sandwich's observations are the instants' scores, not the rows
+    instants = sum(x.shape[0] for x in g)
+    correction = instants / max(instants - base.rank, 1)
     cov_hac = covariance.hac_covariance(gram_inv, g, lags, dof_correction=correction)
     std_error = np.sqrt(np.maximum(np.diag(cov_hac), 0.0))
     cov_boot = covariance.block_bootstrap_covariance(
