@@ -188,7 +188,9 @@ def fit_cmd(
             + f"; torque side {s['torque_side']} ({s['torque_side_reason']})",
             f"condition number {s['condition_number']:.4g} (unit-norm columns "
             f"{s['condition_number_scaled']:.4g}); largest relative standard error "
-            f"{s['max_rel_std_error_pct']:.3g} %",
+            f"{s['max_rel_std_error_pct']:.3g} % ({s['std_error']})",
+            "from the prior (the data cannot separate them; not identified): "
+            + (", ".join(s["from_prior"]) or "none"),
             f"residual RMS [N m]: {_row(s['residual_rms_nm'], '.3g')}",
             f"torque RMS   [N m]: {_row(s['torque_rms_nm'], '.3g')}",
             f"sensor offset [N m]: {_row(s['offset_nm'], '.3g')}",

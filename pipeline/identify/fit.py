@@ -7,8 +7,11 @@
    pivot falls below ``1 / max_condition`` of the first are not excited (an error
    naming them).
 3. Ordinary least squares, per-joint residual standard deviation ``sigma_j``, then
-   weighted least squares with weights ``1 / sigma_j`` (Gautier & Poignet 2001); the
-   covariance ``sigma^2 (Y_w^T Y_w)^-1`` gives a standard error per base parameter.
+   weighted least squares with weights ``1 / sigma_j`` (Gautier & Poignet 2001). The
+   standard error per base parameter is residual-based (:mod:`.covariance`): the
+   Newey-West sandwich over the weighted scores, Andrews' AR(1) bandwidth, because the
+   filtered, decimated residuals are correlated in time and across joints; the
+   textbook ``s^2 (Y_w^T Y_w)^-1`` (kept as ``std_error_iid``) is several times too small.
 4. Physical consistency: over every link's log-Cholesky vector (:mod:`.physical`,
    physical by construction), armature, Coulomb and viscous friction >= 0 and offsets,
    minimise ``||Y_w (E theta - beta_wls)||^2`` (the weighted residual's increase over
@@ -30,7 +33,7 @@ from numpy.typing import NDArray
 from scipy import optimize
 
 from pipeline.errors import IdentificationError
-from pipeline.identify import physical
+from pipeline.identify import covariance, physical
 from pipeline.identify.blas import one_thread
 from pipeline.identify.defaults import (
     DEFAULT_MAX_CONDITION,
@@ -73,7 +76,8 @@ class FitResult:
     Attributes:
         base: the base parameters identified.
         beta_wls: (rank,) weighted least-squares estimate.
-        std_error: (rank,) standard error of ``beta_wls``.
+        std_error: (rank,) standard error of ``beta_wls``: Newey-West (HAC), see
+            :mod:`.covariance`.
         beta: (rank,) base parameters of the physically consistent model.
         theta: (n_standard,) the physically consistent standard parameters.
         theta_cad: (n_standard,) the CAD model's (start and null-space prior).
@@ -90,6 +94,11 @@ class FitResult:
             out: the CAD armature is kept).
         torque_side_reason: why (declared, or what the detection saw).
         transition_speed_rad_s: the Coulomb column's ``tanh`` speed (0: ``sign``).
+        std_error_iid: (rank,) the textbook ``s^2 (Y_w^T Y_w)^-1`` standard error
+            (white residuals assumed; too small on filtered data).
+        std_error_bootstrap: (rank,) moving-block bootstrap standard error (blocks of
+            ``hac_lags + 1`` instants, :data:`BOOTSTRAP_REPLICATES` seeded replicates).
+        hac_lags: the Newey-West bandwidth (Andrews' AR(1) plug-in rule).
     """
 
     base: BaseParameters
@@ -108,8 +117,13 @@ class FitResult:
     torque_side: str = "motor"
     torque_side_reason: str = "declared"
     transition_speed_rad_s: float = 0.0
+    std_error_iid: F64 | None = None
+    std_error_bootstrap: F64 | None = None
+    hac_lags: int = 0
 
 
+BOOTSTRAP_REPLICATES = 400
+BOOTSTRAP_SEED = 0
 TORQUE_SIDES = ("auto", "motor", "link")
 ARMATURE_FLOOR_KG_M2 = 1e-6
 """An armature estimate below this (or below two standard errors) is not seen."""
@@ -177,6 +191,46 @@ def fitted_transition_speed(
             beta = np.linalg.lstsq(y_b, tau * scale, rcond=None)[0]
             costs[float(v_s)] = float(np.sum((tau * scale - y_b @ beta) ** 2))
     return min(costs, key=lambda v: costs[v]), costs
+
+
+def row_instants(
+    spec: RobotSpec, samples: Sequence[JointSamples], *, min_speed_rad_s: float
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Each row of :func:`stacked`: its sample index and its recording index."""
+    instants, recordings = [], []
+    for r, s in enumerate(samples):
+        keep = (np.abs(s.qd) >= min_speed_rad_s).ravel()
+        k = np.repeat(np.arange(s.q.shape[0]), spec.dof)[keep]
+        instants.append(k)
+        recordings.append(np.full(k.size, r, dtype=np.intp))
+    return np.concatenate(instants), np.concatenate(recordings)
+
+
+SEPARABLE_TOL = 1e-9
+"""A standard parameter is separable when its unit vector lies in ``E``'s row space to
+this (``1 - P_ii``, ``P`` the projector on the row space)."""
+
+
+def from_prior(spec: RobotSpec, base: BaseParameters) -> tuple[str, ...]:
+    """Standard parameters the data cannot separate, in standard order: those whose unit
+    vector is not in the row space of the base projection ``E`` (no torque shows them
+    alone: either no column at all, like link 1's mass, or only a sum with others, like
+    the shoulder armatures with the link inertias about the same axis). The fit's value
+    of such a parameter is the CAD prior's, moved by its share of the combination's
+    correction (the null-space pull), never a measurement."""
+    e = base.projection
+    diag = np.sum(np.linalg.pinv(e) * e.T, axis=1)  # diagonal of pinv(E) E
+    names = standard_names(spec)
+    return tuple(names[i] for i in np.flatnonzero(1.0 - diag > SEPARABLE_TOL))
+
+
+DRIVE_SUFFIXES = (".armature", ".fc", ".fv", ".offset")
+
+
+def drive_from_prior(spec: RobotSpec, base: BaseParameters) -> tuple[str, ...]:
+    """The armature and friction parameters among :func:`from_prior` (the inertial ones
+    are many and expected: a link's parameters about other axes, link 1's mass)."""
+    return tuple(n for n in from_prior(spec, base) if n.endswith(DRIVE_SUFFIXES))
 
 
 def unexcited(gram: F64, names: Sequence[str], *, max_condition: float) -> tuple[list[str], float]:
@@ -356,7 +410,28 @@ def _identify(
     resid_w2 = float(np.sum(w2[joint_of] * resid**2))
     s2 = resid_w2 / max(tau.size - base.rank, 1)
     r_inv = scipy.linalg.solve_triangular(r_w, np.eye(base.rank))
-    std_error = np.sqrt(s2 * np.sum(r_inv**2, axis=1))
+    std_error_iid = np.sqrt(s2 * np.sum(r_inv**2, axis=1))
+    # residual-based: scores of the weighted rows, summed per instant over joints
+    w = np.sqrt(w2)[joint_of]
+    instant, recording = row_instants(spec, samples, min_speed_rad_s=min_speed_rad_s)
+    g = covariance.scores(y_b * w[:, None], resid * w, instant, recording)
+    series: list[F64] = []
+    for r in np.unique(recording):
+        rows = recording == r
+        e = np.zeros((int(instant[rows].max()) + 1, dof))
+        e[instant[rows], joint_of[rows]] = (resid * w)[rows]
+        series.extend(e.T)
+    lags = covariance.bandwidth(series)
+    gram_inv = r_inv @ r_inv.T
+    # the sandwich's observations are the instants' scores, not the rows
+    instants = sum(x.shape[0] for x in g)
+    correction = instants / max(instants - base.rank, 1)
+    cov_hac = covariance.hac_covariance(gram_inv, g, lags, dof_correction=correction)
+    std_error = np.sqrt(np.maximum(np.diag(cov_hac), 0.0))
+    cov_boot = covariance.block_bootstrap_covariance(
+        gram_inv, g, lags + 1, replicates=BOOTSTRAP_REPLICATES, seed=BOOTSTRAP_SEED
+    )
+    std_error_bootstrap = np.sqrt(correction * np.maximum(np.diag(cov_boot), 0.0))
     sv = np.linalg.svd(r_ols, compute_uv=False)
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
     theta_cad = standard_parameters(spec)
@@ -384,6 +459,9 @@ def _identify(
         torque_rms_nm=tau_rms,
         rows=int(tau.size),
         projection_cost=max(final_w2 - resid_w2, 0.0) / max(tau_w2, 1e-300),
+        std_error_iid=std_error_iid,
+        std_error_bootstrap=std_error_bootstrap,
+        hac_lags=lags,
     )
 
 

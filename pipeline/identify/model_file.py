@@ -107,8 +107,13 @@ def _inertia_list(i: Inertial) -> list[float]:
     return [t[0][0], t[1][1], t[2][2], t[0][1], t[0][2], t[1][2]]
 
 
-def links_document(spec: RobotSpec) -> list[dict[str, Any]]:
-    """Per joint, the inertial of the link it moves and the armature (any robot format)."""
+def links_document(
+    spec: RobotSpec, *, armature_from: Mapping[str, str] | None = None
+) -> list[dict[str, Any]]:
+    """Per joint, the inertial of the link it moves and the armature (any robot format);
+    ``armature_from`` (joint -> ``data``, ``prior`` or ``description``): where each
+    armature value comes from, written beside it (``prior``: the data cannot separate it
+    from the link inertias, the value is the CAD prior's, never identified)."""
     out = []
     for j in spec.joints:
         entry: dict[str, Any] = {"joint": j.name}
@@ -119,6 +124,8 @@ def links_document(spec: RobotSpec) -> list[dict[str, Any]]:
                 "inertia": _inertia_list(j.inertial),
             }
         entry["armature"] = j.armature
+        if armature_from is not None:
+            entry["armature_from"] = armature_from[j.name]
         out.append(entry)
     return out
 
@@ -133,14 +140,17 @@ def description_document(spec: RobotSpec) -> dict[str, Any]:
     }
 
 
-def model_robot_document(spec: RobotSpec) -> dict[str, Any]:
-    """The robot part of a model file: ``robot`` (DH) or ``description``, and ``links``."""
+def model_robot_document(
+    spec: RobotSpec, *, armature_from: Mapping[str, str] | None = None
+) -> dict[str, Any]:
+    """The robot part of a model file: ``robot`` (DH) or ``description``, and ``links``
+    (``armature_from``: see :func:`links_document`)."""
     head = (
         {"robot": spec_document(spec)}
         if spec.dh_rows is not None
         else {"description": description_document(spec)}
     )
-    return {**head, "links": links_document(spec)}
+    return {**head, "links": links_document(spec, armature_from=armature_from)}
 
 
 def _finite(v: Any) -> bool:

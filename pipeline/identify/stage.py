@@ -25,7 +25,14 @@ from pipeline.identify.defaults import (
     DEFAULT_MAX_CONDITION,
     DEFAULT_MIN_SPEED_RAD_S,
 )
-from pipeline.identify.fit import FitResult, fitted_transition_speed, identify, violations
+from pipeline.identify.fit import (
+    FitResult,
+    drive_from_prior,
+    fitted_transition_speed,
+    from_prior,
+    identify,
+    violations,
+)
 from pipeline.identify.identity import kinematics_mismatch, robot_file_sha256
 from pipeline.identify.model_file import (
     FORMAT,
@@ -187,10 +194,15 @@ def _check_efforts(spec: RobotSpec, samples: Sequence[JointSamples]) -> None:
 
 
 def identified_spec(
-    spec: RobotSpec, theta: np.ndarray, *, identified_armature: bool = True
+    spec: RobotSpec,
+    theta: np.ndarray,
+    *,
+    identified_armature: bool = True,
+    prior_armature: Sequence[str] = (),
 ) -> RobotSpec:
     """``spec`` with the inertials and armature of standard parameters ``theta``
-    (``identified_armature=False``: the description's armature kept)."""
+    (``identified_armature=False``: the description's armature kept; ``prior_armature``:
+    joints whose armature the data cannot separate, said so in ``armature_source``)."""
     joints = tuple(
         replace(
             joint,
@@ -201,6 +213,11 @@ def identified_spec(
     )
     source = (
         "identified from recordings (pipeline identify fit)"
+        + (
+            "; from the prior (CAD, not separable by the data): " + ", ".join(prior_armature)
+            if prior_armature
+            else ""
+        )
         if identified_armature
         else spec.armature_source or "the description's (link-side torque: not observable)"
     )
@@ -252,9 +269,19 @@ def model_document(
     theta = fit.theta
     rel = np.abs(fit.std_error) / np.maximum(np.abs(fit.beta_wls), 1e-12) * 100
     link = fit.torque_side == "link"
+    drive = drive_from_prior(spec, fit.base)
+    prior_armature = [n.removesuffix(".armature") for n in drive if n.endswith(".armature")]
     return {
         "format": FORMAT,
-        **model_robot_document(identified_spec(spec, theta, identified_armature=not link)),
+        **model_robot_document(
+            identified_spec(
+                spec, theta, identified_armature=not link, prior_armature=prior_armature
+            ),
+            armature_from={
+                j: "description" if link else "prior" if j in prior_armature else "data"
+                for j in spec.joint_names
+            },
+        ),
         "friction": friction_document(fit),
         "torque_side": fit.torque_side,
         "identification": {
@@ -269,7 +296,20 @@ def model_document(
                     "value is kept"
                     if link
                     else "identified (torque includes the rotor's inertia)"
+                    + (
+                        ", except " + ", ".join(prior_armature) + ": from the prior"
+                        if prior_armature
+                        else ""
+                    )
                 ),
+            },
+            "from_prior": {
+                "why": "the data cannot separate these standard parameters from others "
+                "(not in the row space of the base projection): their values are the CAD "
+                "prior's, moved only by their share of a combination's correction; never "
+                "identified",
+                "drive": list(drive_from_prior(spec, fit.base)),
+                "inertial": [n for n in from_prior(spec, fit.base) if n not in drive],
             },
             "robot_sha256": robot_file_sha256(spec),
             "recordings": [
@@ -289,6 +329,8 @@ def model_document(
                 "base_parameters": "QR with column pivoting of the regressor stacked over "
                 "random states",
                 "estimator": "weighted least squares, weights 1/sigma_j from an OLS residual",
+                "std_error": "Newey-West (HAC) sandwich over the weighted scores summed per "
+                f"instant, Bartlett kernel, {fit.hac_lags} lags (Andrews' AR(1) plug-in rule)",
                 "physical": "log-Cholesky pseudo-inertia per link (Rucker & Wensing 2022), "
                 "armature and friction >= 0; Levenberg-Marquardt from the CAD model",
                 **dict(method),
@@ -305,14 +347,16 @@ def model_document(
                     "name": name,
                     "wls": float(b),
                     "std_error": float(se),
+                    "std_error_iid": float(si),
                     "rel_std_error_pct": float(r),
                     "physical": float(p),
                     "cad": float(c),
                 }
-                for name, b, se, r, p, c in zip(
+                for name, b, se, si, r, p, c in zip(
                     fit.base.names,
                     fit.beta_wls,
                     fit.std_error,
+                    fit.std_error_iid if fit.std_error_iid is not None else fit.std_error,
                     rel,
                     fit.beta,
                     fit.base.of(fit.theta_cad),
@@ -397,6 +441,8 @@ def fit_command(
         "condition_number_scaled": fit.condition_number_scaled,
         "projection_cost": fit.projection_cost,
         "max_rel_std_error_pct": float(rel.max()),
+        "std_error": f"Newey-West, {fit.hac_lags} lags",
+        "from_prior": list(drive_from_prior(spec, fit.base)),
         "residual_rms_nm": [float(x) for x in fit.residual_rms_nm],
         "torque_rms_nm": [float(x) for x in fit.torque_rms_nm],
         "joints": list(spec.joint_names),
