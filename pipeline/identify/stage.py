@@ -1,3 +1,4 @@
+# long: the three identify commands (excite, fit, validate) and the model document they share
 """The ``pipeline identify fit`` and ``validate`` commands: recordings in, model / verdict out.
 
 Validation predicts each recording's torque from the model file's robot (inertials,
