@@ -1,4 +1,4 @@
-# long: the whole recorded-settings contract in one place (every group the bag records, its validation and the version check); a split is the next step of issue 29
+# long: every group a bag records, its validation and the version check, in one place
 """What a recording's settings hold: the typed contract between the recorder and the report.
 
 The recorder builds an :class:`EpisodeSettings` and writes ``to_dict()`` as JSON into

@@ -1,4 +1,4 @@
-# long: the fit and its standard errors (iid, Newey-West, bootstrap) share the stacked regressor and weights
+# long: the fit and its standard errors (iid, Newey-West, bootstrap) share one regressor
 """Weighted least squares on the base parameters, then a physically consistent model.
 
 1. Stack the base regressor ``Y_b`` and torques of every sample, leaving out a joint's
