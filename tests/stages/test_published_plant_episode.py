@@ -4,6 +4,7 @@ torque-sensor errors work on the UR5's realistic plant."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -133,9 +134,7 @@ def test_a_transition_spread_without_a_sigmoid_is_refused_in_one_line():
     params = _params({"a": {"scenario": "ur5-draws", "controller": "pid"}})
     scenario = params.scenarios["ur5-draws"]
     plant = scenario.plant.model_copy(
-        update={
-            "uncertainty": scenario.plant.uncertainty.model_copy(update={"transition_rel": 0.2})
-        }
+        update={"uncertainty": dataclasses.replace(scenario.plant.uncertainty, transition_rel=0.2)}
     )
     with pytest.raises(ModelError) as err:
         scenario_friction(load_spec("ur5"), scenario.model_copy(update={"plant": plant}), seed=0)
