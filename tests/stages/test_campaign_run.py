@@ -59,6 +59,7 @@ def _files(out: Path) -> dict[str, bytes]:
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("ray")  # one local Ray instance at a time under pytest -n
 def test_same_campaign_same_bytes_with_one_two_jobs_and_ray(tmp_path):
     ray = pytest.importorskip("ray")
     params = _params(tmp_path)

@@ -38,6 +38,7 @@ def _recorded(out: Path) -> bool:
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("ray")  # one local Ray instance at a time under pytest -n
 def test_killing_rays_dashboard_agent_ends_the_run_in_one_line(tmp_path: Path) -> None:
     pytest.importorskip("ray")
     psutil = pytest.importorskip("psutil")
