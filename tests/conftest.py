@@ -1,6 +1,8 @@
 from __future__ import annotations
 
+import ast
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -24,54 +26,56 @@ def dynamic_robot(request: pytest.FixtureRequest) -> RobotSpec:
     return load_spec(request.param)
 
 
-# --- running on several workers (`pytest -n 2`, pytest-xdist with --dist loadgroup) -----------
+# --- running on several workers (`pytest -n 2 --dist loadscope`, pytest-xdist) ----------------
 #
-# A shared fixture is made once per worker process. Tests that share an expensive one (module
-# scope: a recorded bag, a report; session scope in a sub-folder's conftest: the identification
-# bags) are sent to one worker together, as an xdist group named after where the fixture lives,
-# so it is still made once. The robot fixtures above are cheap and group nothing. A test that
-# names its own group (`@pytest.mark.xdist_group("ray")`: tests that start a local Ray instance,
-# one at a time) keeps it.
+# A shared fixture is made once per worker process, so each test module goes to one worker
+# whole (loadscope: a module's recorded bags or report are made once). A test that names an
+# xdist group (`@pytest.mark.xdist_group("ray")`: the tests that start a local Ray instance)
+# runs in that group instead, on one worker, one after another. pytest-xdist's own loadgroup
+# cannot do this under pytest 9 (it renames items through `item._nodeid`, which pytest 9 no
+# longer reads), so the scheduler below reads the groups from the test sources.
 
 
-def _fixture_home(fixturedef: pytest.FixtureDef[object], module: str) -> str | None:
-    """The group a shared fixture puts its users in: its module or its conftest's folder."""
-    if fixturedef.scope == "function" or fixturedef.func.__module__ == __name__:
+def _explicit_groups() -> dict[str, str]:
+    """``path::test`` -> group, for every test decorated ``@pytest.mark.xdist_group("name")``."""
+    out = {}
+    for path in sorted(TESTS.rglob("test_*.py")):
+        rel = path.relative_to(TESTS.parent).as_posix()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not (isinstance(node, ast.FunctionDef) and node.name.startswith("test_")):
+                continue
+            for deco in node.decorator_list:
+                if (
+                    isinstance(deco, ast.Call)
+                    and isinstance(deco.func, ast.Attribute)
+                    and deco.func.attr == "xdist_group"
+                    and deco.args
+                    and isinstance(deco.args[0], ast.Constant)
+                ):
+                    out[f"{rel}::{node.name}"] = str(deco.args[0].value)
+    return out
+
+
+@pytest.hookimpl(tryfirst=True, optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    if config.getvalue("dist") != "loadscope":
         return None
-    path = fixturedef.baseid.split("::")[0]  # "" for a plugin's fixture
-    if not path:
-        return None
-    if fixturedef.scope in ("module", "class"):
-        return module  # made once per module, wherever it is defined
-    return path  # package or session scope: made once per worker for the whole folder
+    from xdist.scheduler import LoadScopeScheduling
+
+    groups = _explicit_groups()
+
+    class ModulesAndGroups(LoadScopeScheduling):  # type: ignore[misc]
+        def _split_scope(self, nodeid: str) -> str:
+            return groups.get(nodeid.split("[")[0]) or nodeid.split("::")[0]
+
+    # work units in collection order, which puts the modules with slow tests first (below)
+    config.option.loadscopereorder = False
+    return ModulesAndGroups(config, log)
 
 
-def _group(item: pytest.Item) -> str | None:
-    info = getattr(item, "_fixtureinfo", None)
-    if info is None:
-        return None
-    module = item.nodeid.split("::")[0]
-    homes = set()
-    for name in info.names_closure:
-        for fixturedef in info.name2fixturedefs.get(name, ()):
-            home = _fixture_home(fixturedef, module)
-            if home is not None:
-                homes.add(home)
-    if not homes:
-        return None
-    # a folder's session fixture outranks a module's fixture inside that folder
-    return min(homes, key=lambda home: (home.endswith(".py"), home))
-
-
-@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     if not hasattr(config, "workerinput"):
-        return  # a plain run: nothing to distribute, the collection order is kept
-    for item in items:
-        if item.get_closest_marker("xdist_group") is None:
-            group = _group(item)
-            if group is not None:
-                item.add_marker(pytest.mark.xdist_group(group))
-    # the long tests first, so the two workers do not end on one of them (stable: every worker
-    # must see the same order)
+        return  # a plain run: the collection order is kept
+    # the slow tests first, so the two workers do not end on one of them (a stable sort: every
+    # worker must see the same order)
     items.sort(key=lambda item: item.get_closest_marker("slow") is None)
