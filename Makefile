@@ -21,11 +21,15 @@ demo: $(STAMP)
 	@echo "Rerun view:  $(BIN)/rerun reports/recording.rrd"
 	@echo "ROS 2 bags:  recordings/*/  (ros2 bag info recordings/paper-ctc, or open the .mcap in Foxglove)"
 
+# the suite on $(TEST_WORKERS) pytest-xdist workers, a test module (its shared fixtures) or an
+# xdist group (the Ray tests) to one worker (tests/conftest.py). TEST_WORKERS=0: one process
+TEST_WORKERS ?= 2
+
 test: $(STAMP)
 	$(BIN)/ruff check pipeline tests benches
 	$(BIN)/ruff format --check pipeline tests benches
 	$(BIN)/mypy
-	$(RUN) pytest
+	$(RUN) pytest -n $(TEST_WORKERS) --dist loadscope
 
 clean:
 	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache

@@ -111,6 +111,7 @@ def test_example_and_module_object_controllers_run_in_a_pool_campaign(site, tmp_
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("ray")  # one local Ray instance at a time under pytest -n
 def test_example_and_module_object_controllers_run_on_a_local_ray_instance(site, tmp_path):
     pytest.importorskip("ray")
     proc = _record(site, _params(tmp_path), tmp_path / "out", "--executor", "ray")

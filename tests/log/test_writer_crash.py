@@ -141,9 +141,7 @@ def test_writer_killed_at_any_moment_leaves_a_complete_bag_or_none(earlier: Path
     proc = start_writer("plain", target, 120_000, force=False)  # 2 min at 1 kHz
     assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
     partial = root / f".big.partial-{proc.pid}"
-    deadline = time.monotonic() + 60
     while not (partial / "big_0.mcap").exists() and proc.poll() is None:
-        assert time.monotonic() < deadline
         time.sleep(0.001)
     if proc.poll() is None:
         os.kill(proc.pid, signal.SIGKILL)  # it may finish just before: both outcomes are valid

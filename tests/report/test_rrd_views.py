@@ -51,9 +51,9 @@ def _report(
     return result.out_dir / "recording.rrd", _views(layout.root_container)
 
 
-def test_colour_key_is_plain_text_naming_each_colour(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
+@pytest.fixture(scope="module")
+def default(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[str], list[Any]]:
+    """One report of the two default bags, shared: its text documents and its views."""
     logged: list[str] = []
     real = rerun_rrd.rr.TextDocument
 
@@ -61,8 +61,16 @@ def test_colour_key_is_plain_text_naming_each_colour(
         logged.append(text)
         return real(text, **kwargs)
 
-    monkeypatch.setattr(rerun_rrd.rr, "TextDocument", spy)
-    _report(tmp_path, monkeypatch)
+    with pytest.MonkeyPatch.context() as monkeypatch:
+        monkeypatch.setattr(rerun_rrd.rr, "TextDocument", spy)
+        _, views = _report(tmp_path_factory.mktemp("default"), monkeypatch)
+    return logged, views
+
+
+def test_colour_key_is_plain_text_naming_each_colour(
+    default: tuple[list[str], list[Any]],
+) -> None:
+    logged, _ = default
     (key,) = logged  # the .rrd's one text document (its bytes are LZ4-compressed)
     assert "<" not in key and "style=" not in key  # Rerun's text view renders no HTML
     assert "**ctc**: orange (#ff7f0e)" in key and "**pid**: blue (#1f77b4)" in key
@@ -70,9 +78,9 @@ def test_colour_key_is_plain_text_naming_each_colour(
 
 
 def test_no_3d_view_when_no_bag_holds_a_robot_model(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, default: tuple[list[str], list[Any]]
 ) -> None:
-    _, with_robot = _report(tmp_path / "ours", monkeypatch)
+    _, with_robot = default
     assert any(isinstance(v, rrb.Spatial3DView) for v in with_robot)
     _, foreign = _report(tmp_path / "foreign", monkeypatch, episode_metadata=False)
     assert not any(isinstance(v, rrb.Spatial3DView) for v in foreign)
@@ -84,9 +92,9 @@ def _title(view: Any) -> str:
 
 
 def test_error_views_are_in_mrad_against_the_state_the_metrics_use(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, default: tuple[list[str], list[Any]]
 ) -> None:
-    _, measured = _report(tmp_path / "measured", monkeypatch)
+    _, measured = default
     titles = [_title(v) for v in measured]
     assert any("error = reference − measured state [mrad]" in t for t in titles), titles
     n = len(paper_like("x", "pid").stamp_ns)
@@ -133,9 +141,9 @@ def test_readable_range_holds_the_data_with_two_to_four_ticks(lo: float, hi: flo
 
 
 def test_error_and_effort_views_get_a_readable_range(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    default: tuple[list[str], list[Any]],
 ) -> None:
-    _, views = _report(tmp_path, monkeypatch)
+    _, views = default
     by_origin = {str(v.origin): v for v in views if isinstance(v, rrb.TimeSeriesView)}
     for q in ("error", "effort"):
         view = by_origin[ent.quantity_path("shoulder_lift_joint", q)]

@@ -24,8 +24,14 @@ def _report(root: Path, *, seeds: int, foreign: bool = False, baseline: str = "p
     return (root / "reports" / "report.md").read_text(encoding="utf-8")
 
 
-def test_the_first_screen_holds_the_headline_table_and_the_verdicts(tmp_path: Path) -> None:
-    text = _report(tmp_path, seeds=3)
+@pytest.fixture(scope="module")
+def three_seeds(tmp_path_factory: pytest.TempPathFactory) -> str:
+    """report.md of pid and ctc over 3 seeds (shared by the tests that only read it)."""
+    return _report(tmp_path_factory.mktemp("three"), seeds=3)
+
+
+def test_the_first_screen_holds_the_headline_table_and_the_verdicts(three_seeds: str) -> None:
+    text = three_seeds
     screen = "\n".join(text.splitlines()[:FIRST_SCREEN])
     assert "## Answer" in screen
     assert "| 2 shoulder_lift_joint [rad] |" in screen
@@ -41,8 +47,8 @@ def test_the_first_screen_holds_the_headline_table_and_the_verdicts(tmp_path: Pa
     assert "Physical checks failed" not in text  # every check passes: no banner
 
 
-def test_physical_checks_are_one_controller_by_joint_table(tmp_path: Path) -> None:
-    text = _report(tmp_path, seeds=2)
+def test_physical_checks_are_one_controller_by_joint_table(three_seeds: str) -> None:
+    text = three_seeds
     section = text.split("## Physical checks", 1)[1].split("\n## ", 1)[0]
     rows = [line for line in section.splitlines() if line.startswith("| ")]
     assert rows[0].startswith("| controller | contacts | 1 shoulder_pan_joint |")

@@ -59,6 +59,7 @@ def _files(out: Path) -> dict[str, bytes]:
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("ray")  # one local Ray instance at a time under pytest -n
 def test_same_campaign_same_bytes_with_one_two_jobs_and_ray(tmp_path):
     ray = pytest.importorskip("ray")
     params = _params(tmp_path)
@@ -89,9 +90,8 @@ def test_a_killed_campaign_resumes_without_redoing_or_trusting_partial_work(tmp_
     cmd = [*PIPELINE, "record", "--params", str(params), "--out", str(out), "--campaign", "c"]
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             start_new_session=True)  # fmt: skip
-    deadline = time.monotonic() + 120
     done = out / "c" / DONE_DIR
-    while time.monotonic() < deadline and len(list(done.glob("*"))) < 3:
+    while len(list(done.glob("*"))) < 3:  # no wall-clock deadline: the run ends or marks
         assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
         time.sleep(0.02)
     os.killpg(proc.pid, signal.SIGKILL)

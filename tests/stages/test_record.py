@@ -152,11 +152,10 @@ def test_killed_run_leaves_no_partial_bag_and_keeps_earlier_ones(tmp_path):
         start_new_session=True,
     )
     # kill while the bag is being written: its partial directory exists (the 600 s
-    # hold first simulates for several seconds, then writes ~90 MB)
-    deadline = time.monotonic() + 120.0
+    # hold first simulates, a minute or more on a loaded machine, then writes ~90 MB);
+    # no wall-clock deadline: a run that never writes ends, or meets pytest's timeout
     while not list(out.glob(".paper-ctc.partial-*")):
         assert proc.poll() is None, "the run ended before its bag was being written"
-        assert time.monotonic() < deadline, "no partial bag directory appeared"
         time.sleep(0.01)
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
