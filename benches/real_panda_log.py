@@ -18,11 +18,13 @@ What it does, as a user would:
    (Franka's torque sensors sit after the gearbox: the rotor inertia is not in ``tau_J``),
    then ``pipeline identify validate MODEL held_out/``: our held-out RMS error per joint.
 3. The authors' model on the SAME held-out samples: ``M(q) qdd + c(q, qd) + g(q) +
-   tau_f(qd)`` evaluated from their MATLAB files, translated to NumPy at run time (their
-   ``python/panda_dyn_model.py`` is a stub loading a C++ extension that is not built in the
-   repository, so it is not importable). A second, independent evaluation: Pinocchio's RNEA
-   with their feasible parameters (``pipeline/model/published.py``'s ``gaz_links(hand=False)``)
-   plus their sigmoid friction.
+   tau_f(qd)`` evaluated from their MATLAB files, translated to NumPy at run time (a
+   ``python/panda_dyn_model.py`` exists only in unmerged pull request #8, as a stub loading
+   a C++ extension it does not build, so it is not importable). A second, independent
+   evaluation: Pinocchio's RNEA with their feasible parameters
+   (``pipeline/model/published.py``'s ``gaz_links(hand=False)``) plus their sigmoid friction.
+   Checks of the translation, run once: M and g equal ``tests/model/gaz_reference.py`` at
+   its three configurations (4e-10, 0); c equals the Christoffel form of their M (1e-9).
    Samples: ``pipeline.identify.samples.joint_samples`` at the model's cutoff, i.e. the
    zero-phase Butterworth (5 Hz) of ``fit``/``validate``: filtered q, recorded velocity
    filtered, its central difference for qdd, filtered torque, decimated; joint samples
