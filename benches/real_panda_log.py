@@ -23,8 +23,9 @@ What it does, as a user would:
    a C++ extension it does not build, so it is not importable). A second, independent
    evaluation: Pinocchio's RNEA with their feasible parameters
    (``pipeline/model/published.py``'s ``gaz_links(hand=False)``) plus their sigmoid friction.
-   Checks of the translation, run once: M and g equal ``tests/model/gaz_reference.py`` at
-   its three configurations (4e-10, 0); c equals the Christoffel form of their M (1e-9).
+   Checks of the translation, every run: M and g equal ``tests/model/gaz_reference.py`` at
+   its three configurations (to its 10 digits); c equals the Christoffel form of their M
+   (central differences, 1e-6 N m).
    Samples: ``pipeline.identify.samples.joint_samples`` at the model's cutoff, i.e. the
    zero-phase Butterworth (5 Hz) of ``fit``/``validate``: filtered q, recorded velocity
    filtered, its central difference for qdd, filtered torque, decimated; joint samples
@@ -179,6 +180,42 @@ class MatlabModel:
         return np.concatenate(parts)
 
 
+def check_translation(model: MatlabModel) -> dict[str, float]:
+    """The translated files against an independent transcription and against themselves."""
+    from tests.model.gaz_reference import MASS_MATRICES, gravity_nm
+
+    worst_m = worst_g = worst_c = 0.0
+    zero = np.zeros((1, 7))
+    for q_list, m_ref in MASS_MATRICES:
+        q = np.asarray(q_list)[None]
+        m = model._eval("MassMatrix", q, zero)[:, :, 0]
+        g = model._eval("GravityVector", q, zero)[:, 0, 0]
+        worst_m = max(worst_m, float(np.abs(m - np.asarray(m_ref)).max()))
+        worst_g = max(worst_g, float(np.abs(g - gravity_nm(q[0])).max()))
+    rng = np.random.default_rng(0)
+    h = 1e-6
+    for _ in range(3):
+        q, qd = rng.uniform(-1.5, 1.5, 7), rng.uniform(-1.0, 1.0, 7)
+        dm = np.zeros((7, 7, 7))  # dM_ij / dq_k
+        for k in range(7):
+            e = np.zeros(7)
+            e[k] = h
+            plus = model._eval("MassMatrix", (q + e)[None], zero)[:, :, 0]
+            minus = model._eval("MassMatrix", (q - e)[None], zero)[:, :, 0]
+            dm[:, :, k] = (plus - minus) / (2 * h)
+        christoffel = np.einsum("ijk,j,k->i", dm, qd, qd) - 0.5 * np.einsum(
+            "jki,j,k->i", dm, qd, qd
+        )
+        c = model._eval("CoriolisVector", q[None], qd[None])[:, 0, 0]
+        worst_c = max(worst_c, float(np.abs(c - christoffel).max()))
+    if worst_m > 1e-8 or worst_g > 1e-9 or worst_c > 1e-6:
+        raise SystemExit(
+            f"error: the translated MATLAB model disagrees (M {worst_m:.2g}, g {worst_g:.2g}, "
+            f"c {worst_c:.2g}): not the files of commit 24d85ce?"
+        )
+    return {"mass_matrix_nm": worst_m, "gravity_nm": worst_g, "coriolis_christoffel_nm": worst_c}
+
+
 def pinocchio_torque(q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
     """RNEA with the feasible parameters (arm as identified, no hand) + their friction."""
     from dataclasses import replace
@@ -224,6 +261,14 @@ def main() -> None:
         "python": platform.python_version(),
         "load_before": os.getloadavg(),
     }
+    log_files = [f"exciting_traj_{n}.txt" for n in ("time", "positions", "velocity", "torques")]
+    model_files = [
+        f"get_{n}.m" for n in ("MassMatrix", "CoriolisVector", "GravityVector", "FrictionTorque")
+    ]
+    for folder, names in ((args.log_dir, log_files), (args.model_dir, model_files)):
+        missing = [n for n in names if not (folder / n).is_file()]
+        if missing:
+            raise SystemExit(f"error: {folder}: no {missing[0]} (expected {', '.join(names)})")
     t, q, qd, tau = read_log(args.log_dir)
     periods = np.diff(t)
     split_s = t[0] + FIT_SHARE * (t[-1] - t[0])
@@ -269,6 +314,7 @@ def main() -> None:
         measured = ours.measured_nm
         slow = np.isnan(measured)
         matlab = MatlabModel(args.model_dir)
+        out["translation_check_max_abs"] = check_translation(matlab)
         theirs_m = matlab.torque(samples.q, samples.qd, samples.qdd)
         theirs_p = pinocchio_torque(samples.q, samples.qd, samples.qdd)
         theirs_m[slow] = np.nan
