@@ -20,7 +20,7 @@ What it does, as a user would:
 3. The authors' model on the SAME held-out samples: ``M(q) qdd + c(q, qd) + g(q) +
    tau_f(qd)`` evaluated from their MATLAB files, translated to NumPy at run time (a
    ``python/panda_dyn_model.py`` exists only in unmerged pull request #8, as a stub loading
-   a C++ extension it does not build, so it is not importable). A second, independent
+   a C++ extension to be compiled first: not importable as fetched). A second, independent
    evaluation: Pinocchio's RNEA with their feasible parameters
    (``pipeline/model/published.py``'s ``gaz_links(hand=False)``) plus their sigmoid friction.
    Checks of the translation, every run: M and g equal ``tests/model/gaz_reference.py`` at
