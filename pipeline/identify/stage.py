@@ -110,8 +110,9 @@ def recording_spec(recording: Recording, robot: str | None) -> RobotSpec:
 
 
 def _described_robot(recording: Recording) -> RobotSpec | None:
-    """The robot file (URDF, MJCF) an excitation's raw settings name, when it still has the
-    recorded SHA-256 (an excitation's settings are not an episode's: read them raw)."""
+    """The URDF or MJCF robot an excitation's raw settings hold by value (an excitation's
+    settings are not an episode's: read them raw); older bags name the file and its
+    SHA-256, read while that file is unchanged (``robots.recorded.robot_from_dict``)."""
     if not recording.armlab_metadata:
         return None
     try:
@@ -120,14 +121,12 @@ def _described_robot(recording: Recording) -> RobotSpec | None:
         return None
     if not isinstance(data, dict) or data.get("format") in (None, "dh-yaml"):
         return None
-    ref = data.get("robot") or data.get("source")
-    if not isinstance(ref, str) or not ref:
-        return None
+    from pipeline.robots.recorded import robot_from_dict
+
     try:
-        spec = load_spec(ref)
+        return robot_from_dict(data, where=f"{recording.source}: settings.robot")
     except PipelineError:
         return None
-    return spec if spec.source_sha256 == data.get("sha256") else None
 
 
 def _read(
