@@ -52,8 +52,9 @@ MID = "0,-1.2,1.2,-1.0,0.5,0"
 """The excitation's mid posture [rad]: a bent arm, clear of the ground and pedestal, excites
 the shoulder and elbow parameters better than the stretched start pose."""
 VARIANTS = (1, 2, 3)
-"""Excitation designs tried in turn: the design search has a wall-clock budget, so a
-loaded machine can end it on a series that touches the ground; the next variant is used."""
+"""Excitation designs tried in turn: a variant whose design touches the ground is
+refused; the next variant is used (the design spends a count of evaluations, so which
+variant is used no longer depends on the machine's load)."""
 
 
 def identify(seed: int) -> None:
@@ -65,7 +66,7 @@ def identify(seed: int) -> None:
         if _run(
             ["pipeline", "identify", "excite", "--params", PARAMS, "--scenario", "cad",
              "--seed", str(seed), "--variant", str(variant), "--periods", "2",
-             "--mid", MID, "--budget-s", "20", "--out", str(bag), "--force"],
+             "--mid", MID, "--evaluations", "4000", "--out", str(bag), "--force"],
             check=False,
         ):  # fmt: skip
             _run(["pipeline", "identify", "fit", str(bag), "--out", str(model)])

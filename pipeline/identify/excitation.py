@@ -5,8 +5,10 @@ Design (Swevers et al. 1997; Gaz et al. 2019): the free Fourier coefficients of 
 joint (:mod:`.fourier`) minimise ``log cond(Y_b)`` of the base regressor with unit-norm
 columns, sampled over one period, plus a penalty for leaving :data:`LIMIT_SHARE` of the
 velocity and acceleration limits or ``span_rad`` around the mid posture. L-BFGS-B from
-random coefficients (``numpy.random.default_rng(variant)``), within a wall-clock budget;
-the best design is then scaled down onto the limits if it still leaves them, and
+random coefficients (``numpy.random.default_rng(variant)``), restarted until a budget of
+objective evaluations is spent (:data:`DEFAULT_EVALUATIONS`; a count, not a time, so the
+design is the same on any machine and under any load; a wall-clock cap only fails); the
+best design is then scaled down onto the limits if it still leaves them, and
 checked: within the position, velocity and acceleration limits and collision-free
 (robot, floor, the scenario's obstacles) at every sample, or an error.
 
@@ -32,6 +34,7 @@ from scipy import optimize
 
 from pipeline.errors import IdentificationError, ParamsError
 from pipeline.identify.blas import one_thread
+from pipeline.identify.defaults import DEFAULT_BUDGET_S, DEFAULT_EVALUATIONS
 from pipeline.identify.fourier import FourierReference
 from pipeline.identify.regressor import Regressor, base_parameters
 from pipeline.robots.spec import RobotSpec
@@ -57,8 +60,8 @@ class Design:
         condition_number_scaled: ``cond`` of the base regressor (unit-norm columns) over
             one period of the design samples.
         condition_number: the same, columns unscaled.
-        evaluations: objective evaluations spent.
-        wall_s: design time [s].
+        evaluations: objective evaluations spent (the budget: the same on any machine).
+        wall_s: design time [s] (machine-dependent: never recorded in a bag).
     """
 
     reference: FourierReference
@@ -68,8 +71,12 @@ class Design:
     wall_s: float
 
 
+class _Spent(Exception):
+    """The evaluation budget is spent."""
+
+
 class _OutOfTime(Exception):
-    pass
+    """The wall-clock safety cap has passed."""
 
 
 def _conditions(y: F64) -> tuple[float, float]:
@@ -109,16 +116,21 @@ def design_excitation(
     base_frequency_hz: float = 0.1,
     periods: int = 2,
     span_rad: float = 1.0,
-    budget_s: float = 30.0,
+    evaluations: int = DEFAULT_EVALUATIONS,
+    budget_s: float = DEFAULT_BUDGET_S,
     obstacles: tuple[Any, ...] = (),
 ) -> Design:
     """Design excitation ``variant`` around ``q0`` (see the module docstring).
 
     Collisions enter the objective as a penalty on clearances below
-    :data:`CLEARANCE_M` at the design samples.
+    :data:`CLEARANCE_M` at the design samples. ``evaluations`` objective evaluations are
+    spent (restarts of L-BFGS-B until then; the last one cut where the count runs out): the
+    same inputs give the same design, bit for bit, whatever the machine's load.
+    ``budget_s`` is only a safety cap on the wall-clock time.
 
     Raises:
-        IdentificationError: bad settings, ``q0`` outside the limits.
+        IdentificationError: bad settings, ``q0`` outside the limits, the design running
+            past ``budget_s`` (one line: raise the cap or lower ``evaluations``).
     """
     dof = spec.dof
     q0 = np.asarray(q0, dtype=float)
@@ -129,6 +141,7 @@ def design_excitation(
     for name, value, low in (
         ("harmonics", harmonics, 2),
         ("periods", periods, 1),
+        ("evaluations", evaluations, 1),
     ):
         if not (isinstance(value, int) and value >= low):
             raise IdentificationError(f"{name}: expected an integer >= {low}, got {value!r}")
@@ -141,7 +154,7 @@ def design_excitation(
         return _design(
             spec, q0=q0, variant=variant, harmonics=harmonics,
             base_frequency_hz=base_frequency_hz, periods=periods, span_rad=span_rad,
-            budget_s=budget_s, obstacles=obstacles,
+            evaluations=evaluations, budget_s=budget_s, obstacles=obstacles,
         )  # fmt: skip
 
 
@@ -154,6 +167,7 @@ def _design(
     base_frequency_hz: float,
     periods: int,
     span_rad: float,
+    evaluations: int,
     budget_s: float,
     obstacles: tuple[Any, ...],
 ) -> Design:
@@ -173,13 +187,15 @@ def _design(
         )
 
     best: dict[str, Any] = {"f": math.inf, "x": None}
-    evaluations = 0
+    spent = 0
 
     def objective(x: F64) -> float:
-        nonlocal evaluations
+        nonlocal spent
+        if spent >= evaluations:
+            raise _Spent
         if time.perf_counter() - wall0 > budget_s:
             raise _OutOfTime
-        evaluations += 1
+        spent += 1
         ref = reference_of(x)
         q, qd, qdd = ref.sample_many(t)
         y = reg.stacked(q, qd, qdd)[:, base.columns]
@@ -196,23 +212,26 @@ def _design(
     rng = np.random.default_rng(variant)
     # coefficient scale: each harmonic's velocity amplitude a share of the velocity limit
     scale = 0.05 * np.tile(np.repeat(spec.velocity_limits, harmonics - 1), 2)
-    while time.perf_counter() - wall0 < budget_s:
+    while spent < evaluations:  # restarts until the count is spent, never the clock
         x0 = rng.normal(size=n_free) * scale / np.sqrt(harmonics)
         try:
             optimize.minimize(objective, x0, method="L-BFGS-B", options={"maxiter": 200})
+        except _Spent:
+            break
         except _OutOfTime:
-            break
-        if best["x"] is not None and time.perf_counter() - wall0 > budget_s / 2:
-            break
+            raise IdentificationError(
+                f"the excitation design ran past --budget-s {budget_s:g} s after {spent} of "
+                f"{evaluations} evaluations: raise --budget-s or lower --evaluations"
+            ) from None
     x = best["x"]
-    if x is None:
+    if x is None:  # only a non-finite objective leaves no best
         raise IdentificationError(
-            f"no excitation within the limits found in {budget_s:g} s: raise --budget-s"
+            f"no excitation found in {evaluations} evaluations: raise --evaluations"
         )
     ref = _onto_limits(spec, reference_of(x), span_rad=span_rad)
     q, qd, qdd = ref.sample_many(t)
     scaled, raw = _conditions(reg.stacked(q, qd, qdd)[:, base.columns])
-    return Design(ref, scaled, raw, evaluations, time.perf_counter() - wall0)
+    return Design(ref, scaled, raw, spent, time.perf_counter() - wall0)
 
 
 def _onto_limits(spec: RobotSpec, ref: FourierReference, *, span_rad: float) -> FourierReference:
@@ -282,7 +301,8 @@ def record_excitation(
     base_frequency_hz: float = 0.1,
     periods: int = 2,
     span_rad: float = 1.0,
-    budget_s: float = 30.0,
+    evaluations: int = DEFAULT_EVALUATIONS,
+    budget_s: float = DEFAULT_BUDGET_S,
     force: bool = False,
     export: Path | None = None,
     mid_posture: Sequence[float] | None = None,
@@ -292,7 +312,9 @@ def record_excitation(
 
     ``mid_posture``: the series' offset [rad] (default: the scenario's start pose).
     ``export``: also write the trajectory as CSV at 1 kHz (:func:`.fourier.write_csv`),
-    for a real robot.
+    for a real robot. ``evaluations``, ``budget_s``: see :func:`design_excitation`; the
+    recording holds the evaluation count (``settings.excitation.evaluations``), never the
+    design's wall time (same inputs, same bytes).
 
     Raises:
         PipelineError: unknown scenario or controller, an excitation that leaves the limits
@@ -362,6 +384,7 @@ def record_excitation(
         base_frequency_hz=base_frequency_hz,
         periods=periods,
         span_rad=span_rad,
+        evaluations=evaluations,
         budget_s=budget_s,
         obstacles=obstacles,
     )
@@ -413,6 +436,7 @@ def record_excitation(
         "base_frequency_hz": base_frequency_hz,
         "periods": periods,
         "span_rad": span_rad,
+        "evaluations": design.evaluations,
         "q0": list(ref.q0),
         "a": [list(r) for r in ref.a],
         "b": [list(r) for r in ref.b],

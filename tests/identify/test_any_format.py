@@ -53,7 +53,7 @@ def ideal_params(folder: Path, robot: str, *, nominal: str | None = None) -> Pat
 def round_trip(folder: Path, robot: str) -> None:
     """excite (CSV export too) -> fit (exact) -> validate -> a nominal: episode recorded."""
     params = ideal_params(folder, robot)
-    kw = {"scenario_name": "ideal", "budget_s": 2.0, "periods": 1, "span_rad": 0.6, "seed": 0}
+    kw = {"scenario_name": "ideal", "evaluations": 400, "periods": 1, "span_rad": 0.6, "seed": 0}
     kw["variant"] = 0
     record_excitation(params, out=folder / "fit", export=folder / "fit.csv", **kw)  # type: ignore[arg-type]
     assert (folder / "fit.csv").stat().st_size > 0

@@ -3,6 +3,11 @@
 from __future__ import annotations
 
 import json
+import os
+import re
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -61,11 +66,66 @@ def test_excitation_exports_as_csv_for_a_robot(tmp_path: Path) -> None:
 def test_design_stays_within_limits_and_beats_a_random_series() -> None:
     spec = load_spec("ur5")
     q0 = np.array([0.0, -1.2, 1.2, -1.0, 0.5, 0.0])
-    design = design_excitation(spec, q0=q0, variant=0, budget_s=8.0)
+    design = design_excitation(spec, q0=q0, variant=0, evaluations=1500)
     for ratios in limit_ratios(spec, design.reference, span_rad=1.0, samples=2000):
         assert ratios.max() <= 1.0 + 1e-4  # peaks between the design's samples
     check_excitation(spec, design.reference)
     assert design.condition_number_scaled < 1e3
+
+
+def test_same_inputs_give_the_same_design_bit_for_bit_even_under_load() -> None:
+    """The design spends a count of evaluations, not a time: a second design while a
+    busy-loop process spins on a core gives the same coefficients, bit for bit."""
+    spec = load_spec("ur5")
+    q0 = np.array([0.0, -1.2, 1.2, -1.0, 0.5, 0.0])
+    kw = {"q0": q0, "variant": 3, "evaluations": 250}
+    quiet = design_excitation(spec, **kw)  # type: ignore[arg-type]
+    spinner = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        time.sleep(0.2)  # spinning before the design starts
+        assert spinner.poll() is None
+        loaded = design_excitation(spec, **kw)  # type: ignore[arg-type]
+    finally:
+        spinner.kill()
+        spinner.wait()
+    assert quiet.evaluations == loaded.evaluations == 250
+    assert quiet.reference == loaded.reference  # tuples of floats: bitwise equal
+    assert quiet.condition_number_scaled == loaded.condition_number_scaled
+
+
+def test_the_wall_clock_cap_fails_in_one_line_naming_the_count() -> None:
+    spec = load_spec("ur5")
+    q0 = np.array([0.0, -1.2, 1.2, -1.0, 0.5, 0.0])
+    with pytest.raises(IdentificationError) as err:
+        design_excitation(spec, q0=q0, variant=0, evaluations=10**7, budget_s=0.5)
+    message = str(err.value)
+    assert "\n" not in message
+    assert re.match(
+        r"the excitation design ran past --budget-s 0.5 s after \d+ of 10000000 "
+        r"evaluations: raise --budget-s or lower --evaluations$",
+        message,
+    ), message
+
+
+def test_excite_cli_cap_is_one_error_line_and_nothing_written(tmp_path: Path) -> None:
+    proc = subprocess.run(
+        [sys.executable, "-m", "pipeline", "identify", "excite", "--params", str(PARAMS),
+         "--scenario", "paper", "--budget-s", "0.2", "--out", str(tmp_path / "e")],
+        capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert proc.returncode != 0
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(
+        "error: the excitation design ran past --budget-s 0.2 s after "
+    ), proc.stderr
+    assert "--evaluations" in lines[0]
+    assert not (tmp_path / "e").exists()
+    shown = subprocess.run(
+        [sys.executable, "-m", "pipeline", "identify", "excite", "--help"],
+        capture_output=True, text=True, timeout=300, check=True,
+        env={**os.environ, "COLUMNS": "200", "NO_COLOR": "1", "TERM": "dumb"},
+    ).stdout  # fmt: skip
+    assert "--evaluations" in shown and "6000" in shown
 
 
 def test_an_excitation_beyond_the_limits_is_refused() -> None:
@@ -95,13 +155,15 @@ def test_realistic_plant_identifies_friction_and_predicts_torque(tmp_path: Path)
     friction within 10 % (frictionloss acts as Coulomb friction at the excitation's
     speeds; it is soft only near rest, which the fit leaves out), and another excitation
     of the same plant predicted within 5 % RMS per joint."""
-    kw = {"scenario_name": "paper-realistic", "seed": 3, "budget_s": 6.0, "periods": 2}
+    kw = {"scenario_name": "paper-realistic", "seed": 3, "evaluations": 1200, "periods": 2}
     record_excitation(PARAMS, variant=1, out=tmp_path / "fit", **kw)  # type: ignore[arg-type]
     record_excitation(PARAMS, variant=2, out=tmp_path / "check", **kw)  # type: ignore[arg-type]
     model = tmp_path / "model.yaml"
     fit_command([tmp_path / "fit"], out=model)
     # an excitation's settings are its own (not the episode contract): read them raw
-    plant = json.loads(read_recording(tmp_path / "fit").metadata["settings"])["plant"]
+    settings = json.loads(read_recording(tmp_path / "fit").metadata["settings"])
+    plant = settings["plant"]
+    assert settings["excitation"]["evaluations"] == 1200  # the count, never the wall time
     from pipeline.identify.model_file import load_model
 
     coulomb = np.array(load_model(model).friction.coulomb_nm)
@@ -136,7 +198,7 @@ def test_ctc_on_the_identified_model_beats_ctc_on_cad(tmp_path: Path) -> None:
     from pipeline.sim.references import PAPER_GOAL_RAD, PAPER_START_RAD, QuinticReference
     from pipeline.sim.runner import run_episode
 
-    kw = {"scenario_name": "paper-realistic", "seed": 3, "budget_s": 6.0, "periods": 2}
+    kw = {"scenario_name": "paper-realistic", "seed": 3, "evaluations": 1200, "periods": 2}
     record_excitation(PARAMS, variant=1, out=tmp_path / "fit", **kw)  # type: ignore[arg-type]
     fit_command([tmp_path / "fit"], out=tmp_path / "model.yaml")
     scenario = load_params(PARAMS).scenarios["paper-realistic"]
