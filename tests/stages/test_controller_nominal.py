@@ -135,3 +135,23 @@ def test_another_robots_model_as_controller_nominal_is_refused(tmp_path: Path) -
     assert "controllers.ctc_id.nominal: models/ur10.yaml is a model of robot 'ur10'" in (
         proc.stderr
     )
+
+
+def test_a_controller_nominal_is_read_from_the_params_folder_and_kept_by_a_campaign(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from pipeline.params import load_params
+    from pipeline.stages.campaign_expand import expand
+
+    folder = tmp_path / "study"
+    folder.mkdir()
+    data = yaml.safe_load(params_file(folder, "models/ur5-s{seed}.yaml").read_text())
+    data["campaigns"] = {"c": {"scenario": "s", "controllers": ["ctc", "ctc_id"], "seeds": 2}}
+    (folder / "params.yaml").write_text(yaml.safe_dump(data))
+    monkeypatch.chdir(tmp_path)
+    params = load_params(folder / "params.yaml")
+    assert params.controllers["ctc_id"].nominal == "study/models/ur5-s{seed}.yaml"
+    episodes = {e.controller_name: e for e in expand(params, "c")}
+    assert episodes["ctc_id"].controller.nominal == "study/models/ur5-s{seed}.yaml"
+    # a controller without one dumps (and fingerprints) as before the field existed
+    assert "nominal" not in episodes["ctc"].controller.model_dump()
