@@ -277,6 +277,14 @@ class ControllerParams(_Strict):
     type: str = Field(min_length=1)
     # numbers, per-joint lists or flags (antiwindup): the controller validates each key
     gains: dict[str, Any] = {}
+    # this controller's nominal model, overriding its scenario's `nominal:` (an identified
+    # MODEL.yaml; `{seed}` as there): the same law on two models compared in one scenario
+    nominal: str | None = Field(default=None, min_length=1)
+
+    @model_serializer(mode="wrap")
+    def _dump(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        # unused, left out: the same dumps (campaign fingerprints) as before it existed
+        return _omit_defaults(handler(self), {"nominal": None})
 
     @model_validator(mode="after")
     def _finite_gains(self) -> ControllerParams:
@@ -663,10 +671,13 @@ def _paths_from(data: Any, *, folder: Path, source: str) -> Any:
     """
     from pipeline.robots.loaders import loader_suffix
 
-    scenarios = data.get("scenarios") if isinstance(data, dict) else None
-    if not isinstance(scenarios, dict):
+    if not isinstance(data, dict):
         return data
     here = Path.cwd().resolve()
+    data = _controller_paths_from(data, folder=folder, here=here)
+    scenarios = data.get("scenarios")
+    if not isinstance(scenarios, dict):
+        return data
     moved: dict[Any, Any] = {}
     for name, scenario in scenarios.items():
         if not isinstance(scenario, dict):
@@ -691,3 +702,26 @@ def _paths_from(data: Any, *, folder: Path, source: str) -> Any:
                 )
         moved[name] = scenario
     return {**data, "scenarios": moved}
+
+
+def _relative_to(value: str, *, folder: Path, here: Path) -> str:
+    """A path as written in a params file in ``folder``, as seen from ``here``."""
+    path = Path(value).expanduser()
+    if path.is_absolute() or folder.resolve() == here:
+        return value
+    return str(Path(os.path.relpath(folder.resolve() / path, here)))
+
+
+def _controller_paths_from(data: dict[str, Any], *, folder: Path, here: Path) -> dict[str, Any]:
+    """``data`` with each controller's relative ``nominal`` model path read from the
+    params file's ``folder`` (as a scenario's ``nominal``)."""
+    controllers = data.get("controllers")
+    if not isinstance(controllers, dict):
+        return data
+    moved: dict[Any, Any] = {}
+    for name, controller in controllers.items():
+        value = controller.get("nominal") if isinstance(controller, dict) else None
+        if isinstance(value, str) and value:
+            controller = {**controller, "nominal": _relative_to(value, folder=folder, here=here)}
+        moved[name] = controller
+    return {**data, "controllers": moved}

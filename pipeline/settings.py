@@ -391,20 +391,34 @@ class Gains(dict[str, Any]):
 
 
 @dataclass(frozen=True)
+class NominalModelSettings(Contract):
+    """A controller's own nominal model file (params ``controllers.NAME.nominal``): the
+    path it was read from (``{seed}`` filled in) and the file's SHA-256."""
+
+    _where = "controller.nominal"
+
+    file: Text
+    sha256: Text
+
+
+@dataclass(frozen=True)
 class ControllerSettings(Contract):
     """The controller as run: its params name, registry type, every gain in effect, where
-    its code came from (``origin``: ``pipeline.control.controller_origin``) and where its
-    default gains were designed (``design``; None when they do not depend on it)."""
+    its code came from (``origin``: ``pipeline.control.controller_origin``), where its
+    default gains were designed (``design``; None when they do not depend on it) and its
+    own nominal model (``nominal``; None: its scenario's, recorded there)."""
 
     _where = "controller"
-    # bags written before issue 18: built-in; before issue 28: designed at q = 0
-    _may_be_absent = frozenset({"origin", "design"})
+    # bags written before issue 18: built-in; before issue 28: designed at q = 0, and no
+    # controller had a nominal model of its own (left out while None: the same bytes)
+    _may_be_absent = frozenset({"origin", "design", "nominal"})
 
     name: Text
     type: Text
     gains: Gains
     origin: Plain = field(default_factory=lambda: {"kind": "builtin"})
     design: GainDesign | None = None
+    nominal: NominalModelSettings | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.gains, Gains):  # a plain mapping (the recorder's dict)
@@ -602,6 +616,8 @@ class EpisodeSettings(Contract):
         out["scenario"] = self.scenario.recorded()
         out["safety"] = self.safety.to_dict()  # with its derived keys, for readers of the JSON
         out["plant"] = plant_as_recorded(out["plant"])
+        if out["controller"].get("nominal") is None:  # the scenario's: as before it existed
+            out["controller"].pop("nominal", None)
         return out
 
     @classmethod

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -25,6 +26,7 @@ from pipeline.settings import (
     GainDesign,
     Gains,
     LoopSettings,
+    NominalModelSettings,
     PlannerSettings,
     PlantSettings,
     ProtocolSettings,
@@ -222,6 +224,19 @@ def _published(scenario: ScenarioParams, drawn: DrawnFriction) -> dict[str, Any]
     return out
 
 
+def _own_nominal(episode: Episode) -> NominalModelSettings | None:
+    """The controller's own nominal model file as run (None: its scenario's)."""
+    import hashlib
+
+    from pipeline.identify.model_file import nominal_path
+
+    path = nominal_path(episode.controller.nominal, seed=episode.seed)
+    if path is None:
+        return None
+    digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    return NominalModelSettings(file=path, sha256=digest)
+
+
 def episode_settings(
     episode: Episode,
     *,
@@ -286,6 +301,7 @@ def episode_settings(
             gains=Gains(recorded_gains),
             origin=origin,
             design=design,
+            nominal=_own_nominal(episode),
         ),
         plant=plant,
         planner=PlannerSettings(

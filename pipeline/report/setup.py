@@ -210,7 +210,34 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
             for (ctrl, shown), members in grouped.items()
         ]
     lines.append(md.table(["episode", "controller", "gains and settings", "seed", "status"], rows))
-    return [*lines, *_design_lines(recs), *_origin_lines(recs)]
+    return [*lines, *_nominal_lines(recs), *_design_lines(recs), *_origin_lines(recs)]
+
+
+def _nominal_lines(recs: Sequence[Any]) -> list[str]:
+    """Which nominal model each controller ran on, when one has a model of its own
+    (params ``controllers.NAME.nominal``): the file and its SHA-256 as each bag records
+    them, the others on their scenario's (the robot description's CAD values, or the
+    scenario's ``nominal:``). No line when none has its own."""
+    shown: dict[str, list[str]] = {}
+    for rec in recs:
+        s = rec.settings
+        if s is None:
+            continue
+        own = s.controller.nominal
+        if own is not None:
+            text = f"`{own.file}` (SHA-256 {own.sha256[:16]}…)"
+        elif s.scenario.nominal is not None:
+            text = f"the scenario's `nominal: {s.scenario.nominal}`"
+        else:
+            text = "the robot description's (CAD) values"
+        seen = shown.setdefault(rec.controller, [])
+        if text not in seen:
+            seen.append(text)
+    if not any(r.settings is not None and r.settings.controller.nominal for r in recs):
+        return []
+    return ["", "Nominal model per controller (what its model-based terms and gains use):", ""] + [
+        f"- {name}: {'; '.join(texts)}." for name, texts in shown.items()
+    ]
 
 
 def _origin_lines(recs: Sequence[Any]) -> list[str]:

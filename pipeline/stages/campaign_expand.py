@@ -242,7 +242,7 @@ def _controller_for(
                 for derived in _tuned_keys(base.type, robot):
                     gains.pop(derived, None)
             gains[key] = axis.values[i]
-    return ControllerParams(type=base.type, gains=gains)
+    return ControllerParams(type=base.type, gains=gains, nominal=base.nominal)
 
 
 @functools.cache

@@ -118,6 +118,14 @@ def run_one(
     return EpisodeOutcome(**{**asdict(outcome), "wall_s": time.perf_counter() - wall0})
 
 
+def controller_nominal(episode: Episode) -> tuple[str | None, str]:
+    """The nominal model path the episode's controller runs on (its own ``nominal:``, else
+    its scenario's; None: the robot description's CAD values) and where it is set."""
+    if episode.controller.nominal is not None:
+        return episode.controller.nominal, f"controllers.{episode.controller_name}"
+    return episode.scenario.nominal, f"scenarios.{episode.scenario_name}"
+
+
 def _run_and_write(
     episode: Episode,
     path: PlannedPath,
@@ -134,10 +142,10 @@ def _run_and_write(
     from pipeline.control.controller import with_planned_path
     from pipeline.identify.model_file import nominal_path, nominal_spec, with_nominal_friction
 
-    scenario = episode.scenario
-    spec = scenario_spec(scenario)
-    model_path = nominal_path(scenario.nominal, seed=episode.seed)
-    nominal = nominal_spec(spec, model_path, where=f"scenarios.{episode.scenario_name}")
+    spec = scenario_spec(episode.scenario)
+    given, where = controller_nominal(episode)  # the controller's own, else its scenario's
+    model_path = nominal_path(given, seed=episode.seed)
+    nominal = nominal_spec(spec, model_path, where=where)
     with contained_controller(
         episode.controller.type,
         lambda: make_controller(

@@ -83,6 +83,7 @@ def validate_episodes(params: Params, episodes: Sequence[Episode]) -> None:
                 )
         _check_loop(params, episode, where)
         _check_profile(params, spec, scenario, where)
+        _check_own_nominal(params, spec, episode)
         build = functools.partial(
             make_controller,
             episode.controller.type,
@@ -104,6 +105,22 @@ def validate_episodes(params: Params, episodes: Sequence[Episode]) -> None:
                     if str(err).startswith(params.source):
                         raise
                     raise ParamsError(f"{where_type}.type: {err}") from err
+
+
+def _check_own_nominal(params: Params, spec: Any, episode: Episode) -> None:
+    """A controller's own ``nominal:`` model file that is missing, unreadable or of another
+    robot: refused before any work (one line naming the field)."""
+    from pipeline.errors import IdentificationError
+    from pipeline.identify.model_file import nominal_path, nominal_spec
+
+    if episode.controller.nominal is None:
+        return
+    where = f"{params.source}: controllers.{episode.controller_name}"
+    try:
+        nominal_spec(spec, nominal_path(episode.controller.nominal, seed=episode.seed), where=where)
+    except IdentificationError as err:
+        text = str(err)
+        raise ParamsError(text if text.startswith(where) else f"{where}.nominal: {text}") from err
 
 
 def _check_profile(params: Params, spec: Any, scenario: Any, where: str) -> None:
