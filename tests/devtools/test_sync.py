@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from pipeline.devtools import sync
@@ -79,3 +81,13 @@ def test_check_names_a_stale_file_and_the_command(tmp_path, monkeypatch, capsys)
     monkeypatch.setattr(sync, "generated", lambda: {"dvc.yaml": "something else\n"})
     assert sync.main(["--check"]) == 1
     assert "dvc.yaml is stale: run `make sync`" in capsys.readouterr().err
+
+
+def test_reader_roles_wrap_to_100_columns_and_join_back_to_the_roles() -> None:
+    from pipeline.devtools.sync import reader_roles_lines
+
+    roles = ", ".join(f"role_number_{k}" for k in range(12))  # 180 characters
+    lines = reader_roles_lines(roles, indent=4)
+    assert len(lines) > 1
+    assert all(4 + len(line) <= 100 for line in lines)
+    assert "".join(json.loads(line) for line in lines) == roles
