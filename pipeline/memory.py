@@ -8,12 +8,14 @@ too small for this run.
 
 from __future__ import annotations
 
+import errno
 import os
 
 __all__ = ["OUT_OF_MEMORY_HINT", "out_of_memory", "quiet_unraisable_memory_errors"]
 
 _OOM_TEXTS = ("failed to map segment", "cannot allocate memory", "out of memory")
-_ALLOC_TEXTS = ("could not allocate memory", "cannot allocate memory")
+# a thread's stack that cannot be mapped ("can't start new thread") is the same shortage
+_ALLOC_TEXTS = ("could not allocate memory", "cannot allocate memory", "can't start new thread")
 
 OUT_OF_MEMORY_HINT = "raise the memory limit (ulimit -v), or use fewer --jobs"
 
@@ -26,6 +28,8 @@ def out_of_memory(err: BaseException) -> str | None:
     while cause is not None and id(cause) not in seen:
         seen.add(id(cause))
         if isinstance(cause, MemoryError):
+            return "out of memory"
+        if isinstance(cause, OSError) and cause.errno == errno.ENOMEM:  # e.g. an import's scan
             return "out of memory"
         text = str(cause).lower()
         if isinstance(cause, ImportError) and any(t in text for t in _OOM_TEXTS):

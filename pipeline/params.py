@@ -725,3 +725,12 @@ def _controller_paths_from(data: dict[str, Any], *, folder: Path, here: Path) ->
             controller = {**controller, "nominal": _relative_to(value, folder=folder, here=here)}
         moved[name] = controller
     return {**data, "controllers": moved}
+
+
+SEED_FIELD = "{seed}"
+"""In a scenario's ``nominal:`` path, the episode's seed: each drawn plant's own model."""
+
+
+def nominal_path(path: str | None, *, seed: int) -> str | None:
+    """A `nominal:` path (a scenario's or a controller's) for the episode of `seed`."""
+    return None if path is None else path.replace(SEED_FIELD, str(seed))

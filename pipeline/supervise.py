@@ -50,6 +50,14 @@ def mark_exit_when_python_exits() -> None:
         atexit.register(Path(mark).write_text, "python exit\n")
 
 
+def write_exit_mark() -> None:
+    """In the supervised child: write the exit mark now (before an ``os._exit``)."""
+    mark = os.environ.get(MARK_ENV)
+    if mark:
+        with contextlib.suppress(OSError):
+            Path(mark).write_text("python exit\n")
+
+
 def _die_with_parent() -> None:  # runs in the child between fork and exec
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)

@@ -34,6 +34,7 @@ from pipeline.cli import (  # noqa: F401
 )
 
 # isort: on
+from pipeline import supervise
 from pipeline.errors import (
     EXIT_INTERRUPTED,
     EXIT_TERMINATED,
@@ -125,6 +126,8 @@ def main() -> None:
             raise
         _stop(interrupt)
     except OSError as err:
+        if not debug and out_of_memory(err):  # ENOMEM, e.g. an import's directory scan
+            _out_of_memory(err)
         # a full or failing disk on a write path no stage turned into a PipelineError
         if debug or err.errno not in _DISK_ERRNOS:
             raise
@@ -150,4 +153,9 @@ def _out_of_memory(err: BaseException) -> NoReturn:
     """One line for a run that ran out of memory (a MemoryError, or a library that could not
     be loaded for lack of it), and exit 1."""
     sys.stderr.write(f"error: {out_of_memory(err)}: {OUT_OF_MEMORY_HINT}\n")
-    sys.exit(1)
+    sys.stderr.flush()
+    sys.stdout.flush()
+    # Out of memory, the libraries' own teardown may crash (Polars' allocator, after a
+    # thread it could not start): end here, with the exit mark a supervisor waits for
+    supervise.write_exit_mark()
+    os._exit(1)

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from pipeline import __version__
-from pipeline.params import Episode, RecordedScenario, ScenarioParams
+from pipeline.params import Episode, RecordedScenario, ScenarioParams, nominal_path
 from pipeline.planning import PlannedPath, TimedTrajectory
 from pipeline.robots.recorded import robot_to_dict
 from pipeline.robots.spec import RobotSpec
@@ -227,8 +227,6 @@ def _published(scenario: ScenarioParams, drawn: DrawnFriction) -> dict[str, Any]
 def _own_nominal(episode: Episode) -> NominalModelSettings | None:
     """The controller's own nominal model file as run (None: its scenario's)."""
     import hashlib
-
-    from pipeline.identify.model_file import nominal_path
 
     path = nominal_path(episode.controller.nominal, seed=episode.seed)
     if path is None:

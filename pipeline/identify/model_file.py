@@ -44,6 +44,8 @@ import numpy as np
 import yaml
 
 from pipeline.errors import IdentificationError, PipelineError
+from pipeline.params import SEED_FIELD as SEED_FIELD
+from pipeline.params import nominal_path as nominal_path
 from pipeline.robots.dh_yaml import parse_spec
 from pipeline.robots.spec import Inertial, RobotSpec
 from pipeline.yamlio import parse_yaml
@@ -377,15 +379,6 @@ def load_model(path: str | Path, *, robot: RobotSpec | None = None) -> Identifie
         identification=ident if isinstance(ident, dict) else {},
         torque_side=str(side),
     )
-
-
-SEED_FIELD = "{seed}"
-"""In a scenario's ``nominal:`` path, the episode's seed: each drawn plant's own model."""
-
-
-def nominal_path(path: str | None, *, seed: int) -> str | None:
-    """A scenario's ``nominal:`` path for the episode of ``seed`` (``{seed}`` filled in)."""
-    return None if path is None else path.replace(SEED_FIELD, str(seed))
 
 
 def nominal_spec(spec: RobotSpec, path: str | None, *, where: str = "nominal") -> RobotSpec:
