@@ -17,6 +17,9 @@ _OOM_TEXTS = ("failed to map segment", "cannot allocate memory", "out of memory"
 # a thread's stack that cannot be mapped ("can't start new thread") is the same shortage
 _ALLOC_TEXTS = ("could not allocate memory", "cannot allocate memory", "can't start new thread")
 
+# CPython's SystemError when an allocation failed inside an import (both wordings seen)
+_NO_EXCEPTION_TEXTS = ("NULL without setting an exception", "error return without exception set")
+
 OUT_OF_MEMORY_HINT = "raise the memory limit (ulimit -v), or use fewer --jobs"
 
 
@@ -37,7 +40,7 @@ def out_of_memory(err: BaseException) -> str | None:
             return f"out of memory while loading {os.path.basename(library) or cause.name}"
         if any(t in text for t in _ALLOC_TEXTS):  # MuJoCo's FatalError, among others
             return f"out of memory ({type(cause).__name__}: {str(cause)[:80]})"
-        if isinstance(cause, SystemError) and "NULL without setting an exception" in str(cause):
+        if isinstance(cause, SystemError) and any(t in str(cause) for t in _NO_EXCEPTION_TEXTS):
             return "out of memory (the interpreter failed inside an import)"
         cause = cause.__cause__ or cause.__context__
     return None

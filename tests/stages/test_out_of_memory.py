@@ -83,3 +83,24 @@ def test_what_counts_as_out_of_memory():
         assert out_of_memory(outer) == "out of memory"
     assert out_of_memory(ImportError("No module named 'x'")) is None
     assert out_of_memory(ValueError("bad value")) is None
+
+
+@pytest.mark.parametrize(
+    "err",
+    [
+        SystemError("error return without exception set"),
+        SystemError("<built-in function x> returned NULL without setting an exception"),
+        OSError(12, "Cannot allocate memory"),
+        RuntimeError("can't start new thread"),
+    ],
+)
+def test_the_shortages_seen_under_an_address_limit_read_as_out_of_memory(err):
+    # each was seen as the first failure of `report` under RLIMIT_AS (CI logs)
+    assert out_of_memory(err) is not None
+
+
+@pytest.mark.parametrize(
+    "err", [SystemError("bad call"), OSError(28, "No space left on device"), RuntimeError("x")]
+)
+def test_other_failures_are_not_called_out_of_memory(err):
+    assert out_of_memory(err) is None
