@@ -4,12 +4,18 @@ Python says ``MemoryError``; a C extension whose shared library cannot be mapped
 address-space limit (``ulimit -v``) says ``ImportError: ... failed to map segment`` or
 ``cannot allocate memory``. Both mean the same to the user: the machine (or the limit) is
 too small for this run.
+
+The wording of such failures varies by library and CPython version, so the wordings seen
+are only the fallback. The check that does not depend on wording: an address-space limit
+(``RLIMIT_AS``) is set and this process is within ``_NEAR_LIMIT_BYTES`` of it, and the
+failure is of a kind an allocation can cause (an import, a thread start, a SystemError).
 """
 
 from __future__ import annotations
 
 import errno
 import os
+import resource
 
 __all__ = ["OUT_OF_MEMORY_HINT", "out_of_memory", "quiet_unraisable_memory_errors"]
 
@@ -20,7 +26,38 @@ _ALLOC_TEXTS = ("could not allocate memory", "cannot allocate memory", "can't st
 # CPython's SystemError when an allocation failed inside an import (both wordings seen)
 _NO_EXCEPTION_TEXTS = ("NULL without setting an exception", "error return without exception set")
 
+# an allocation that failed was at most this large (a shared library's segment, a thread's
+# 8 MiB stack, an arena): closer than this to the limit, the limit is the likely cause
+_NEAR_LIMIT_BYTES = 256 * 1024 * 1024
+# the failures an allocation can cause without saying so (wording aside)
+_ALLOCATION_KINDS: tuple[type[BaseException], ...] = (ImportError, SystemError, RuntimeError)
+
 OUT_OF_MEMORY_HINT = "raise the memory limit (ulimit -v), or use fewer --jobs"
+
+
+def near_address_limit(*, used_bytes: int | None = None, limit_bytes: int | None = None) -> bool:
+    """Whether an address-space limit is set and ``used_bytes`` (default: this process's
+    virtual size now) is within ``_NEAR_LIMIT_BYTES`` of it (default: ``RLIMIT_AS``)."""
+    if limit_bytes is None:
+        soft, _hard = resource.getrlimit(resource.RLIMIT_AS)
+        limit_bytes = None if soft == resource.RLIM_INFINITY else soft
+    if limit_bytes is None:
+        return False
+    if used_bytes is None:
+        used_bytes = _virtual_size_bytes()
+        if used_bytes is None:
+            return False
+    return used_bytes + _NEAR_LIMIT_BYTES >= limit_bytes
+
+
+def _virtual_size_bytes() -> int | None:
+    """This process's virtual size (Linux ``/proc/self/statm``); None where unreadable."""
+    try:
+        with open("/proc/self/statm", encoding="ascii") as statm:
+            pages = int(statm.read().split()[0])
+    except (OSError, ValueError, IndexError):
+        return None
+    return pages * os.sysconf("SC_PAGE_SIZE")
 
 
 def out_of_memory(err: BaseException) -> str | None:
@@ -43,7 +80,21 @@ def out_of_memory(err: BaseException) -> str | None:
         if isinstance(cause, SystemError) and any(t in str(cause) for t in _NO_EXCEPTION_TEXTS):
             return "out of memory (the interpreter failed inside an import)"
         cause = cause.__cause__ or cause.__context__
+    if _caused_by_allocation(err) and near_address_limit():
+        return f"out of memory (at the address-space limit: {type(err).__name__})"
     return None
+
+
+def _caused_by_allocation(err: BaseException) -> bool:
+    """Whether ``err`` or its cause chain is of a kind a failed allocation can raise."""
+    seen: set[int] = set()
+    cause: BaseException | None = err
+    while cause is not None and id(cause) not in seen:
+        seen.add(id(cause))
+        if isinstance(cause, _ALLOCATION_KINDS):
+            return True
+        cause = cause.__cause__ or cause.__context__
+    return False
 
 
 def quiet_unraisable_memory_errors() -> None:

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from pipeline.memory import out_of_memory
+from pipeline.memory import near_address_limit, out_of_memory
 from tests.analysis.bagfactory import paper_like, write_bag
 
 REPO = Path(__file__).resolve().parents[2]
@@ -104,3 +104,37 @@ def test_the_shortages_seen_under_an_address_limit_read_as_out_of_memory(err):
 )
 def test_other_failures_are_not_called_out_of_memory(err):
     assert out_of_memory(err) is None
+
+
+def test_near_the_address_limit_is_told_apart_from_far_below_it():
+    mib = 1024 * 1024
+    assert near_address_limit(used_bytes=900 * mib, limit_bytes=1000 * mib)
+    assert not near_address_limit(used_bytes=100 * mib, limit_bytes=1000 * mib)
+
+
+_UNKNOWN_WORDING = """
+import resource, sys
+from pipeline.memory import _virtual_size_bytes, out_of_memory
+used = _virtual_size_bytes()
+err = ImportError("libfoo.so: some wording no one has seen yet")
+print("unlimited:", out_of_memory(err))
+resource.setrlimit(resource.RLIMIT_AS, (used + 64 * 1024 * 1024, resource.RLIM_INFINITY))
+print("at limit:", out_of_memory(err))
+print("other kind:", out_of_memory(ValueError("bad value")))
+"""
+
+
+def test_an_import_that_fails_at_the_address_limit_is_out_of_memory_whatever_its_wording():
+    # a real RLIMIT_AS in a child: the same unknown wording is out of memory only at the limit
+    done = subprocess.run(
+        [sys.executable, "-c", _UNKNOWN_WORDING],
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    )
+    lines = dict(line.split(": ", 1) for line in done.stdout.splitlines())
+    assert lines["unlimited"] == "None"
+    assert lines["at limit"].startswith("out of memory (at the address-space limit")
+    assert lines["other kind"] == "None"
