@@ -26,6 +26,17 @@ def dynamic_robot(request: pytest.FixtureRequest) -> RobotSpec:
     return load_spec(request.param)
 
 
+@pytest.fixture(scope="session")
+def panda_xml(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """example-robot-data's Panda as an MJCF file (:func:`tests.robots.panda_files.panda_mjcf`);
+    skipped without example-robot-data."""
+    from tests.robots.panda_files import ERD, panda_mjcf
+
+    if ERD is None:
+        pytest.skip("example-robot-data is not installed")
+    return panda_mjcf(tmp_path_factory.mktemp("panda_mjcf"))
+
+
 # --- running on several workers (`pytest -n 2 --dist loadscope`, pytest-xdist) ----------------
 #
 # A shared fixture is made once per worker process, so each test module goes to one worker

@@ -32,6 +32,11 @@ does not see its neighbours):
 - ``joint_states`` frame: ``time_s``, ``velocity_rad_s``, ``effort_nm``,
   ``commanded_effort_nm``, ``effort_limit_nm`` and ``saturated`` (at the limit or clipped;
   null where no effort was recorded).
+- both frames also carry the columns of the topics paired with the controller state
+  (:data:`pipeline.log.topics.PAIRED_COLUMNS`, from the rows of
+  :data:`pipeline.log.topics.TOPICS`: ``true_position_rad``, ``true_velocity_rad_s``),
+  null where the recording lacks the topic: a metric of a new topic's column needs no
+  other edit.
 - ``tcp`` frame (task space, joint :data:`pipeline.analysis.task_space.TCP`):
   ``time_s``, ``position_error_mm``, ``orientation_error_mrad`` (FK of the reference vs the
   position the joint metrics use) plus ``completed`` and ``in_final`` as above.

@@ -38,6 +38,7 @@ from pipeline.analysis.episodes import comparable
 from pipeline.analysis.task_space import TaskSpace, tcp_errors
 from pipeline.constants import FINAL_EDGE_S, FINAL_WINDOW_S
 from pipeline.errors import ReportError, unknown_name_message
+from pipeline.log.topics import PAIRED_COLUMNS
 
 __all__ = [
     "COMPARED_METRICS",
@@ -88,10 +89,20 @@ def _episode_columns(episodes: pl.DataFrame, final_window_s: float) -> pl.DataFr
 
 
 def _time_sorted(frame: pl.DataFrame) -> pl.DataFrame:
-    # Every order-dependent partial (first/last, the settling scan, the peak's time) needs
-    # time order within an (episode, joint) group; a stable sort keeps the joints in
-    # recorded order.
-    return frame.sort("episode", "time_s", maintain_order=True)
+    """``frame`` in time order, with every paired topic's column.
+
+    Every order-dependent partial (first/last, the settling scan, the peak's time) needs
+    time order within an (episode, joint) group; a stable sort keeps the joints in
+    recorded order. The columns the topic rows pair with the controller state
+    (:data:`pipeline.log.topics.PAIRED_COLUMNS`) are taken from the rows, so a metric can
+    read a new topic's column with no edit here: a frame made without one (not read by
+    :mod:`pipeline.log.reader`) gets it as nulls, "not recorded", as the reader gives a
+    recording without the topic.
+    """
+    absent = [c for c in PAIRED_COLUMNS if c not in frame.columns]
+    return frame.with_columns(pl.lit(None, pl.Float64).alias(c) for c in absent).sort(
+        "episode", "time_s", maintain_order=True
+    )
 
 
 def _prepared_controller_states(

@@ -57,8 +57,10 @@ __all__ = [
     "WANT",
     "Fill",
     "Topic",
+    "paired_columns",
     "tf_poses",
     "tf_sample_indices",
+    "want_by_type",
 ]
 
 I64 = NDArray[np.int64]
@@ -314,9 +316,57 @@ TOPICS: tuple[Topic, ...] = (
           paired={"true_position_rad": "position", "true_velocity_rad_s": "velocity"}),
 )  # fmt: skip
 
-# What to decode of each control-rate message type (its rows' ``want``: one per type, as
-# the reader finds a role's topic by type too).
-WANT: dict[str, Want] = {t.type: t.want for t in TOPICS if t.want is not None}
+
+def want_by_type(rows: tuple[Topic, ...]) -> dict[str, Want]:
+    """What the reader decodes of each control-rate message type: its rows' ``want``.
+
+    The reader decodes a channel by its type (a role's topic may be found by type, before
+    any role is chosen), so every row of one type must want the same leaves: a second
+    row of a type already read that asks for others is refused here, at import, naming
+    both rows (else the last row's decode would silently serve both).
+
+    Raises:
+        ValueError: two rows of one type with different wants.
+    """
+    wants: dict[str, tuple[str, Want]] = {}
+    for t in rows:
+        if t.want is None:
+            continue
+        first = wants.setdefault(t.type, (t.name, t.want))
+        if first[1] != t.want:
+            raise ValueError(
+                f"pipeline/log/topics.py: {t.name} wants other leaves of {t.type} than "
+                f"{first[0]}; the reader decodes a message type one way: give both rows "
+                "one want (a superset of both)"
+            )
+    return {type_name: want for type_name, (_, want) in wants.items()}
+
+
+def paired_columns(rows: tuple[Topic, ...]) -> tuple[str, ...]:
+    """The frame columns the rows' ``paired`` add, in row order.
+
+    Raises:
+        ValueError: a column added twice, or taken from an array its row does not decode.
+    """
+    columns: dict[str, str] = {}
+    for t in rows:
+        for column, key in (t.paired or {}).items():
+            if column in columns:
+                raise ValueError(
+                    f"pipeline/log/topics.py: {t.name} pairs column {column!r}, "
+                    f"already paired by {columns[column]}"
+                )
+            if t.want is None or key not in t.want.arrays:
+                raise ValueError(
+                    f"pipeline/log/topics.py: {t.name} pairs {column!r} from {key!r}, "
+                    "not an array its want decodes"
+                )
+            columns[column] = t.name
+    return tuple(columns)
+
+
+# What to decode of each control-rate message type (one per type: :func:`want_by_type`).
+WANT: dict[str, Want] = want_by_type(TOPICS)
 
 # The order the reader picks roles in and lists them (errors, ``--topic`` help): the
 # control-rate ones first. A role not listed here comes after these.
@@ -343,4 +393,4 @@ OUR_TOPICS = frozenset(t.name for t in ROLES.values())
 
 # The roles read at the controller state's stamps, and the frame columns they add.
 PAIRED: dict[str, Topic] = {r: t for r, t in ROLES.items() if t.paired is not None}
-PAIRED_COLUMNS: tuple[str, ...] = tuple(c for t in PAIRED.values() for c in t.paired or {})
+PAIRED_COLUMNS: tuple[str, ...] = paired_columns(tuple(PAIRED.values()))

@@ -27,7 +27,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
-from xml.etree import ElementTree
 from xml.sax.saxutils import quoteattr
 
 import mujoco
@@ -37,6 +36,7 @@ from numpy.typing import NDArray
 from pipeline.errors import PipelineError, SpecError
 from pipeline.fileio import atomic_write_bytes
 from pipeline.model.mjcf import build_mjcf
+from pipeline.robots.link_geometry import link_edges
 from pipeline.robots.spec import RobotSpec
 
 __all__ = [
@@ -106,20 +106,6 @@ def sample_configurations(spec: RobotSpec, samples: int, seed: int) -> F64:
     rng = np.random.default_rng(seed)
     out: F64 = rng.uniform(spec.lower, spec.upper, size=(samples, spec.dof))
     return out
-
-
-def _link_graph(spec: RobotSpec) -> list[tuple[str, str]]:
-    """Parent-child link pairs of every joint: the URDF's own (fixed joints included), or
-    the bodies' chain for a robot given otherwise."""
-    if spec.format == "urdf" and spec.description:
-        root = ElementTree.fromstring(spec.description)
-        edges = []
-        for el in root.findall("joint"):
-            parent, child = el.find("parent"), el.find("child")
-            if parent is not None and child is not None:
-                edges.append((parent.get("link") or "", child.get("link") or ""))
-        return edges
-    return list(spec.adjacent_pairs)
 
 
 def adjacent_links(edges: list[tuple[str, str]], links: set[str]) -> set[tuple[str, str]]:
@@ -213,7 +199,7 @@ def collision_matrix(
         return codes
 
     reasons: dict[tuple[str, str], Reason] = {}
-    for pair in sorted(adjacent_links(_link_graph(spec), set(links))):
+    for pair in sorted(adjacent_links(link_edges(spec), set(links))):
         reasons[pair] = "Adjacent"
     # the default configuration: body pairs from MuJoCo, links sharing a body by distance
     data.qpos[:] = default_configuration(spec)

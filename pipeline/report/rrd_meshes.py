@@ -20,6 +20,7 @@ from pipeline.robots import RobotSpec
 from pipeline.robots.link_geometry import (
     RERUN_MESH_SUFFIXES,
     LinkGeometry,
+    has_link_geometry,
     link_geometry,
     rerun_geometry,
 )
@@ -80,11 +81,12 @@ def drawn_geometry(spec: RobotSpec) -> tuple[tuple[LinkGeometry, ...], str]:
 
 
 def link_meshes(spec: RobotSpec, q: NDArray[np.float64]) -> LinkMeshes | None:
-    """The mesh arm at each row of ``q``; None for a robot that is not a URDF. A URDF
-    robot whose geometry cannot be drawn (a mesh file not on this machine: the bag carries
-    the robot, its meshes by path only) gets no geometry and a note saying why: capsules
-    then, with the note."""
-    if spec.format != "urdf":
+    """The mesh arm at each row of ``q``; None for a robot whose format describes no link
+    geometry (:func:`pipeline.robots.link_geometry.has_link_geometry`). A robot whose
+    geometry cannot be drawn (a mesh file not on this machine: the bag carries the robot,
+    its meshes by path only) gets no geometry and a note saying why: capsules then, with
+    the note."""
+    if not has_link_geometry(spec):
         return None
     links = (spec.base_link, *(j.link for j in spec.joints))
     try:

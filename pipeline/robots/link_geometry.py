@@ -1,15 +1,25 @@
-"""A URDF robot's link geometry (visual or collision) on the arm's link frames, for the
-viewers: ``teach`` (viser) and the report's ``.rrd`` (Rerun).
+"""A robot's link geometry (visual or collision) on the arm's link frames, for the
+viewers (``teach``'s viser scene, the report's ``.rrd``), and its link graph, for the
+collision matrix: what a robot file format describes beyond the :class:`RobotSpec`.
 
-Each ``<visual>``/``<collision>`` of the robot's URDF (:attr:`RobotSpec.description`) is
-placed on the link frame that carries it: the base (owner -1) or the link moved by joint
-``i`` (owner ``i``, the frame :func:`pipeline.model.dh.link_frames` poses). Links merged
-into another (fixed joints, locked fingers) are carried by their owner through their
-:attr:`RobotSpec.frames` pose. ``package://`` resolves as the loader resolves it.
+A format that describes link geometry registers a :class:`FormatGeometry` in
+:data:`pipeline.robots.loaders.GEOMETRY` (keyed by :attr:`RobotSpec.format`); nothing
+outside this module and the loaders asks which format a robot came from. A format
+without an entry (DH YAML, MJCF) has no link geometry: the viewers draw capsules, the
+collision matrix takes the joints' bodies as the link graph.
+
+URDF (:data:`URDF_GEOMETRY`): each ``<visual>``/``<collision>`` of the robot's URDF
+(:attr:`RobotSpec.description`) is placed on the link frame that carries it: the base
+(owner -1) or the link moved by joint ``i`` (owner ``i``, the frame
+:func:`pipeline.model.dh.link_frames` poses). Links merged into another (fixed joints,
+locked fingers) are carried by their owner through their :attr:`RobotSpec.frames` pose.
+``package://`` resolves as the loader resolves it.
 """
 
 from __future__ import annotations
 
+import importlib
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -22,7 +32,18 @@ from pipeline.errors import SpecError
 from pipeline.robots.spec import RobotSpec, pose_matrix
 from pipeline.robots.urdf_loader import urdf_geometry, xml_floats, xml_origin
 
-__all__ = ["RERUN_MESH_SUFFIXES", "GeometryKind", "LinkGeometry", "link_geometry", "rerun_geometry"]
+__all__ = [
+    "RERUN_MESH_SUFFIXES",
+    "URDF_GEOMETRY",
+    "FormatGeometry",
+    "GeometryKind",
+    "LinkGeometry",
+    "format_geometry",
+    "has_link_geometry",
+    "link_edges",
+    "link_geometry",
+    "rerun_geometry",
+]
 
 GeometryKind = Literal["visual", "collision"]
 # What rr.Asset3D reads (Rerun 0.41); COLLADA (.dae), common in URDFs, is not among them.
@@ -66,16 +87,71 @@ def _owners(spec: RobotSpec) -> dict[str, tuple[int, NDArray[np.float64]]]:
     return out
 
 
+@dataclass(frozen=True)
+class FormatGeometry:
+    """What a robot file format describes beyond the :class:`RobotSpec`, registered in
+    :data:`pipeline.robots.loaders.GEOMETRY` under the format's :attr:`RobotSpec.format`.
+
+    Attributes:
+        links: ``(spec, kind, package_path)`` -> every ``kind`` element (visual or
+            collision) of the robot's links, on the arm's link frames (() if none).
+            Raises :class:`SpecError` (one line) for geometry it cannot resolve.
+        edges: ``spec`` -> the parent-child link pairs of every joint of the description
+            (fixed ones included); None: the description does not give them (then the
+            joints' bodies, :attr:`RobotSpec.adjacent_pairs`).
+    """
+
+    links: Callable[[RobotSpec, GeometryKind, tuple[str, ...]], tuple[LinkGeometry, ...]]
+    edges: Callable[[RobotSpec], list[tuple[str, str]] | None]
+
+
+def format_geometry(spec: RobotSpec) -> FormatGeometry | None:
+    """The registered geometry of ``spec``'s file format; None for a format without
+    (:data:`pipeline.robots.loaders.GEOMETRY`)."""
+    from pipeline.robots.loaders import GEOMETRY
+
+    entry = GEOMETRY.get(spec.format)
+    if entry is None:
+        return None
+    module, name = entry.split(":")
+    found = getattr(importlib.import_module(module), name)
+    if not isinstance(found, FormatGeometry):
+        raise TypeError(f"pipeline.robots.loaders.GEOMETRY: {entry} is not a FormatGeometry")
+    return found
+
+
+def has_link_geometry(spec: RobotSpec) -> bool:
+    """Whether ``spec``'s file format describes link geometry (the viewers then draw its
+    links' meshes and primitives instead of capsules)."""
+    return format_geometry(spec) is not None
+
+
 def link_geometry(
     spec: RobotSpec, kind: GeometryKind, *, package_path: tuple[str, ...] = ()
 ) -> tuple[LinkGeometry, ...]:
-    """Every ``<kind>`` element of a URDF robot's links, on the arm's link frames; () for a
-    robot that is not a URDF.
+    """Every ``<kind>`` element of the robot's links, on the arm's link frames; () for a
+    robot whose format describes no link geometry.
 
     Raises:
         SpecError: an unresolved ``package://`` or a missing mesh file (one line).
     """
-    if spec.format != "urdf" or not spec.description:
+    geometry = format_geometry(spec)
+    return () if geometry is None else geometry.links(spec, kind, package_path)
+
+
+def link_edges(spec: RobotSpec) -> list[tuple[str, str]]:
+    """Parent-child link pairs of every joint: the description's own (fixed joints
+    included) where its format gives them, else the bodies' chain."""
+    geometry = format_geometry(spec)
+    edges = None if geometry is None else geometry.edges(spec)
+    return list(spec.adjacent_pairs) if edges is None else edges
+
+
+def _urdf_links(
+    spec: RobotSpec, kind: GeometryKind, package_path: tuple[str, ...]
+) -> tuple[LinkGeometry, ...]:
+    """Every ``<kind>`` element of a URDF robot's links (() without its URDF text)."""
+    if not spec.description:
         return ()
     source = spec.source
     try:
@@ -104,6 +180,23 @@ def link_geometry(
     return tuple(out)
 
 
+def _urdf_edges(spec: RobotSpec) -> list[tuple[str, str]] | None:
+    """The URDF's own parent-child links of every joint (fixed joints included)."""
+    if not spec.description:
+        return None
+    root = ElementTree.fromstring(spec.description)
+    edges = []
+    for el in root.findall("joint"):
+        parent, child = el.find("parent"), el.find("child")
+        if parent is not None and child is not None:
+            edges.append((parent.get("link") or "", child.get("link") or ""))
+    return edges
+
+
+URDF_GEOMETRY = FormatGeometry(links=_urdf_links, edges=_urdf_edges)
+"""A URDF's ``<visual>``/``<collision>`` elements and joint graph."""
+
+
 def _colour(el: ElementTree.Element, where: str) -> tuple[float, float, float, float] | None:
     colour = el.find("material/color")
     if colour is None:
@@ -115,9 +208,10 @@ def _colour(el: ElementTree.Element, where: str) -> tuple[float, float, float, f
 def rerun_geometry(
     spec: RobotSpec, *, package_path: tuple[str, ...] = ()
 ) -> tuple[LinkGeometry, ...]:
-    """What the ``.rrd`` draws of a URDF robot: each link's visual geometry where Rerun
-    loads all of its meshes (:data:`RERUN_MESH_SUFFIXES`), else that link's collision
-    geometry (its meshes Rerun cannot load left out); () for a robot that is not a URDF.
+    """What the ``.rrd`` draws of a robot: each link's visual geometry where Rerun loads
+    all of its meshes (:data:`RERUN_MESH_SUFFIXES`), else that link's collision geometry
+    (its meshes Rerun cannot load left out); () for a robot whose format describes no
+    link geometry.
 
     Raises:
         SpecError: an unresolved ``package://`` or a missing mesh file (one line).

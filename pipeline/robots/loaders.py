@@ -1,7 +1,8 @@
 """Loading a robot: by built-in name or by path, through one loader per file format.
 
 :data:`LOADERS` maps a file suffix to its loader; adding a format is one loader file and
-one entry there. Loaded robots are cached per process (per file content for paths).
+one entry there (and, for a format with link meshes or primitives, one in
+:data:`GEOMETRY`). Loaded robots are cached per process (per file content for paths).
 """
 
 from __future__ import annotations
@@ -40,6 +41,15 @@ LOADERS: dict[str, str] = {
 }
 """Robot file loaders by suffix, ``module:function`` taking ``(path, *, package_path)`` and
 returning a :class:`RobotSpec`: a new format is one loader file and one entry here."""
+
+GEOMETRY: dict[str, str] = {
+    "urdf": "pipeline.robots.link_geometry:URDF_GEOMETRY",
+}
+"""Link geometry by :attr:`RobotSpec.format`, ``module:name`` of a
+:class:`pipeline.robots.link_geometry.FormatGeometry`: the links' visual and collision
+geometry the viewers draw and the link graph the collision matrix walks. A format that
+describes meshes or primitives adds its entry here (its FormatGeometry beside its
+loader); one without (DH YAML, MJCF) is drawn as capsules."""
 
 
 def loader_suffix(path: Path) -> str | None:

@@ -81,6 +81,7 @@ RECORD_CODE = (
     "robots/dh_yaml.py",
     "robots/facts.py",
     "robots/link_facts.py",
+    "robots/link_geometry.py",
     "robots/loaders.py",
     "robots/mdh_example.yaml",
     "robots/mjcf_loader.py",

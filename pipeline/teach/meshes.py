@@ -16,7 +16,7 @@ import trimesh
 from pipeline import transforms as tf
 from pipeline.errors import SpecError
 from pipeline.robots import RobotSpec
-from pipeline.robots.link_geometry import LinkGeometry, link_geometry
+from pipeline.robots.link_geometry import LinkGeometry, has_link_geometry, link_geometry
 from pipeline.robots.mesh_glb import mesh_glb
 
 __all__ = ["add_link_meshes", "geometry_node"]
@@ -44,15 +44,16 @@ def _primitive(g: LinkGeometry) -> Any:
 def add_link_meshes(
     scene: Any, spec: RobotSpec, node: Callable[[int], str]
 ) -> tuple[list[Any], str]:
-    """Add a URDF robot's visual geometry to ``scene`` (a viser ``SceneApi``) under the
+    """Add a robot's visual geometry to ``scene`` (a viser ``SceneApi``) under the
     link-frame nodes ``node(i)`` (``i`` = 0 for the base, i + 1 for joint i's link).
 
     Returns:
-        the handles added and why none were ("" when some were, or for a robot that is not
-        a URDF): nothing is added for a robot that is not a URDF, has no visual geometry,
-        or whose visual meshes cannot be read; the caller draws its capsules then.
+        the handles added and why none were ("" when some were, or for a robot whose
+        format describes no link geometry: DH, MJCF): nothing is added for such a robot,
+        one with no visual geometry, or one whose visual meshes cannot be read; the
+        caller draws its capsules then.
     """
-    if spec.format != "urdf":
+    if not has_link_geometry(spec):
         return [], ""
     try:
         items = link_geometry(spec, "visual")

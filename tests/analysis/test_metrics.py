@@ -264,3 +264,38 @@ def test_unknown_baseline_lists_the_controllers_present(
         ReportError, match=r"unknown baseline controller 'mpc'.*ctc, ctc2, lqr, pid"
     ):
         check_baseline(table, "mpc")
+
+
+def test_a_paired_topic_column_reaches_the_metric_frames_from_the_topic_rows() -> None:
+    """A metric may read any column a topic row pairs with the controller state
+    (:data:`pipeline.log.topics.PAIRED_COLUMNS`): frames made without it (not by the
+    reader) get it as nulls, frames with it keep it as recorded."""
+    from pipeline.analysis.metrics import _prepared_controller_states, _prepared_joint_states
+    from pipeline.log.topics import PAIRED_COLUMNS, TOPICS
+
+    assert set(PAIRED_COLUMNS) == {c for t in TOPICS for c in (t.paired or {})}
+    times = [0.0, 0.5, 1.0]
+    base = {"episode": ["e"] * 3, "joint": ["j1"] * 3, "time_s": times}
+    samples = pl.DataFrame(
+        base
+        | {"velocity_rad_s": [0.0] * 3, "effort_nm": [1.0] * 3, "commanded_effort_nm": [1.0] * 3}
+    )
+    states = pl.DataFrame(
+        base
+        | {"error_rad": [0.0] * 3, "reference_position_rad": [0.0] * 3}
+        | {"feedback_position_rad": [0.0] * 3}
+    )
+    table = pl.DataFrame(
+        {"episode": ["e"], "motion_end_s": [0.5], "end_s": [1.0], "motion_completed": [True]}
+    )
+    prepared = (
+        _prepared_joint_states(samples, None),
+        _prepared_controller_states(states, table, settling_tolerance_rad=1e-3, final_window_s=0.5),
+    )
+    for frame in prepared:
+        for column in PAIRED_COLUMNS:
+            assert frame.schema[column] == pl.Float64, column
+            assert frame.get_column(column).null_count() == frame.height, column
+    recorded = samples.with_columns(true_velocity_rad_s=pl.Series([3.0, -4.0, 1.0]))
+    peak = _prepared_joint_states(recorded, None).select(pl.col("true_velocity_rad_s").abs().max())
+    assert peak.item() == 4.0

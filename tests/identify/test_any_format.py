@@ -18,7 +18,6 @@ from pipeline.identify.model_file import load_model, nominal_spec
 from pipeline.identify.regressor import base_parameters, standard_parameters
 from pipeline.identify.stage import fit_command, model_parameters, validate_command
 from pipeline.robots.loaders import load_spec
-from tests.robots.test_mjcf_loader import panda_xml  # noqa: F401  (fixture)
 from tests.robots.test_urdf_loader import SHARE
 
 pytestmark = pytest.mark.skipif(SHARE is None, reason="example-robot-data share not found")
@@ -90,7 +89,7 @@ def test_urdf_panda_excite_fit_validate_and_nominal(tmp_path: Path) -> None:
 @pytest.mark.slow
 def test_mjcf_panda_excite_fit_validate_and_nominal(
     tmp_path: Path,
-    panda_xml: Path,  # noqa: F811
+    panda_xml: Path,
 ) -> None:
     round_trip(tmp_path, str(panda_xml))
 

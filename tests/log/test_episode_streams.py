@@ -11,9 +11,10 @@ import pytest
 
 from pipeline.errors import RecordingError
 from pipeline.log.bag import write_streams
+from pipeline.log.decode import Want
 from pipeline.log.reader import read_recording
 from pipeline.log.streams import EpisodeStreams
-from pipeline.log.topics import PAIRED, TOPICS, WANT
+from pipeline.log.topics import PAIRED, ROLES, TOPICS, WANT, paired_columns, want_by_type
 from pipeline.log.whole import episode_recording, reads_whole
 from pipeline.robots import RobotSpec
 from tests.log.test_writer import analytic_episode, episode_metadata
@@ -67,3 +68,29 @@ def test_rows_of_one_message_type_decode_the_same_leaves() -> None:
         assert t.want is None or t.want == WANT[t.type], t.name
     for role, t in PAIRED.items():
         assert t.want is not None and set((t.paired or {}).values()) <= set(t.want.arrays), role
+
+
+def test_a_second_topic_of_a_read_type_cannot_silently_decode_as_the_first() -> None:
+    """A new row of a message type already read that wants other leaves is refused at
+    import (naming both rows), not decoded with whichever row came last."""
+    truth = ROLES["ground_truth"]
+    assert truth.want is not None
+    same = dataclasses.replace(truth, name="/other/joint_states", role="other")
+    assert want_by_type((*TOPICS, same)) == WANT
+    other = dataclasses.replace(same, want=Want(names=("name",), arrays={"effort": ("effort",)}))
+    with pytest.raises(ValueError, match=r"/other/joint_states wants other leaves of "
+                       r"sensor_msgs/msg/JointState than /joint_states"):  # fmt: skip
+        want_by_type((*TOPICS, other))
+
+
+def test_a_paired_column_is_added_once_from_an_array_its_row_decodes() -> None:
+    truth = ROLES["ground_truth"]
+    assert truth.paired is not None
+    twice = dataclasses.replace(truth, name="/other/joint_states", role="other")
+    with pytest.raises(ValueError, match=r"'true_position_rad', already paired by /ground_truth"):
+        paired_columns((truth, twice))
+    undecoded = dataclasses.replace(twice, paired={"other_effort_nm": "torque"})
+    with pytest.raises(ValueError, match=r"pairs 'other_effort_nm' from 'torque', not an"):
+        paired_columns((truth, undecoded))
+    fine = dataclasses.replace(twice, paired={"other_effort_nm": "effort"})
+    assert paired_columns((truth, fine)) == (*truth.paired, "other_effort_nm")

@@ -4,7 +4,6 @@ Assistant does, cross-checked against Pinocchio's collision query (FCL on the re
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 from xml.etree import ElementTree
 
@@ -23,12 +22,9 @@ from pipeline.planning.collision_matrix import (
     write_srdf,
 )
 from pipeline.robots import load_spec
-from pipeline.robots.packages import package_search_path
 from pipeline.robots.urdf_loader import load_urdf
+from tests.robots.panda_files import ERD, copy_panda_urdf, needs_erd
 
-ERD = next((p / "example-robot-data" for p in package_search_path()
-            if (p / "example-robot-data").is_dir()), None)  # fmt: skip
-needs_erd = pytest.mark.skipif(ERD is None, reason="example-robot-data is not installed")
 PANDA_SRDF = "robots/panda_description/srdf/panda.srdf"
 START = np.array([0.0, -0.785398, 0.0, -2.35619, 0.0, 1.5707, 0.785398])  # the SRDF's default
 GOAL = np.array([1.3, -0.5, 0.0, -2.0, 0.0, 1.5, 0.785398])
@@ -37,13 +33,7 @@ GOAL = np.array([1.3, -0.5, 0.0, -2.0, 0.0, 1.5, 0.785398])
 def _panda_without_srdf(folder: Path) -> Path:
     """example-robot-data's Panda URDF copied out (package:// meshes still resolve), with a
     sidecar that locks the fingers and names no SRDF."""
-    assert ERD is not None
-    urdf = folder / "panda.urdf"
-    shutil.copy(ERD / "robots/panda_description/urdf/panda.urdf", urdf)
-    (folder / "panda.armlab.yaml").write_text(
-        "locked: {panda_finger_joint1: 0.0}\nflange: panda_hand_tcp\n"
-    )
-    return urdf
+    return copy_panda_urdf(folder)
 
 
 def _srdf_pairs(path: Path) -> dict[tuple[str, str], str]:

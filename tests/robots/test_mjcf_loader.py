@@ -4,7 +4,6 @@ compile of that MJCF; bad input refused in one line."""
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import mujoco
@@ -17,35 +16,11 @@ from pipeline.model.dh import forward_kinematics
 from pipeline.model.mjcf import build_mujoco_model
 from pipeline.robots import RobotSpec, load_spec
 from pipeline.robots.urdf import build_pinocchio_model
-from tests.robots.test_urdf_loader import PANDA_URDF, SHARE, _bad, _urdf
+from tests.robots.test_urdf_loader import SHARE, _bad
 
 pytestmark = pytest.mark.skipif(SHARE is None, reason="example-robot-data share not found")
 ARM = [f"panda_joint{i}" for i in range(1, 8)]
 N_CONFIGS = 20
-
-
-@pytest.fixture(scope="module")
-def panda_xml(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The Panda URDF through MuJoCo's URDF import, saved as MJCF (``mj_saveLastXML``).
-
-    Meshes are left out (FK and dynamics need none), the fingers' ``<mimic>`` too (MuJoCo
-    would make it an equality constraint); static bodies are kept, so the TCP is a body.
-    """
-    folder = tmp_path_factory.mktemp("panda_mjcf")
-    text = Path(_urdf(PANDA_URDF)).read_text(encoding="utf-8")
-    text = re.sub(r"<(visual|collision)>.*?</\1>", "", text, flags=re.S)
-    text = re.sub(r"<mimic[^>]*/>", "", text)
-    text = re.sub(r"(<robot[^>]*>)", r'\1<mujoco><compiler fusestatic="false"/></mujoco>', text)
-    urdf = folder / "panda.urdf"
-    urdf.write_text(text)
-    model = mujoco.MjModel.from_xml_path(str(urdf))
-    xml = folder / "panda_mjcf.xml"
-    mujoco.mj_saveLastXML(str(xml), model)
-    # the facts the built-in panda's sidecar adds to its URDF (its armature: Menagerie's)
-    (folder / "panda_mjcf.armlab.yaml").write_text(
-        "tip: panda_link7\nflange: panda_hand_tcp\narmature: 0.1\n"
-    )
-    return xml
 
 
 @pytest.fixture(scope="module")

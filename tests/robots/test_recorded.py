@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import json
-import re
 import shutil
 from dataclasses import replace
 from pathlib import Path
@@ -15,13 +14,9 @@ import pytest
 
 from pipeline.errors import SpecError
 from pipeline.robots import RobotSpec, load_spec
-from pipeline.robots.packages import package_search_path
 from pipeline.robots.recorded import RECORDED_SOURCE, robot_from_dict, robot_to_dict
 from pipeline.settings import EpisodeSettings, SettingsError
-
-ERD = next((p / "example-robot-data" for p in package_search_path()
-            if (p / "example-robot-data").is_dir()), None)  # fmt: skip
-needs_erd = pytest.mark.skipif(ERD is None, reason="example-robot-data is not installed")
+from tests.robots.panda_files import ERD, copy_panda_urdf, needs_erd
 
 TWO_HINGES = """\
 <mujoco model="arm">
@@ -155,19 +150,9 @@ def test_a_urdf_robots_bag_is_reported_after_its_files_are_deleted(
     from pipeline.log.reader import read_recording
     from tests.test_bad_input import run_cli, run_cli_out
 
-    assert ERD is not None
     arm = tmp_path / "arm"
-    shutil.copytree(ERD / "robots/panda_description", arm)
-    urdf = arm / "urdf" / "panda.urdf"
     # the copy's meshes, not the installed package's: package:// -> the copied folder
-    text = urdf.read_text(encoding="utf-8")
-    urdf.write_text(
-        re.sub(r"package://example-robot-data/robots/panda_description/", "../", text),
-        encoding="utf-8",
-    )
-    (urdf.parent / "panda.armlab.yaml").write_text(
-        "locked: {panda_finger_joint1: 0.0}\nflange: panda_hand_tcp\n"
-    )
+    urdf = copy_panda_urdf(arm, meshes=True)
     recorded = load_spec(urdf)
     assert any(Path(s.mesh).is_relative_to(arm) for j in recorded.joints for s in j.shapes)
     params = tmp_path / "params.yaml"

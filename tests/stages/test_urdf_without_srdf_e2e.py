@@ -3,19 +3,16 @@ fail every episode on its base and first link), and a scenario starts at a named
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from pipeline.robots import load_spec
-from pipeline.robots.packages import package_search_path
+from tests.robots.panda_files import copy_panda_urdf, needs_erd
 from tests.test_bad_input import run_cli
 
-ERD = next((p / "example-robot-data" for p in package_search_path()
-            if (p / "example-robot-data").is_dir()), None)  # fmt: skip
-pytestmark = pytest.mark.skipif(ERD is None, reason="example-robot-data is not installed")
+pytestmark = needs_erd
 
 PARAMS = """\
 sim: {physics_dt_s: 0.0005, control_period_steps: 2, integrator: RK4, joint_state_decimation: 1,
@@ -47,13 +44,7 @@ episodes:
 def test_a_urdf_without_srdf_records_and_a_named_start_is_used(tmp_path: Path, capsys) -> None:
     from pipeline.log.reader import read_recording
 
-    assert ERD is not None
-    urdf = tmp_path / "arm" / "panda.urdf"
-    urdf.parent.mkdir()
-    shutil.copy(ERD / "robots/panda_description/urdf/panda.urdf", urdf)
-    (urdf.parent / "panda.armlab.yaml").write_text(
-        "locked: {panda_finger_joint1: 0.0}\nflange: panda_hand_tcp\n"
-    )
+    urdf = copy_panda_urdf(tmp_path / "arm")
     params = tmp_path / "params.yaml"
     params.write_text(PARAMS.replace("ROBOT", str(urdf)))
     code, err = run_cli(
