@@ -27,7 +27,14 @@ import polars as pl
 from pipeline.analysis.intervals import mean_ci
 from pipeline.analysis.verdict import Verdict, compare
 
-NOMINALS = {"": "CAD", "_id": "identified", "_fric": "identified + friction ff"}
+NOMINALS = {
+    "": "CAD",
+    "_id": "identified",
+    "_fric": "identified + friction ff",
+    "_own": "own plant's model",
+    "_fric_own": "own plant's model + friction ff",
+}
+SUFFIXES = ("_fric_own", "_own", "_fric", "_id")
 UR5_ORDER = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
              "wrist_2_joint", "wrist_3_joint")  # fmt: skip
 WORD = {"better": "lower", "worse": "higher", "no clear difference": "n.s."}
@@ -93,14 +100,14 @@ LAW_ORDER = ("pid", "pid_ff", "ctc", "ctc_pid")
 
 
 def _rank(controller: str) -> tuple[int, int, str]:
-    suffix = next((x for x in ("_fric", "_id") if controller.endswith(x)), "")
+    suffix = next((x for x in SUFFIXES if controller.endswith(x)), "")
     law = controller[: len(controller) - len(suffix)]
     where = LAW_ORDER.index(law) if law in LAW_ORDER else len(LAW_ORDER)
     return list(NOMINALS).index(suffix), where, controller
 
 
 def label(controller: str) -> str:
-    for suffix in ("_fric", "_id"):
+    for suffix in SUFFIXES:
         if controller.endswith(suffix):
             return f"`{controller[: -len(suffix)]}`, {NOMINALS[suffix]}"
     return f"`{controller}`, CAD"
@@ -150,9 +157,9 @@ def short(q: str) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("parquet", type=Path)
+    parser.add_argument("parquet", type=Path, nargs="+", help="campaign tables of the same seeds")
     args = parser.parse_args()
-    study = Study(pl.read_parquet(args.parquet))
+    study = Study(pl.concat([pl.read_parquet(p) for p in args.parquet], how="diagonal_relaxed"))
     out = print
     quantities = ["tcp", *study.order(study.joints)]
     n = len(study.seeds)
@@ -172,7 +179,7 @@ def main() -> None:
             hw = f" ± {ci.half_width * 1e3:.2f}" if ci.half_width is not None else ""
             cells.append(f"{ci.mean * 1e3:.2f}{hw}")
         out(f"| {label(c)} | " + " | ".join(cells) + " |")
-    laws = [c for c in study.controllers if not c.endswith(("_id", "_fric"))]
+    laws = [c for c in study.controllers if not c.endswith(SUFFIXES)]
     comparison_table(
         study, "Each law vs `pid`, same nominal",
         [(label(c), c, "pid") for c in laws if c != "pid"]
@@ -193,8 +200,15 @@ def main() -> None:
         quantities, out,
     )  # fmt: skip
     comparison_table(
-        study, "With the identified model and its friction vs `pid` on CAD",
-        [(label(c), c, "pid") for c in study.controllers if c.endswith("_fric")],
+        study, "Each plant's own model vs the one model identified on another plant",
+        [(f"`{c}`", f"{c}_own", f"{c}_id") for c in laws]
+        + [(f"`{c}` + friction ff", f"{c}_fric_own", f"{c}_fric") for c in laws]
+        + [("`ctc` vs `pid_ff`, own model + friction ff", "ctc_fric_own", "pid_ff_fric_own")],
+        quantities, out,
+    )  # fmt: skip
+    comparison_table(
+        study, "With an identified model and its friction vs `pid` on CAD",
+        [(label(c), c, "pid") for c in study.controllers if c.endswith(("_fric", "_fric_own"))],
         quantities, out,
     )  # fmt: skip
 
