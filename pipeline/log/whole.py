@@ -1,9 +1,10 @@
-"""Read a recording whole: every message of the chosen topics decoded at once, then paired
-into the tidy frames of a :class:`~pipeline.log.recording.Recording`.
+"""Read a recording whole: every message of the chosen topics decoded in one pass, then
+paired and framed as one window (:class:`pipeline.log.pairing.Windows`, the windowed read's
+framing) into a :class:`~pipeline.log.recording.Recording`.
 
 :func:`pipeline.log.reader.read_recording` sends recordings up to
 :data:`pipeline.log.recording.STREAM_ABOVE_BYTES` here (longer ones to
-:mod:`pipeline.log.windowed`, which builds the same frames from the same parts).
+:mod:`pipeline.log.windowed`, which streams the rows into many windows of the same code).
 :func:`assemble` is the second half: decoded arrays -> the recording; an episode's streams
 take the same way without a file (:func:`episode_recording`: the campaign path).
 """

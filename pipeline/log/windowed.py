@@ -1,4 +1,3 @@
-# long: one two-pass read whose passes, streams and windows share private state
 """Read a long recording in two streaming passes, in windows: memory does not grow with it.
 
 :func:`pipeline.log.reader.read_recording` sends recordings above
@@ -9,12 +8,14 @@
   file), the planned trajectory and the robot description, and per control-rate joint
   list the message count, first and last stamp and the histogram of stamp steps (so the
   median period, which pairs stamps, is the whole recording's, exactly).
-- **Pass 2** decodes the chosen topics chunk by chunk and cuts the rows into windows of
-  contiguous stamp intervals, each flushed once every topic has delivered past its end
-  plus a period (a watermark), so pairing ``/joint_states`` with ``/controller_state`` and
-  that with ``/ground_truth/joint_states`` (nearest stamp within half a period) gives the
-  pairs of the whole read, also across window boundaries. Each window's tidy frames (the
-  rows the whole read has in that interval) go to a :class:`~pipeline.log.recording.WindowSink`;
+- **Pass 2** decodes the chosen topics chunk by chunk into streams, and
+  :class:`pipeline.log.pairing.Windows` (the whole read's framing, where it is one window)
+  cuts the rows into windows of contiguous stamp intervals, each flushed once every topic
+  has delivered past its end plus a period (a watermark), so pairing ``/joint_states``
+  with ``/controller_state`` and that with ``/ground_truth/joint_states`` (nearest stamp
+  within half a period) gives the pairs of the whole read, also across window boundaries.
+  Each window's tidy frames (the rows the whole read has in that interval) go to a
+  :class:`~pipeline.log.recording.WindowSink`;
   every k-th control step is kept for the returned :class:`~pipeline.log.recording.Recording`.
 
 Memory: one window, one batch of chunks and what the sink keeps, as long as the file holds
