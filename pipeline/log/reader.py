@@ -8,11 +8,13 @@ at a time), messages are decoded through their embedded schemas
 This module is the one entry point: it checks the options, finds the storage files, holds
 the error boundary and sends the recording to the whole read (:mod:`pipeline.log.whole`)
 or, above :data:`STREAM_ABOVE_BYTES`, to the windowed one (:mod:`pipeline.log.windowed`).
-The two reads do not import each other; they share their parts: the :class:`Recording`
-they return (:mod:`pipeline.log.recording`), finding each role's topic
+They differ only in how the decoded rows arrive: the whole read decodes them in one pass
+and frames them as one window, the windowed read streams them in a second pass into many
+windows. Everything else is one path: the :class:`Recording` they return
+(:mod:`pipeline.log.recording`), decoding and finding each role's topic
 (:mod:`pipeline.log.collect`, roles in :data:`pipeline.log.topics.ROLES`), pairing stamps
-into tidy frames (:mod:`pipeline.log.pairing`), labels and settings
-(:mod:`pipeline.log.labels`) and notes (:mod:`pipeline.log.notes`).
+and building the tidy frames window by window (:class:`pipeline.log.pairing.Windows`),
+labels and settings (:mod:`pipeline.log.labels`) and notes (:mod:`pipeline.log.notes`).
 """
 
 from __future__ import annotations

@@ -1,9 +1,10 @@
-"""Read a recording whole: every message of the chosen topics decoded at once, then paired
-into the tidy frames of a :class:`~pipeline.log.recording.Recording`.
+"""Read a recording whole: every message of the chosen topics decoded in one pass, then
+paired and framed as one window (:class:`pipeline.log.pairing.Windows`, the windowed read's
+framing) into a :class:`~pipeline.log.recording.Recording`.
 
 :func:`pipeline.log.reader.read_recording` sends recordings up to
 :data:`pipeline.log.recording.STREAM_ABOVE_BYTES` here (longer ones to
-:mod:`pipeline.log.windowed`, which builds the same frames from the same parts).
+:mod:`pipeline.log.windowed`, which streams the rows into many windows of the same code).
 :func:`assemble` is the second half: decoded arrays -> the recording; an episode's streams
 take the same way without a file (:func:`episode_recording`: the campaign path).
 """
@@ -43,7 +44,7 @@ from pipeline.log.notes import (
     paired_note,
     read_notes,
 )
-from pipeline.log.pairing import error_feedback, match_stamps, paired_at, tidy
+from pipeline.log.pairing import Framing, Stream, Windows, stamp_period_ns
 from pipeline.log.recording import (
     F64,
     STREAM_ABOVE_BYTES,
@@ -242,33 +243,43 @@ def episode_recording(episode: EpisodeStreams, source: Path) -> Recording:
 
 
 def assemble(d: Decoded) -> Recording:
-    """The :class:`Recording` of decoded messages: the topics paired by stamp, the notes,
-    the duration check and the tidy frames."""
+    """The :class:`Recording` of decoded messages: the windowed read's framing
+    (:class:`pipeline.log.pairing.Windows`) over one window holding every row, the notes,
+    the duration check."""
     js_t, js_a, cs_t, names = d.js_t, d.js_a, d.cs_t, d.names
     mcap_path, source, labels = d.mcap_path, d.source, d.labels
-    rows_js, rows_cs = match_stamps(js_t, cs_t)
-    if rows_js.size == 0:
-        raise no_pairs(mcap_path)
-    notes = list(d.notes)
-    notes += dropped_note(js_t.size - rows_js.size)
-    notes += missing_array_notes(js_a, d.js_topic, JS_OPTIONAL)
-    notes += labels.notes
+
+    def stream(stamps: NDArray[np.int64], arrays: dict[str, F64], keys: list[str]) -> Stream:
+        s = Stream(names, first=0, last=0)  # one window: neither bound is asked
+        s.push(stamps, {k: arrays[k] for k in keys})
+        return s
 
     # Relative times: wall-clock header stamps (1.7e9 s) would otherwise swamp float64
     # resolution and put the motion end (a duration from the start) 50 years early.
-    t0_ns = int(min(js_t[0], cs_t[0]))
-    episode = episode_name(labels.metadata, source)
-    cs_all = d.cs_a
-    error, feedback = error_feedback(cs_all)
-    paired: dict[str, F64] = {}
+    t0_ns = int(min(js_t[0], cs_t[0])) if js_t.size and cs_t.size else 0
+    windows = Windows(
+        Framing(
+            names=names,
+            perms={r: found[2] for r, found in d.paired.items()},
+            js_period_ns=stamp_period_ns(js_t),
+            cs_period_ns=stamp_period_ns(cs_t),
+            t0_ns=t0_ns,
+            episode=episode_name(labels.metadata, source),
+        ),
+        stream(js_t, js_a, list(js_a)),
+        stream(cs_t, d.cs_a, list(d.cs_a)),
+        {r: stream(t, a, list(a)) for r, (t, a, _) in d.paired.items() if r in PAIRED},
+    )
+    windows.one()
+    if windows.pairs == 0:
+        raise no_pairs(mcap_path)
+    notes = list(d.notes)
+    notes += dropped_note(windows.dropped)
+    notes += missing_array_notes(js_a, d.js_topic, JS_OPTIONAL)
+    notes += labels.notes
     for role, row in PAIRED.items():
-        found = d.paired.get(role)
-        columns, rows = paired_at(
-            cs_t, found[:2] if found else None, found[2] if found else [], row.paired or {}, error
-        )
-        paired |= columns
-        if found is not None:
-            notes += paired_note(cs_t.size - rows.size, d.cs_topic, row.name)
+        if role in d.paired:
+            notes += paired_note(windows.unpaired[role], d.cs_topic, row.name)
     planned = d.planned
     contradicted = check_trajectory_duration(
         labels.settings,
@@ -276,50 +287,11 @@ def assemble(d: Decoded) -> Recording:
         end_s=(int(max(js_t[-1], cs_t[-1])) - t0_ns) * 1e-9,
         salvaged=d.damaged,
         control_period_s=float(np.median(np.diff(cs_t))) * 1e-9 if cs_t.size > 1 else 0.0,
-        reference_end=reference_end_s(cs_t, cs_all["reference_position"], t0_ns),
+        reference_end=reference_end_s(cs_t, d.cs_a["reference_position"], t0_ns),
         planned_topic=d.planned_topic,
     )
     notes += [contradicted.note] if contradicted else []
-    every_cs = rows_cs.size == cs_t.size and bool(np.all(rows_cs == np.arange(cs_t.size)))
-    every_js = rows_js.size == js_t.size and bool(np.all(rows_js == np.arange(js_t.size)))
-
-    def at_cs(a: F64) -> F64:
-        return a if every_cs else a[rows_cs]
-
-    def at_js(a: F64) -> F64:
-        return a if every_js else a[rows_js]
-
-    cs_rows = {k: at_cs(v) for k, v in cs_all.items()}
-    samples = tidy(
-        js_t if every_js else js_t[rows_js],
-        {
-            "position_rad": at_js(js_a["position"]),
-            "velocity_rad_s": at_js(js_a["velocity"]),
-            "effort_nm": at_js(js_a["effort"]),
-            "reference_position_rad": cs_rows["reference_position"],
-            "reference_velocity_rad_s": cs_rows["reference_velocity"],
-            "error_rad": at_cs(error),
-            "commanded_effort_nm": cs_rows["commanded_effort"],
-            **{k: at_cs(v) for k, v in paired.items()},
-        },
-        names=names,
-        t0_ns=t0_ns,
-        episode=episode,
-    )
-    controller_states = tidy(
-        cs_t,
-        {
-            "reference_position_rad": cs_all["reference_position"],
-            "reference_velocity_rad_s": cs_all["reference_velocity"],
-            "feedback_position_rad": feedback,
-            "error_rad": error,
-            "commanded_effort_nm": cs_all["commanded_effort"],
-            **paired,
-        },
-        names=names,
-        t0_ns=t0_ns,
-        episode=episode,
-    )
+    samples, controller_states = windows.frames()
     return Recording(
         source=source,
         mcap_path=mcap_path,

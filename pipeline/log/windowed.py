@@ -1,4 +1,3 @@
-# long: one two-pass read whose passes, streams and windows share private state
 """Read a long recording in two streaming passes, in windows: memory does not grow with it.
 
 :func:`pipeline.log.reader.read_recording` sends recordings above
@@ -9,12 +8,14 @@
   file), the planned trajectory and the robot description, and per control-rate joint
   list the message count, first and last stamp and the histogram of stamp steps (so the
   median period, which pairs stamps, is the whole recording's, exactly).
-- **Pass 2** decodes the chosen topics chunk by chunk and cuts the rows into windows of
-  contiguous stamp intervals, each flushed once every topic has delivered past its end
-  plus a period (a watermark), so pairing ``/joint_states`` with ``/controller_state`` and
-  that with ``/ground_truth/joint_states`` (nearest stamp within half a period) gives the
-  pairs of the whole read, also across window boundaries. Each window's tidy frames (the
-  rows the whole read has in that interval) go to a :class:`~pipeline.log.recording.WindowSink`;
+- **Pass 2** decodes the chosen topics chunk by chunk into streams, and
+  :class:`pipeline.log.pairing.Windows` (the whole read's framing, where it is one window)
+  cuts the rows into windows of contiguous stamp intervals, each flushed once every topic
+  has delivered past its end plus a period (a watermark), so pairing ``/joint_states``
+  with ``/controller_state`` and that with ``/ground_truth/joint_states`` (nearest stamp
+  within half a period) gives the pairs of the whole read, also across window boundaries.
+  Each window's tidy frames (the rows the whole read has in that interval) go to a
+  :class:`~pipeline.log.recording.WindowSink`;
   every k-th control step is kept for the returned :class:`~pipeline.log.recording.Recording`.
 
 Memory: one window, one batch of chunks and what the sink keeps, as long as the file holds
@@ -39,14 +40,12 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-import polars as pl
 from numpy.typing import NDArray
 
 from pipeline.errors import RecordingError
 from pipeline.log.collect import (
     WANT,
     Collector,
-    Roles,
     pick_roles,
     planned_trajectory,
     scan_storage,
@@ -63,10 +62,9 @@ from pipeline.log.notes import (
     paired_note,
     read_notes,
 )
-from pipeline.log.pairing import error_feedback, match_stamps, paired_at, tidy
+from pipeline.log.pairing import Framing, Stream, Windows
 from pipeline.log.recording import (
     CONTROLLER_STATE_COLUMNS,
-    F64,
     SAMPLE_COLUMNS,
     STREAM_ABOVE_BYTES,
     ReadOptions,
@@ -90,13 +88,6 @@ _TAIL = 4096
 GAP_NS = 1_000_000_000
 
 I64 = NDArray[np.int64]
-# Stamps are compared as integers: a float64 cannot tell wall-clock nanoseconds apart.
-_LOW = int(np.iinfo(np.int64).min)
-_HIGH = int(np.iinfo(np.int64).max)
-
-
-def _clamp(stamp: int) -> int:
-    return min(max(stamp, _LOW), _HIGH)
 
 
 @dataclass
@@ -190,233 +181,6 @@ class _Pass1(Collector):
             self.stats.setdefault((dec.topic, group.names), _StampStats()).add(stamps, self.path)
 
 
-@dataclass
-class _Stream:
-    """The not yet windowed rows of one chosen joint list, sorted by stamp."""
-
-    names: tuple[str, ...]
-    first: int  # its first stamp in the recording (pass 1)
-    last: int  # its last stamp in the recording (pass 1)
-    cols: list[int] | None = None  # columns in controller joint order
-    gaps: dict[int, tuple[int, int]] = field(default_factory=dict)  # _StampStats.gaps
-    stamps: I64 = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    arrays: dict[str, F64] = field(default_factory=dict)
-    high: int = _LOW  # largest stamp delivered so far
-    delivered: int = 0  # rows delivered so far
-    keys: tuple[str, ...] = ()  # its arrays, empty until rows come (a window may come first)
-
-    def __post_init__(self) -> None:
-        width = len(self.cols) if self.cols is not None else len(self.names)
-        self.arrays = {k: np.zeros((0, width)) for k in self.keys}
-
-    def push(self, stamps: I64, arrays: dict[str, F64]) -> None:
-        if not stamps.size:
-            return
-        order = np.argsort(stamps, kind="stable")
-        if self.cols is not None:
-            arrays = {k: v[:, self.cols] for k, v in arrays.items()}
-        self.stamps = np.concatenate([self.stamps, stamps[order]])
-        for k, v in arrays.items():
-            old = self.arrays.get(k)
-            self.arrays[k] = v[order] if old is None else np.concatenate([old, v[order]])
-        self.high = max(self.high, int(stamps.max()))
-        self.delivered += stamps.size
-
-    def complete_to(self) -> int:
-        """Every row below this stamp has been delivered (``_HIGH``: every row); at the
-        start of a gap, with every row up to it delivered, the stamp after the gap."""
-        if self.high >= self.last:
-            return _HIGH
-        if not self.delivered:  # nothing lies before its first stamp (a late start)
-            return self.first
-        gap = self.gaps.get(self.high)
-        if gap is not None and gap[1] == self.delivered:
-            return gap[0]
-        return self.high
-
-    def span(self, lo: int, hi: int) -> tuple[int, int]:
-        lo, hi = _clamp(lo), _clamp(hi)
-        return int(np.searchsorted(self.stamps, lo)), int(np.searchsorted(self.stamps, hi))
-
-    def rows(self, a: int, b: int) -> tuple[I64, dict[str, F64]]:
-        return self.stamps[a:b], {k: v[a:b] for k, v in self.arrays.items()}
-
-    def drop_below(self, stamp: int) -> None:
-        a = int(np.searchsorted(self.stamps, _clamp(stamp)))
-        self.stamps = self.stamps[a:]
-        self.arrays = {k: v[a:] for k, v in self.arrays.items()}
-
-
-@dataclass
-class _Facts:
-    """What pass 1 found that pass 2 and the recording need."""
-
-    roles: Roles
-    js_period_ns: float
-    cs_period_ns: float
-    t0_ns: int
-    end_ns: int
-    episode: str
-    decimation: int
-    window_steps: int
-
-
-class _Windows:
-    """Cuts the chosen streams into windows at a watermark and builds their frames."""
-
-    def __init__(self, facts: _Facts, js: _Stream, cs: _Stream, paired: dict[str, _Stream]) -> None:
-        self.f = facts
-        self.js, self.cs, self.paired = js, cs, paired
-        self.margin = math.ceil(max(facts.js_period_ns, facts.cs_period_ns))
-        self.lo = _LOW
-        self.count = 0
-        self.pairs = 0  # /joint_states rows paired so far
-        self.cs_rows = 0
-        self.dropped = 0
-        self.unpaired = dict.fromkeys(paired, 0)  # controller states without its row
-        self.js_empty = {k: True for k in JS_OPTIONAL}
-        self.end_ns: int | None = None  # the last paired stamp so far
-        self.kept: list[tuple[pl.DataFrame, pl.DataFrame]] = []
-        self.last: list[pl.DataFrame | None] = [None, None]  # unkept last steps
-        self.sink: WindowSink | None = None
-
-    def pump(self, *, final: bool = False) -> None:
-        while True:
-            limit = _HIGH
-            if not final:
-                limit = min(self.js.complete_to(), self._less(self.cs.complete_to()))
-                for stream in self.paired.values():
-                    limit = min(limit, self._less(stream.complete_to()))
-            a, b = self.cs.span(self.lo, limit)
-            steps = self.f.window_steps
-            cut = a + steps
-            if cut < b and self.cs.stamps[cut] == self.cs.stamps[a]:
-                # one stamp repeated over a whole window: cut after its last copy
-                cut = int(np.searchsorted(self.cs.stamps, self.cs.stamps[a], side="right"))
-            if cut < b:
-                hi = int(self.cs.stamps[cut])
-            elif limit == _HIGH:
-                hi = _HIGH
-            else:
-                return
-            self._emit(self.lo, hi)
-            self.lo = hi
-            if hi == _HIGH:
-                return
-
-    def _less(self, complete_to: int) -> int:
-        """A topic complete to a stamp pairs rows up to a margin before it."""
-        return _HIGH if complete_to == _HIGH else complete_to - self.margin
-
-    def _emit(self, lo: int, hi: int) -> None:
-        f, n = self.f, self.margin
-        ja, jb = self.js.span(lo, hi)
-        js_t, js_a = self.js.rows(ja, jb)
-        xa, xb = self.cs.span(lo - n, hi + n)  # every controller state a js row may pair with
-        cs_t, cs_a = self.cs.rows(xa, xb)
-        wa, wb = self.cs.span(lo, hi)
-        wa, wb = wa - xa, wb - xa  # the window's own controller states, within cs_t
-        if js_t.size and js_t.shape == cs_t[wa:wb].shape and np.array_equal(js_t, cs_t[wa:wb]):
-            rows_js, rows_cs = np.arange(js_t.size), np.arange(wa, wb)
-        else:
-            rows_js, rows_cs = match_stamps(js_t, cs_t, period_ns=f.js_period_ns)
-        error, feedback = error_feedback(cs_a)
-        paired: dict[str, F64] = {}
-        for role, row in PAIRED.items():
-            stream = self.paired.get(role)
-            found = None
-            if stream is not None:
-                ga, gb = stream.span(lo - n, hi + n)
-                found = stream.rows(ga, gb)
-            columns, rows = paired_at(
-                cs_t,
-                found,
-                f.roles.perm(role) if stream is not None else [],
-                row.paired or {},
-                error,
-                period_ns=f.cs_period_ns,
-            )
-            paired |= columns
-            if stream is not None:
-                self.unpaired[role] += (wb - wa) - int(((rows >= wa) & (rows < wb)).sum())
-        for k in self.js_empty:
-            self.js_empty[k] = self.js_empty[k] and bool(np.isnan(js_a[k]).all())
-        self.dropped += js_t.size - rows_js.size
-        samples = self._tidy(
-            js_t[rows_js],
-            {
-                "position_rad": js_a["position"][rows_js],
-                "velocity_rad_s": js_a["velocity"][rows_js],
-                "effort_nm": js_a["effort"][rows_js],
-                "reference_position_rad": cs_a["reference_position"][rows_cs],
-                "reference_velocity_rad_s": cs_a["reference_velocity"][rows_cs],
-                "error_rad": error[rows_cs],
-                "commanded_effort_nm": cs_a["commanded_effort"][rows_cs],
-                **{k: v[rows_cs] for k, v in paired.items()},
-            },
-        )
-        w = slice(wa, wb)
-        states = self._tidy(
-            cs_t[w],
-            {
-                "reference_position_rad": cs_a["reference_position"][w],
-                "reference_velocity_rad_s": cs_a["reference_velocity"][w],
-                "feedback_position_rad": feedback[w],
-                "error_rad": error[w],
-                "commanded_effort_nm": cs_a["commanded_effort"][w],
-                **{k: v[w] for k, v in paired.items()},
-            },
-        )
-        ends = [int(js_t[rows_js].max())] if rows_js.size else []
-        ends += [int(cs_t[wb - 1])] if wb > wa else []
-        if ends:
-            self.end_ns = max(ends) if self.end_ns is None else max(self.end_ns, *ends)
-        if samples.height or states.height:
-            self.count += 1
-            if self.sink is not None:
-                try:
-                    self.sink.window(samples, states)
-                except Exception as err:
-                    raise SinkError() from err
-        self.kept.append(
-            (self._decimate(samples, self.pairs, 0), self._decimate(states, self.cs_rows, 1))
-        )
-        self.pairs += rows_js.size
-        self.cs_rows += wb - wa
-        self.js.drop_below(hi)
-        self.cs.drop_below(hi - n)
-        for stream in self.paired.values():
-            stream.drop_below(hi - n)
-
-    def _tidy(self, stamps: I64, columns: dict[str, F64]) -> pl.DataFrame:
-        return tidy(
-            stamps, columns, names=self.f.roles.names, t0_ns=self.f.t0_ns, episode=self.f.episode
-        )
-
-    def _decimate(self, frame: pl.DataFrame, before: int, which: int) -> pl.DataFrame:
-        """Every k-th step of the recording (by its index ``before`` + row // joints); the
-        window's last step is held back in case it is the recording's last."""
-        j = max(len(self.f.roles.names), 1)
-        steps = frame.height // j
-        if not steps:
-            return frame
-        index = before + np.repeat(np.arange(steps), j)
-        keep = index % self.f.decimation == 0
-        self.last[which] = None if keep[-1] else frame.tail(j)
-        return frame.filter(pl.Series(keep))
-
-    def frames(self) -> tuple[pl.DataFrame, pl.DataFrame]:
-        """The kept (decimated) frames, the last step of each included."""
-        out = []
-        for which in (0, 1):
-            parts = [k[which] for k in self.kept]
-            last = self.last[which]
-            if last is not None:
-                parts.append(last)
-            out.append(pl.concat(parts, how="vertical"))
-        return out[0], out[1]
-
-
 class _Chosen(Collector):
     """Decodes a chosen control-rate topic's messages (no other)."""
 
@@ -464,7 +228,7 @@ class _LastPaired(_Chosen):
 class _Pass2(_Chosen):
     """Decodes the chosen topics only and hands each chosen joint list's rows on."""
 
-    def __init__(self, topics: dict[str, str], streams: dict[str, _Stream], windows: _Windows):
+    def __init__(self, topics: dict[str, str], streams: dict[str, Stream], windows: Windows):
         super().__init__(topics)
         self.streams = streams  # topic -> its chosen stream
         self.windows = windows
@@ -549,18 +313,20 @@ def read_windowed(
 
     cs_period = cs_stats.period_ns()
     steps = max(js_stats.count, cs_stats.count)
-    facts = _Facts(
-        roles=roles,
+    t0_ns = min(js_stats.first, cs_stats.first)
+    end_ns_1 = _end_ns(cs_stats, js_stats, js_period, scan_js)  # pass 1's
+    framing = Framing(
+        names=roles.names,
+        perms={r: roles.perm(r) for r in paired_stats},
         js_period_ns=js_period,
         cs_period_ns=cs_period,
-        t0_ns=min(js_stats.first, cs_stats.first),
-        end_ns=_end_ns(cs_stats, js_stats, js_period, scan_js),
+        t0_ns=t0_ns,
         episode=episode_name(labels.metadata, source),
         decimation=max(1, math.ceil(steps / MAX_KEPT_STEPS)),
         window_steps=options.window_steps if options.window_steps > 0 else WINDOW_STEPS,
     )
     js_keys = tuple(WANT[roles.js_dec.type_name].arrays)
-    js = _Stream(
+    js = Stream(
         roles.js_group.names,
         js_stats.first,
         js_stats.last,
@@ -569,9 +335,9 @@ def read_windowed(
         keys=js_keys,
     )
     cs_keys = tuple(WANT[roles.cs_dec.type_name].arrays)
-    cs = _Stream(roles.names, cs_stats.first, cs_stats.last, gaps=cs_stats.gaps, keys=cs_keys)
+    cs = Stream(roles.names, cs_stats.first, cs_stats.last, gaps=cs_stats.gaps, keys=cs_keys)
     paired = {
-        r: _Stream(
+        r: Stream(
             roles.paired[r].names,
             stats.first,
             stats.last,
@@ -580,13 +346,13 @@ def read_windowed(
         )
         for r, stats in paired_stats.items()
     }
-    windows = _Windows(facts, js, cs, paired)
+    windows = Windows(framing, js, cs, paired)
     header_notes, lost_pct = read_notes(scanned, roles)
     planned = planned_trajectory(first, roles.chosen["planned_trajectory"])
     contradicted = check_trajectory_duration(
         labels.settings,
         planned,
-        end_s=(facts.end_ns - facts.t0_ns) * 1e-9,
+        end_s=(end_ns_1 - t0_ns) * 1e-9,
         salvaged=scanned.damaged,
         control_period_s=cs_period * 1e-9 if cs_stats.count > 1 else 0.0,
         planned_topic=str(roles.chosen["planned_trajectory"]),
@@ -602,8 +368,8 @@ def read_windowed(
         metadata=labels.metadata,
         settings=labels.settings,
         joint_names=roles.names,
-        samples=windows._tidy(empty, dict.fromkeys(_SAMPLE_VALUES, no_rows)),
-        controller_states=windows._tidy(empty, dict.fromkeys(_CS_VALUES, no_rows)),
+        samples=windows.tidy(empty, dict.fromkeys(_SAMPLE_VALUES, no_rows)),
+        controller_states=windows.tidy(empty, dict.fromkeys(_CS_VALUES, no_rows)),
         planned=planned,
         robot_description=labels.urdf,
         topic_counts=dict(first.topic_counts),
@@ -615,9 +381,9 @@ def read_windowed(
         salvaged=scanned.damaged,
         salvage_lost_pct=lost_pct,
         armlab_metadata=labels.ours,
-        decimation=facts.decimation,
+        decimation=framing.decimation,
         controller_sample_count=cs_stats.count,
-        end_s=(facts.end_ns - facts.t0_ns) * 1e-9,
+        end_s=(end_ns_1 - t0_ns) * 1e-9,
         control_period_s=cs_period * 1e-9 if cs_stats.count > 1 else 0.0,
         duration_contradicted=contradicted is not None,
         data_trajectory_duration_s=contradicted.duration_s if contradicted else None,
@@ -646,11 +412,11 @@ def read_windowed(
     notes += labels.notes
     for r in paired:
         notes += paired_note(windows.unpaired[r], cs_topic, PAIRED[r].name)
-    end_ns = facts.end_ns if windows.end_ns is None else windows.end_ns
-    if end_ns != facts.end_ns:  # not expected: pass 1 (with _end_ns) found the same stamp
+    end_ns = end_ns_1 if windows.end_ns is None else windows.end_ns
+    if end_ns != end_ns_1:  # not expected: pass 1 (with _end_ns) found the same stamp
         notes.append(
             f"the last paired stamp ({end_ns} ns) is not the one the first pass "
-            f"estimated ({facts.end_ns} ns): the final-window metrics used the estimate"
+            f"estimated ({end_ns_1} ns): the final-window metrics used the estimate"
         )
     samples, states = windows.frames()
     return replace(
@@ -660,7 +426,7 @@ def read_windowed(
         notes=(*notes, *labels.settings_notes),
         windows=windows.count,
         sample_count=windows.pairs,
-        end_s=(end_ns - facts.t0_ns) * 1e-9,
+        end_s=(end_ns - t0_ns) * 1e-9,
     )
 
 

@@ -18,7 +18,7 @@ from polars.testing import assert_frame_equal
 from rosbags.rosbag2 import StoragePlugin
 
 from pipeline.errors import RecordingError
-from pipeline.log import bag, windowed
+from pipeline.log import bag, pairing, windowed
 from pipeline.log.reader import ReadOptions, Recording, read_recording
 from pipeline.robots import RobotSpec
 from tests.log.test_external_bags import write_external_bag
@@ -199,14 +199,16 @@ def test_a_topic_that_pauses_does_not_hold_the_others_back(
     gap = (start_s * 10**9, (start_s + 12) * 10**9)
     path = write_bag(tmp_path, replace(ep, joint_state_gap_ns=gap))
     most = [0]
-    push = windowed._Stream.push
+    push = pairing.Stream.push
 
-    def counting(self: windowed._Stream, stamps: np.ndarray, arrays: dict) -> None:
+    def counting(self: pairing.Stream, stamps: np.ndarray, arrays: dict) -> None:
         push(self, stamps, arrays)
         most[0] = max(most[0], self.stamps.size)
 
-    monkeypatch.setattr(windowed._Stream, "push", counting)
-    whole, win, sink = both(path)
+    whole = read_recording(path)  # one window of every row: not counted
+    monkeypatch.setattr(pairing.Stream, "push", counting)
+    sink = Windows()
+    win = read_recording(path, WINDOW, sink=sink)
     assert_same(whole, win, sink)
     assert whole.samples.height // 6 == 10_001 - 6_000  # the pause is in the bag
     # a batch of chunks, a window and up to GAP_NS of the others (measured: 1,203 rows;
