@@ -100,6 +100,18 @@ def test_a_comparison_of_plants_sharing_no_seed_is_refused_in_one_line(tmp_path:
     assert not (tmp_path / "rec").exists() or not any((tmp_path / "rec").iterdir())
 
 
+def test_a_controller_plant_of_another_robot_is_refused_naming_the_controller(
+    tmp_path: Path,
+) -> None:
+    data = yaml.safe_load(params_file(tmp_path).read_text())
+    data["controllers"]["pid_real"]["plant"] = {"profile": "gaz-panda"}  # a Panda's, on a UR5
+    (tmp_path / "params.yaml").write_text(yaml.safe_dump(data))
+    proc = cli("record", "--params", "params.yaml", "--out", "rec", cwd=tmp_path)
+    assert proc.returncode != 0
+    assert proc.stderr.strip().count("\n") == 0, proc.stderr
+    assert "controllers.pid_real.plant.profile: gaz-panda describes the Franka" in proc.stderr
+
+
 def test_a_controller_plant_is_kept_by_a_campaign_and_unused_dumps_as_before(
     tmp_path: Path,
 ) -> None:
