@@ -280,11 +280,14 @@ class ControllerParams(_Strict):
     # this controller's nominal model, overriding its scenario's `nominal:` (an identified
     # MODEL.yaml; `{seed}` as there): the same law on two models compared in one scenario
     nominal: str | None = Field(default=None, min_length=1)
+    # this controller's plant, replacing its scenario's `plant:` for its episodes only (same
+    # form): the same law on two plants compared in one scenario, paired by seed
+    plant: PlantParams | None = None
 
     @model_serializer(mode="wrap")
     def _dump(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
-        # unused, left out: the same dumps (campaign fingerprints) as before it existed
-        return _omit_defaults(handler(self), {"nominal": None})
+        # unused, left out: the same dumps (campaign fingerprints) as before they existed
+        return _omit_defaults(handler(self), {"nominal": None, "plant": None})
 
     @model_validator(mode="after")
     def _finite_gains(self) -> ControllerParams:
@@ -303,6 +306,43 @@ class ControllerParams(_Strict):
                         f"gains.{key}: {v!r} is not a finite gain of magnitude <= {MAX_GAIN:g}"
                     )
         return self
+
+
+def episode_scenario(scenario: ScenarioParams, controller: ControllerParams) -> ScenarioParams:
+    """The scenario an episode of ``controller`` runs: ``scenario`` itself, or with the
+    controller's own ``plant:`` in place of the scenario's (validated as a scenario).
+
+    Raises:
+        ValueError: the controller's plant does not fit the scenario (its loop).
+    """
+    if controller.plant is None:
+        return scenario
+    given = {k: getattr(scenario, k) for k in scenario.model_fields_set}
+    return ScenarioParams.model_validate({**given, "plant": controller.plant})
+
+
+def unpaired_plant(
+    episodes: Mapping[str, EpisodeParams], controllers: Mapping[str, ControllerParams]
+) -> str | None:
+    """A hand-listed comparison of plants that shares no seed: the first controller with
+    its own ``plant:`` whose episodes in a scenario have no seed in common with those of
+    the scenario's other controllers, as a message (None: every such group pairs)."""
+    seeds: dict[str, dict[str, set[int]]] = {}
+    for e in episodes.values():
+        seeds.setdefault(e.scenario, {}).setdefault(e.controller, set()).add(e.seed)
+    for scenario, by_controller in seeds.items():
+        for name, own in by_controller.items():
+            others = {c: s for c, s in by_controller.items() if c != name}
+            if controllers[name].plant is None or not others:
+                continue
+            if not any(own & s for s in others.values()):
+                return (
+                    f"controllers.{name}.plant: its episodes of scenario {scenario} share no "
+                    f"seed with {', '.join(sorted(others))} (seeds {sorted(own)} vs "
+                    f"{sorted(set().union(*others.values()))}): a comparison of plants is "
+                    "paired by seed"
+                )
+    return None
 
 
 class EpisodeParams(_Strict):
@@ -618,11 +658,23 @@ def parse_params(data: Any, *, source: str) -> Params:
         raw = _Params.model_validate(data)
     except ValidationError as err:
         raise ParamsError(format_validation_error(source, err)) from err
+    unpaired = unpaired_plant(raw.episodes, raw.controllers)
+    if unpaired:
+        raise ParamsError(f"{source}: {unpaired}")
+    try:
+        scenarios = {
+            (e.scenario, e.controller): episode_scenario(
+                raw.scenarios[e.scenario], raw.controllers[e.controller]
+            )
+            for e in raw.episodes.values()
+        }
+    except ValidationError as err:
+        raise ParamsError(format_validation_error(source, err)) from err
     episodes = tuple(
         Episode(
             name=name,
             scenario_name=e.scenario,
-            scenario=raw.scenarios[e.scenario],
+            scenario=scenarios[e.scenario, e.controller],
             controller_name=e.controller,
             controller=raw.controllers[e.controller],
             seed=e.seed,

@@ -406,12 +406,14 @@ class ControllerSettings(Contract):
     """The controller as run: its params name, registry type, every gain in effect, where
     its code came from (``origin``: ``pipeline.control.controller_origin``), where its
     default gains were designed (``design``; None when they do not depend on it) and its
-    own nominal model (``nominal``; None: its scenario's, recorded there)."""
+    own nominal model (``nominal``; None: its scenario's, recorded there) and its own plant
+    (``plant``: params ``controllers.NAME.plant`` as given; None: its scenario's. Either
+    way ``scenario.plant`` records the plant the episode ran on)."""
 
     _where = "controller"
     # bags written before issue 18: built-in; before issue 28: designed at q = 0, and no
     # controller had a nominal model of its own (left out while None: the same bytes)
-    _may_be_absent = frozenset({"origin", "design", "nominal"})
+    _may_be_absent = frozenset({"origin", "design", "nominal", "plant"})
 
     name: Text
     type: Text
@@ -419,6 +421,7 @@ class ControllerSettings(Contract):
     origin: Plain = field(default_factory=lambda: {"kind": "builtin"})
     design: GainDesign | None = None
     nominal: NominalModelSettings | None = None
+    plant: Plain | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.gains, Gains):  # a plain mapping (the recorder's dict)
@@ -616,8 +619,9 @@ class EpisodeSettings(Contract):
         out["scenario"] = self.scenario.recorded()
         out["safety"] = self.safety.to_dict()  # with its derived keys, for readers of the JSON
         out["plant"] = plant_as_recorded(out["plant"])
-        if out["controller"].get("nominal") is None:  # the scenario's: as before it existed
-            out["controller"].pop("nominal", None)
+        for own in ("nominal", "plant"):  # the scenario's: as before they existed
+            if out["controller"].get(own) is None:
+                out["controller"].pop(own, None)
         return out
 
     @classmethod

@@ -95,10 +95,18 @@ def mixed_settings(groups: Mapping[str, Sequence[Recording]]) -> list[MixedSetti
             if s is None or rec.status != "ok":  # a failed episode is compared with nothing
                 continue
             scenario = {k: v for k, v in s.scenario.recorded().items() if k != "name"}
+            # a controller's own plant (params controllers.NAME.plant) differs on purpose:
+            # compared among that controller's episodes only
+            own_plant = s.controller.plant is not None
+            plant = scenario.pop("plant", None) if own_plant else None
             scenario_rows.append((rec.episode, dict(_flat(scenario))))
             gains = dict(s.controller.gains)
             gains_rows.setdefault(rec.controller, []).append(
-                (rec.episode, {f"gains.{k}": v for k, v in _flat(gains)})
+                (
+                    rec.episode,
+                    {f"gains.{k}": v for k, v in _flat(gains)}
+                    | ({f"plant.{k}": v for k, v in _flat(plant)} if own_plant else {}),
+                )
             )
         found += _differences(group, scenario_rows)
         for controller, rows in sorted(gains_rows.items()):

@@ -68,11 +68,16 @@ DEFAULT_TRANSITION_SPEED_RAD_S = 0.1
 """The sigmoid model's default transition speed (real arms: about 0.05-0.2 rad/s)."""
 
 
+def _speed_text(speed: float | list[float]) -> str:
+    """A transition speed for the summary line: ``0.1`` or, per joint, ``0.2/0.05/...``."""
+    return "/".join(f"{v:g}" for v in speed) if isinstance(speed, list) else f"{speed:g}"
+
+
 def _transition_speed(friction: str, text: str | None) -> float:
     """``--friction`` and ``--transition-speed`` -> the fit's ``transition_speed_rad_s``
     (0: Coulomb; > 0: sigmoid; ``FIT_TRANSITION_SPEED``: sigmoid, speed fitted)."""
     from pipeline.errors import IdentificationError
-    from pipeline.identify.stage import FIT_TRANSITION_SPEED
+    from pipeline.identify.stage import FIT_TRANSITION_SPEED, FIT_TRANSITION_SPEED_PER_JOINT
 
     if friction not in FRICTION_MODELS:
         raise IdentificationError(
@@ -86,11 +91,13 @@ def _transition_speed(friction: str, text: str | None) -> float:
         return DEFAULT_TRANSITION_SPEED_RAD_S
     if text.strip() == "auto":
         return FIT_TRANSITION_SPEED
+    if text.strip() == "per-joint":
+        return FIT_TRANSITION_SPEED_PER_JOINT
     try:
         value = float(text)
     except ValueError as err:
         raise IdentificationError(
-            f"--transition-speed: expected a speed [rad/s] or auto, got {text!r}"
+            f"--transition-speed: expected a speed [rad/s], auto or per-joint, got {text!r}"
         ) from err
     if not value > 0:
         raise IdentificationError(f"--transition-speed: expected a speed > 0 rad/s, got {value!r}")
@@ -139,7 +146,8 @@ def fit_cmd(
         typer.Option(
             "--transition-speed",
             help="The sigmoid model's v_s \\[rad/s], or auto: the best fit of 0.01, 0.02, "
-            f"0.05, 0.1, 0.15, 0.2, 0.3, 0.5 (default {DEFAULT_TRANSITION_SPEED_RAD_S:g}).",
+            "0.05, 0.1, 0.15, 0.2, 0.3, 0.5, or per-joint: each joint's best fit of "
+            f"0.01-0.7 (default {DEFAULT_TRANSITION_SPEED_RAD_S:g}).",
         ),
     ] = None,
     torque_side: Annotated[
@@ -183,7 +191,7 @@ def fit_cmd(
             "(uneven stamps)",
             f"friction {s['friction_model']}"
             + (
-                f" (transition speed {s['transition_speed_rad_s']:g} rad/s)"
+                f" (transition speed {_speed_text(s['transition_speed_rad_s'])} rad/s)"
                 if s["friction_model"] == "sigmoid"
                 else ""
             )

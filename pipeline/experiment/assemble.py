@@ -300,6 +300,11 @@ def episode_settings(
             origin=origin,
             design=design,
             nominal=_own_nominal(episode),
+            plant=(
+                None
+                if episode.controller.plant is None
+                else episode.controller.plant.model_dump(mode="json")
+            ),
         ),
         plant=plant,
         planner=PlannerSettings(

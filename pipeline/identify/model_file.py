@@ -58,11 +58,29 @@ FRICTION_MODELS = ("coulomb", "sigmoid")
 over about the transition speed ``v_s``, as real arms' friction)."""
 TORQUE_SIDES = ("motor", "link")
 
+TransitionSpeed = float | tuple[float, ...]
+"""The sigmoid friction's transition speed ``v_s`` [rad/s]: one for every joint, or one per
+joint; 0: Coulomb friction ``sign(qd)``."""
 
-def coulomb_shape(qd: np.ndarray, transition_speed_rad_s: float) -> np.ndarray:
-    """The Coulomb term's shape: ``sign(qd)``, or ``tanh(qd / v_s)`` for ``v_s > 0``."""
-    if transition_speed_rad_s > 0:
-        return np.asarray(np.tanh(qd / transition_speed_rad_s), dtype=float)
+
+def is_sigmoid(transition_speed_rad_s: TransitionSpeed) -> bool:
+    """Whether ``v_s`` selects the sigmoid ``tanh(qd / v_s)`` (not ``sign(qd)``)."""
+    return bool(np.all(np.asarray(transition_speed_rad_s, dtype=float) > 0))
+
+
+def speed_text(transition_speed_rad_s: TransitionSpeed) -> str:
+    """``v_s`` for a message: ``0.1`` or, per joint, ``0.2/0.05/...``."""
+    if isinstance(transition_speed_rad_s, tuple):
+        return "/".join(f"{v:g}" for v in transition_speed_rad_s)
+    return f"{transition_speed_rad_s:g}"
+
+
+def coulomb_shape(qd: np.ndarray, transition_speed_rad_s: TransitionSpeed) -> np.ndarray:
+    """The Coulomb term's shape: ``sign(qd)``, or ``tanh(qd / v_s)`` for ``v_s > 0``
+    (``qd``'s last axis is the joints when ``v_s`` is per joint)."""
+    if is_sigmoid(transition_speed_rad_s):
+        speeds = np.asarray(transition_speed_rad_s, dtype=float)
+        return np.asarray(np.tanh(qd / speeds), dtype=float)
     return np.asarray(np.sign(qd), dtype=float)
 
 
@@ -76,7 +94,7 @@ class Friction:
     viscous_nm_s_rad: tuple[float, ...]
     offset_nm: tuple[float, ...]
     model: str = "coulomb"
-    transition_speed_rad_s: float = 0.0
+    transition_speed_rad_s: TransitionSpeed = 0.0
 
     def torque_nm(self, qd: np.ndarray) -> np.ndarray:
         """Friction torque [N m] at joint velocities ``qd`` [rad/s] (any leading shape)."""
@@ -359,14 +377,20 @@ def load_model(path: str | Path, *, robot: RobotSpec | None = None) -> Identifie
         raise IdentificationError(
             f"{p}: friction.model: expected one of {', '.join(FRICTION_MODELS)}, got {model!r}"
         )
-    if not (_finite(speed) and (speed > 0 if model == "sigmoid" else speed >= 0)):
+    per_joint = isinstance(speed, list) and model == "sigmoid"
+    speeds = speed if per_joint else [speed]
+    if not (
+        len(speeds) == (base.dof if per_joint else 1)
+        and all(_finite(v) and (v > 0 if model == "sigmoid" else v >= 0) for v in speeds)
+    ):
         raise IdentificationError(
-            f"{p}: friction.transition_speed_rad_s: expected a number > 0 for the sigmoid "
-            f"model, got {speed!r}"
+            f"{p}: friction.transition_speed_rad_s: expected a number > 0 (or {base.dof}, one "
+            f"per joint) for the sigmoid model, got {speed!r}"
         )
-    friction = Friction(
-        **values, model=str(model), transition_speed_rad_s=float(speed if model == "sigmoid" else 0)
+    v_s: TransitionSpeed = (
+        tuple(float(v) for v in speeds) if per_joint else float(speed if model == "sigmoid" else 0)
     )
+    friction = Friction(**values, model=str(model), transition_speed_rad_s=v_s)
     is_dh_file = isinstance(data.get("robot"), dict)
     spec = (
         own if is_dh_file and robot is None else apply_model(base, links, friction, source=str(p))

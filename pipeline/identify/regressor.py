@@ -27,6 +27,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from pipeline.errors import IdentificationError
+from pipeline.identify.model_file import TransitionSpeed, coulomb_shape
 from pipeline.robots.chain import chain
 from pipeline.robots.spec import Inertial, RobotSpec
 from pipeline.robots.urdf import build_pinocchio_model
@@ -96,13 +97,18 @@ class Regressor:
     Args:
         spec: the robot.
         transition_speed_rad_s: the Coulomb column is ``sign(qd)`` (0) or the smooth
-            ``tanh(qd / v_s)`` (``v_s`` > 0, the ``sigmoid`` friction model).
+            ``tanh(qd / v_s)`` (``v_s`` > 0, the ``sigmoid`` friction model; one per
+            joint, or one for all).
         armature: the armature columns are ``qdd``; False: zero (torque sensed on the
             link side of the gearbox: the rotor's inertia does not show).
     """
 
     def __init__(
-        self, spec: RobotSpec, *, transition_speed_rad_s: float = 0.0, armature: bool = True
+        self,
+        spec: RobotSpec,
+        *,
+        transition_speed_rad_s: TransitionSpeed = 0.0,
+        armature: bool = True,
     ) -> None:
         spec.require_dynamics("identification")
         self.spec = spec
@@ -135,8 +141,7 @@ class Regressor:
         base = PER_JOINT * joints
         if self.armature:
             out[:, joints, base + ARMATURE] = qdd
-        v_s = self.transition_speed_rad_s
-        out[:, joints, base + COULOMB] = np.tanh(qd / v_s) if v_s > 0 else np.sign(qd)
+        out[:, joints, base + COULOMB] = coulomb_shape(qd, self.transition_speed_rad_s)
         out[:, joints, base + VISCOUS] = qd
         out[:, joints, base + OFFSET] = 1.0
         return out.reshape(n * dof, self.n_standard)

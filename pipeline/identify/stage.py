@@ -38,8 +38,11 @@ from pipeline.identify.identity import kinematics_mismatch, robot_file_sha256
 from pipeline.identify.model_file import (
     FORMAT,
     IdentifiedModel,
+    TransitionSpeed,
+    is_sigmoid,
     load_model,
     model_robot_document,
+    speed_text,
     write_model,
 )
 from pipeline.identify.regressor import (
@@ -68,6 +71,8 @@ from its joint states alone when it has no controller state (a real robot's log)
 
 FIT_TRANSITION_SPEED = -1.0
 """``transition_speed_rad_s`` meaning: fit the sigmoid model's transition speed."""
+FIT_TRANSITION_SPEED_PER_JOINT = -2.0
+"""``transition_speed_rad_s`` meaning: fit the sigmoid model's transition speed per joint."""
 
 
 def read_options(topics: Mapping[str, str] | None) -> ReadOptions:
@@ -243,8 +248,8 @@ def friction_document(fit: FitResult) -> dict[str, Any]:
     theta = fit.theta
     v_s = fit.transition_speed_rad_s
     return {
-        "model": "sigmoid" if v_s > 0 else "coulomb",
-        "transition_speed_rad_s": v_s,
+        "model": "sigmoid" if is_sigmoid(v_s) else "coulomb",
+        "transition_speed_rad_s": list(v_s) if isinstance(v_s, tuple) else v_s,
         "coulomb_nm": _floats(theta[COULOMB::PER_JOINT]),
         "viscous_nm_s_rad": _floats(theta[VISCOUS::PER_JOINT]),
         "offset_nm": _floats(theta[OFFSET::PER_JOINT]),
@@ -321,8 +326,8 @@ def model_document(
                 + (", left out: link-side torque" if link else "")
                 + ") + friction (Coulomb "
                 + (
-                    f"tanh(qd / {fit.transition_speed_rad_s:g} rad/s)"
-                    if fit.transition_speed_rad_s > 0
+                    f"tanh(qd / {speed_text(fit.transition_speed_rad_s)} rad/s)"
+                    if is_sigmoid(fit.transition_speed_rad_s)
                     else "sign(qd)"
                 )
                 + ", viscous qd, sensor offset 1) per joint",
@@ -376,7 +381,7 @@ def fit_command(
     min_speed_rad_s: float = DEFAULT_MIN_SPEED_RAD_S,
     max_condition: float = DEFAULT_MAX_CONDITION,
     topics: Mapping[str, str] | None = None,
-    transition_speed_rad_s: float = 0.0,
+    transition_speed_rad_s: TransitionSpeed = 0.0,
     torque_side: str = "motor",
 ) -> dict[str, Any]:
     """Identify from ``paths``, write ``out`` (MODEL.yaml); the JSON summary.
@@ -384,7 +389,9 @@ def fit_command(
     Args:
         topics: role -> topic remaps (``--topic joint_states=/name``).
         transition_speed_rad_s: 0: Coulomb friction ``sign(qd)``; > 0: ``tanh(qd / v_s)``;
-            :data:`FIT_TRANSITION_SPEED`: ``tanh`` with the best-fitting ``v_s``.
+            :data:`FIT_TRANSITION_SPEED`: ``tanh`` with the best-fitting ``v_s``;
+            :data:`FIT_TRANSITION_SPEED_PER_JOINT`: each joint's best-fitting ``v_s``;
+            a tuple: one ``v_s`` per joint.
         torque_side: ``motor``, ``link`` or ``auto`` (:func:`pipeline.identify.fit.identify`).
 
     Raises:
@@ -394,7 +401,8 @@ def fit_command(
 
     wall0 = time.perf_counter()
     check_output_file(Path(out))  # a device, FIFO or folder: refused before the fit
-    fitted_speed = transition_speed_rad_s == FIT_TRANSITION_SPEED
+    fitted_speed = transition_speed_rad_s in (FIT_TRANSITION_SPEED, FIT_TRANSITION_SPEED_PER_JOINT)
+    per_joint = transition_speed_rad_s == FIT_TRANSITION_SPEED_PER_JOINT
     check_fit_options(
         torque_side=torque_side,
         transition_speed_rad_s=0.0 if fitted_speed else transition_speed_rad_s,
@@ -405,10 +413,11 @@ def fit_command(
     transition: dict[str, Any] = {}
     if fitted_speed:
         transition_speed_rad_s, costs = fitted_transition_speed(
-            spec, samples, min_speed_rad_s=min_speed_rad_s
+            spec, samples, min_speed_rad_s=min_speed_rad_s, per_joint=per_joint
         )
         transition = {
-            "transition_speed": "fitted: least-squares residual over candidate speeds",
+            "transition_speed": "fitted: least-squares residual over candidate speeds"
+            + (", then per joint (coordinate search)" if per_joint else ""),
             "transition_speed_costs": {f"{k:g}": v for k, v in costs.items()},
         }
     fit = identify(
@@ -448,8 +457,12 @@ def fit_command(
         "joints": list(spec.joint_names),
         "torque_side": fit.torque_side,
         "torque_side_reason": fit.torque_side_reason,
-        "friction_model": "sigmoid" if transition_speed_rad_s > 0 else "coulomb",
-        "transition_speed_rad_s": transition_speed_rad_s,
+        "friction_model": "sigmoid" if is_sigmoid(transition_speed_rad_s) else "coulomb",
+        "transition_speed_rad_s": (
+            list(transition_speed_rad_s)
+            if isinstance(transition_speed_rad_s, tuple)
+            else transition_speed_rad_s
+        ),
         "repeated_stamps_dropped": sum(s.repeated_stamps for s in samples),
         "repeated_values_dropped": sum(s.repeated_values for s in samples),
         "resampled": [s.source for s in samples if s.resampled],
@@ -458,7 +471,7 @@ def fit_command(
     }
 
 
-def check_fit_options(*, torque_side: str, transition_speed_rad_s: float) -> None:
+def check_fit_options(*, torque_side: str, transition_speed_rad_s: TransitionSpeed) -> None:
     """Refuse bad ``--torque-side`` / ``--friction`` values before reading anything."""
     from pipeline.identify.fit import TORQUE_SIDES
 
@@ -466,7 +479,8 @@ def check_fit_options(*, torque_side: str, transition_speed_rad_s: float) -> Non
         raise IdentificationError(
             f"--torque-side: expected one of {', '.join(TORQUE_SIDES)}, got {torque_side!r}"
         )
-    if not (np.isfinite(transition_speed_rad_s) and transition_speed_rad_s >= 0):
+    speeds = np.asarray(transition_speed_rad_s, dtype=float)
+    if not (np.all(np.isfinite(speeds)) and np.all(speeds >= 0)):
         raise IdentificationError(
             f"--transition-speed: expected a speed >= 0 rad/s, got {transition_speed_rad_s!r}"
         )

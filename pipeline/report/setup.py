@@ -210,7 +210,38 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
             for (ctrl, shown), members in grouped.items()
         ]
     lines.append(md.table(["episode", "controller", "gains and settings", "seed", "status"], rows))
-    return [*lines, *_nominal_lines(recs), *_design_lines(recs), *_origin_lines(recs)]
+    return [
+        *lines,
+        *_nominal_lines(recs),
+        *_plant_lines(recs),
+        *_design_lines(recs),
+        *_origin_lines(recs),
+    ]
+
+
+def _plant_lines(recs: Sequence[Any]) -> list[str]:
+    """Which plant each controller ran on, when one has a plant of its own (params
+    ``controllers.NAME.plant``): its plant as the bags record it, the others on their
+    scenario's. No line when none has its own."""
+    if not any(r.settings is not None and r.settings.controller.plant for r in recs):
+        return []
+    shown: dict[str, list[str]] = {}
+    for rec in recs:
+        s = rec.settings
+        if s is None:
+            continue
+        own = s.controller.plant
+        plant = json.dumps(dict(own) if own else s.scenario.recorded()["plant"], sort_keys=True)
+        whose = "its own" if own is not None else "the scenario's"
+        text = f"{whose} `plant: {plant}`"
+        seen = shown.setdefault(rec.controller, [])
+        if text not in seen:
+            seen.append(text)
+    return [
+        "",
+        "Plant per controller (paired by seed: seed N draws each plant's own spread with N):",
+        "",
+    ] + [f"- {name}: {'; '.join(texts)}." for name, texts in shown.items()]
 
 
 def _nominal_lines(recs: Sequence[Any]) -> list[str]:

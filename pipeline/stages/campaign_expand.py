@@ -33,6 +33,7 @@ from pipeline.params import (
     RandomAxis,
     RandomGoals,
     ScenarioParams,
+    episode_scenario,
 )
 from pipeline.robots.dh_yaml import format_validation_error
 from pipeline.settings import CampaignInfo
@@ -242,7 +243,7 @@ def _controller_for(
                 for derived in _tuned_keys(base.type, robot):
                     gains.pop(derived, None)
             gains[key] = axis.values[i]
-    return ControllerParams(type=base.type, gains=gains, nominal=base.nominal)
+    return ControllerParams(type=base.type, gains=gains, nominal=base.nominal, plant=base.plant)
 
 
 @functools.cache
@@ -256,6 +257,35 @@ def _tuned_keys(controller_type: str, robot: str) -> tuple[str, ...]:
     except PipelineError:
         return ()  # validate_episodes names the unknown type
     return tuple(entry.default_gains(load_spec(robot), omega_n_rad_s=40.0, zeta=1.0))
+
+
+def _own_plant(
+    params: Params,
+    name: str,
+    scenario: ScenarioParams,
+    ctrl: str,
+    controller: ControllerParams,
+    scenario_axes: Sequence[Axis],
+) -> ScenarioParams:
+    """The scenario ``ctrl``'s episodes run: with the controller's own ``plant:`` if any.
+
+    Raises:
+        ParamsError: the campaign sweeps the scenario's plant (the controller's own would
+            silently not follow), or the controller's plant does not fit the scenario.
+    """
+    if controller.plant is None:
+        return scenario
+    swept = [a.path for a in scenario_axes if a.path.startswith("plant.")]
+    if swept:
+        raise ParamsError(
+            f"{params.source}: {params.where(name)}: sweeps {swept[0]}, but controller "
+            f"{ctrl} has its own plant (controllers.{ctrl}.plant), which the sweep would not "
+            "change: sweep one or the other"
+        )
+    try:
+        return episode_scenario(scenario, controller)
+    except ValidationError as err:
+        raise ParamsError(format_validation_error(params.source, err)) from err
 
 
 def episode_key(picks: Sequence[tuple[Axis, int]], controller: str, seed: int) -> str:
@@ -291,13 +321,14 @@ def expand(params: Params, name: str) -> tuple[Episode, ...]:
         condition = ",".join(f"{a.label}={a.texts[i]}" for a, i in picks)
         for ctrl in campaign.controllers:
             controller = _controller_for(params, ctrl, picks, robot=scenarios[skey].robot)
+            scenario = _own_plant(params, name, scenarios[skey], ctrl, controller, scenario_axes)
             for seed in campaign.seeds:
                 key = episode_key(picks, ctrl, seed)
                 episodes.append(
                     Episode(
                         name=key,
                         scenario_name=campaign.scenario_name,
-                        scenario=scenarios[skey],
+                        scenario=scenario,
                         controller_name=ctrl,
                         controller=controller,
                         seed=seed,

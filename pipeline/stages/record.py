@@ -74,15 +74,18 @@ def validate_episodes(params: Params, episodes: Sequence[Episode]) -> None:
         where = f"scenarios.{episode.scenario_name}"
         # joint vectors and Cartesian goals (IK: reachable, solver known) once, up front
         resolve_goal(spec, scenario, name=episode.scenario_name, source=params.source)
+        # a controller's own plant (controllers.NAME.plant) is named as such
+        own = episode.controller.plant is not None
+        plant_where = f"controllers.{episode.controller_name}" if own else where
         for key in ("damping", "frictionloss", "armature"):
             value = getattr(scenario.plant, key)
             if isinstance(value, list) and len(value) not in (1, spec.dof):
                 raise ParamsError(
-                    f"{params.source}: {where}.plant.{key}: "
+                    f"{params.source}: {plant_where}.plant.{key}: "
                     f"expected 1 or {spec.dof} values, got {len(value)}"
                 )
         _check_loop(params, episode, where)
-        _check_profile(params, spec, scenario, where)
+        _check_profile(params, spec, scenario, plant_where)
         _check_own_nominal(params, spec, episode)
         build = functools.partial(
             make_controller,

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
+from pipeline.errors import IdentificationError
 from pipeline.identify.fit import fitted_transition_speed, identify
 from pipeline.identify.model_file import load_model
 from pipeline.identify.regressor import OFFSET, PER_JOINT, base_parameters, standard_parameters
@@ -76,6 +77,33 @@ def test_sigmoid_friction_is_fitted_where_coulomb_is_not(exact: JointSamples) ->
     assert fitted_transition_speed(spec, [smooth], min_speed_rad_s=0.0)[0] == v_s
 
 
+def test_a_transition_speed_per_joint_is_fitted_and_round_trips(
+    exact: JointSamples, tmp_path: Path
+) -> None:
+    """Joints whose friction changes sign over different speeds (a real arm's: Gaz et al.'s
+    Panda 0.12-0.39 rad/s): the per-joint search finds each; one common speed cannot fit."""
+    spec = load_spec("ur5")
+    fc = np.array([3.0, 3.0, 2.0, 0.8, 0.8, 0.8])
+    v_s = (0.05, 0.2, 0.1, 0.3, 0.13, 0.07)
+    smooth = replace(exact, tau_nm=exact.tau_nm + fc * np.tanh(exact.qd / np.array(v_s)))
+    found, _ = fitted_transition_speed(spec, [smooth], min_speed_rad_s=0.0, per_joint=True)
+    assert found == v_s
+    fit = identify(spec, [smooth], min_speed_rad_s=0.0, transition_speed_rad_s=found)
+    np.testing.assert_allclose(fit.theta[11::PER_JOINT], fc, rtol=1e-6)
+    common, _ = fitted_transition_speed(spec, [smooth], min_speed_rad_s=0.0)
+    one = identify(spec, [smooth], min_speed_rad_s=0.0, transition_speed_rad_s=common)
+    assert fit.residual_rms_nm.max() < 1e-6 < one.residual_rms_nm.max()
+    doc = model_document(spec, fit, [smooth], method={})
+    assert doc["friction"]["transition_speed_rad_s"] == list(v_s)
+    path = tmp_path / "m.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    assert load_model(path).friction.transition_speed_rad_s == v_s
+    doc["friction"]["transition_speed_rad_s"] = [0.1, 0.2]  # not one per joint
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(IdentificationError, match=r"transition_speed_rad_s: expected .* 6, one"):
+        load_model(path)
+
+
 @pytest.mark.slow
 def test_the_sigmoid_model_file_validates_with_its_own_friction(
     ideal_bags: tuple[Path, Path], tmp_path: Path
@@ -95,16 +123,17 @@ def test_the_sigmoid_model_file_validates_with_its_own_friction(
 def test_friction_options_are_checked_before_reading() -> None:
     from pipeline.cli.identify_app import _transition_speed
     from pipeline.errors import IdentificationError
-    from pipeline.identify.stage import FIT_TRANSITION_SPEED
+    from pipeline.identify.stage import FIT_TRANSITION_SPEED, FIT_TRANSITION_SPEED_PER_JOINT
 
     assert _transition_speed("sigmoid", None) == 0.1
     assert _transition_speed("sigmoid", "auto") == FIT_TRANSITION_SPEED
+    assert _transition_speed("sigmoid", "per-joint") == FIT_TRANSITION_SPEED_PER_JOINT
     assert _transition_speed("sigmoid", "0.05") == 0.05
     assert _transition_speed("coulomb", None) == 0.0
     for friction, text, words in (
         ("coulomb", "0.1", "only with --friction sigmoid"),
         ("sigmoid", "0", "> 0"),
-        ("sigmoid", "fast", "or auto"),
+        ("sigmoid", "fast", "auto or per-joint"),
         ("stribeck", None, "--friction: expected one of coulomb, sigmoid"),
     ):
         with pytest.raises(IdentificationError, match=words):
