@@ -544,6 +544,7 @@ def validate_command(
     if not paths:
         raise IdentificationError("no recordings given")
     predictions = []
+    sampled = []
     for path in paths:
         recording = read_recording(Path(path), read_options(topics))
         recorded = recording.metadata.get("robot") if recording.armlab_metadata else None
@@ -552,6 +553,7 @@ def validate_command(
                 f"{path}: a recording of robot '{recorded}', the model is of '{model.spec.name}'"
             )
         samples = joint_samples(recording, model.spec, cutoff_hz=cutoff_hz)
+        sampled.append(samples)
         predictions.append(predict(model, samples, min_speed_rad_s=min_speed_rad_s))
     measured = np.concatenate([p.measured_nm for p in predictions])
     predicted = np.concatenate([p.predicted_nm for p in predictions])
@@ -571,6 +573,9 @@ def validate_command(
         "samples": int(measured.shape[0]),
         "cutoff_hz": cutoff_hz,
         "min_speed_rad_s": min_speed_rad_s,
+        "repeated_stamps_dropped": sum(s.repeated_stamps for s in sampled),
+        "repeated_values_dropped": sum(s.repeated_values for s in sampled),
+        "resampled": [s.source for s in sampled if s.resampled],
         "figure": str(figure),
     }
 
