@@ -3,7 +3,8 @@
 
 1. Stack the base regressor ``Y_b`` and torques of every sample, leaving out a joint's
    rows while it moves slower than ``min_speed_rad_s`` (sticking friction is no
-   function of ``sign(qd)``).
+   function of ``sign(qd)``). On filtered samples the Coulomb columns are filtered like
+   the torque (:meth:`.JointSamples.coulomb`).
 2. Check the excitation: pivoted QR of the column-normalized ``Y_b``; parameters whose
    pivot falls below ``1 / max_condition`` of the first are not excited (an error
    naming them).
@@ -149,7 +150,7 @@ def stacked(
     reg = Regressor(spec, transition_speed_rad_s=transition_speed_rad_s)
     ys, taus, joints = [], [], []
     for s in samples:
-        y = reg.stacked(s.q, s.qd, s.qdd)
+        y = reg.stacked(s.q, s.qd, s.qdd, coulomb=s.coulomb(transition_speed_rad_s))
         keep = (np.abs(s.qd) >= min_speed_rad_s).ravel()
         ys.append(y[keep])
         taus.append(s.tau_nm.ravel()[keep])
@@ -178,16 +179,19 @@ def fitted_transition_speed(
     """
     with one_thread():
         y, tau, joint_of = stacked(spec, samples, min_speed_rad_s=min_speed_rad_s)
-        qd = np.concatenate(
-            [s.qd.ravel()[(np.abs(s.qd) >= min_speed_rad_s).ravel()] for s in samples]
-        )
+        kept = [(np.abs(s.qd) >= min_speed_rad_s).ravel() for s in samples]
         base = base_parameters(spec)
         scale = 1.0 / np.maximum(_per_joint_rms(tau, joint_of, spec.dof), 1e-9)[joint_of]
         rows = np.arange(tau.size)
         coulomb = PER_JOINT * joint_of + COULOMB
         costs: dict[float, float] = {}
         for v_s in candidates:
-            y[rows, coulomb] = np.tanh(qd / v_s)
+            y[rows, coulomb] = np.concatenate(
+                [
+                    (np.tanh(s.qd / v_s) if (c := s.coulomb(v_s)) is None else c).ravel()[k]
+                    for s, k in zip(samples, kept, strict=True)
+                ]
+            )
             y_b = y[:, base.columns] * scale[:, None]
             beta = np.linalg.lstsq(y_b, tau * scale, rcond=None)[0]
             costs[float(v_s)] = float(np.sum((tau * scale - y_b @ beta) ** 2))

@@ -115,11 +115,14 @@ class Regressor:
         inertial = [PER_JOINT * j + k for j in range(spec.dof) for k in range(10)]
         self._inertial_columns = np.array(inertial)
 
-    def stacked(self, q: F64, qd: F64, qdd: F64) -> F64:
+    def stacked(self, q: F64, qd: F64, qdd: F64, *, coulomb: F64 | None = None) -> F64:
         """Regressor rows of N samples, sample-major: row ``k * dof + j`` is joint j at k.
 
         Args:
             q, qd, qdd: (N, dof) position [rad], velocity [rad/s], acceleration [rad/s^2].
+            coulomb: (N, dof) the Coulomb columns when given (filtered samples: the
+                friction sign low-passed like the torque, :meth:`.JointSamples.coulomb`);
+                default ``sign(qd)`` or ``tanh(qd / v_s)``.
 
         Returns:
             (N dof, 14 dof) regressor.
@@ -136,7 +139,9 @@ class Regressor:
         if self.armature:
             out[:, joints, base + ARMATURE] = qdd
         v_s = self.transition_speed_rad_s
-        out[:, joints, base + COULOMB] = np.tanh(qd / v_s) if v_s > 0 else np.sign(qd)
+        if coulomb is None:
+            coulomb = np.tanh(qd / v_s) if v_s > 0 else np.sign(qd)
+        out[:, joints, base + COULOMB] = coulomb
         out[:, joints, base + VISCOUS] = qd
         out[:, joints, base + OFFSET] = 1.0
         return out.reshape(n * dof, self.n_standard)

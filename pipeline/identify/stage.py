@@ -502,7 +502,9 @@ def predict(model: IdentifiedModel, samples: JointSamples, *, min_speed_rad_s: f
         transition_speed_rad_s=model.friction.transition_speed_rad_s,
         armature=model.torque_side == "motor",
     )
-    predicted = (reg.stacked(samples.q, samples.qd, samples.qdd) @ theta).reshape(n, dof)
+    coulomb = samples.coulomb(model.friction.transition_speed_rad_s)
+    y = reg.stacked(samples.q, samples.qd, samples.qdd, coulomb=coulomb)
+    predicted = (y @ theta).reshape(n, dof)
     slow = np.abs(samples.qd) < min_speed_rad_s
     measured = samples.tau_nm.copy()
     measured[slow] = np.nan
