@@ -97,6 +97,18 @@ class JointSamples:
     filter_ba: tuple[F64, F64] | None = None
     kept: tuple[int, int, int] = (0, 0, 1)
 
+    def stuck_share(self, speed_rad_s: float) -> F64 | None:
+        """(N, dof) per kept sample, the low-passed indicator of the unfiltered velocity
+        being below ``speed_rad_s``: how much of the filtered torque there comes from
+        samples where the joint sticks (None: exact samples)."""
+        if self.raw_qd is None or self.filter_ba is None:
+            return None
+        stuck = (np.abs(self.raw_qd) < speed_rad_s).astype(float)
+        b, a = self.filter_ba
+        start, stop, step = self.kept
+        share = signal.filtfilt(b, a, stuck, axis=0)[start:stop:step]
+        return np.asarray(np.abs(share), dtype=float)
+
     def coulomb(self, transition_speed_rad_s: float) -> F64 | None:
         """The Coulomb regressor columns, filtered like the torque (None: exact samples,
         ``sign(qd)`` as is).

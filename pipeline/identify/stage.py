@@ -32,6 +32,7 @@ from pipeline.identify.fit import (
     fitted_transition_speed,
     from_prior,
     identify,
+    kept_rows,
     violations,
 )
 from pipeline.identify.identity import kinematics_mismatch, robot_file_sha256
@@ -494,7 +495,8 @@ def model_parameters(model: IdentifiedModel) -> F64:
 
 
 def predict(model: IdentifiedModel, samples: JointSamples, *, min_speed_rad_s: float) -> Prediction:
-    """The model's torque on a recording's samples (slow joint samples set to NaN)."""
+    """The model's torque on a recording's samples (the joint samples the fit would leave
+    out, slow or near a stuck joint, set to NaN)."""
     theta = model_parameters(model)
     n, dof = samples.q.shape
     reg = Regressor(
@@ -505,7 +507,7 @@ def predict(model: IdentifiedModel, samples: JointSamples, *, min_speed_rad_s: f
     coulomb = samples.coulomb(model.friction.transition_speed_rad_s)
     y = reg.stacked(samples.q, samples.qd, samples.qdd, coulomb=coulomb)
     predicted = (y @ theta).reshape(n, dof)
-    slow = np.abs(samples.qd) < min_speed_rad_s
+    slow = ~kept_rows(samples, min_speed_rad_s).reshape(n, dof)  # the rows fit leaves out
     measured = samples.tau_nm.copy()
     measured[slow] = np.nan
     predicted[slow] = np.nan
