@@ -4,7 +4,8 @@ For each seed 0..N-1: the ``paper-realistic`` scenario's plant for that seed (dr
 links and armature, MuJoCo frictionloss and damping, sensor noise), a short fixed
 excitation (one period of a 0.1 Hz, 5-harmonic Fourier series, 10 s, seeded
 coefficients, CTC on the CAD model), written as our recording, read back, and fitted
-as ``pipeline identify fit`` does (5 Hz zero-phase filter, decimation, WLS). The truth
+as ``pipeline identify fit`` does (5 Hz zero-phase filter, decimation, WLS; filtered
+Coulomb columns, held torque aligned, rows near a stuck joint left out). The truth
 of the base parameters is the plant's standard parameters (its drawn inertials and
 armature, Coulomb = frictionloss, viscous = damping, offset 0) through the fit's own
 base projection. Coverage: the share of the base-parameter estimates within +-2

@@ -226,11 +226,20 @@ def validate_cmd(
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
 ) -> None:
-    """Torque RMS error per joint of MODEL on other recordings, absolute and % of RMS torque."""
+    """Torque RMS error per joint of MODEL on other recordings, absolute and % of RMS torque.
+
+    Repeated samples are dropped and uneven stamps resampled, as in fit (and reported).
+    """
     from pipeline.identify.stage import validate_command
 
     s = validate_command(model, recordings, figure=figure, topics=_topics(topic), robot=robot)
-    lines = [f"{'joint':<22} {'RMS error [N m]':>16} {'RMS torque [N m]':>17} {'error %':>8}"]
+    lines = [
+        f"samples: {s['repeated_stamps_dropped']} repeated stamps and "
+        f"{s['repeated_values_dropped']} repeated values dropped; "
+        f"{len(s['resampled'])} of {len(s['recordings'])} recording(s) resampled "
+        "(uneven stamps)",
+        f"{'joint':<22} {'RMS error [N m]':>16} {'RMS torque [N m]':>17} {'error %':>8}",
+    ]
     for name, e, t, p in zip(
         s["joints"], s["rms_error_nm"], s["rms_torque_nm"], s["rms_error_pct"], strict=True
     ):

@@ -103,6 +103,24 @@ def report_cmd(
             "x,y,z \\[m] or x,y,z,roll,pitch,yaw \\[m, rad] (default: the flange).",
         ),
     ] = None,
+    robot: Annotated[
+        str | None,
+        typer.Option(
+            "--robot",
+            help="The robot (built-in name or file: URDF, MJCF, DH YAML, sidecar) of bags "
+            "without /robot_description, for the task-space (TCP) metrics; its joints must "
+            "be the bag's. A bag with its own description keeps it.",
+        ),
+    ] = None,
+    tip: Annotated[
+        str | None,
+        typer.Option(
+            "--tip",
+            help="The flange frame of the TCP for a robot from a bag's /robot_description "
+            "or --robot: the last joint's link or a frame fixed to it (default: tool0 where "
+            "the robot has one, else the last link).",
+        ),
+    ] = None,
     jobs: Annotated[
         int | None,
         typer.Option(
@@ -144,7 +162,8 @@ def report_cmd(
     picked by name from /joint_states (extra joints and other publishers are
     left out). Robot name and effort limits come from the bag's own
     /robot_description URDF (never from a built-in robot of the same name;
-    without it saturation is n/a); what needs our metadata (gains, plant,
+    without it saturation is n/a; --robot gives the robot of a bag without one,
+    --tip its flange frame); what needs our metadata (gains, plant,
     motion start) is n/a, with the reason in the report. A damaged bag is
     refused; --salvage reads it up to the damage and marks its status.
     """
@@ -188,6 +207,8 @@ def report_cmd(
                 controller=controller,
                 scenario=scenario,
                 labels=_labels(label or []),
+                robot=robot,
+                tip=tip,
             ),
             tool=tool,
             jobs=jobs,

@@ -3,7 +3,9 @@
 
 1. Stack the base regressor ``Y_b`` and torques of every sample, leaving out a joint's
    rows while it moves slower than ``min_speed_rad_s`` (sticking friction is no
-   function of ``sign(qd)``).
+   function of ``sign(qd)``) or, on filtered samples, while a stuck joint is within the
+   filter's reach (:func:`kept_rows`). On filtered samples the Coulomb columns are
+   filtered like the torque (:meth:`.JointSamples.coulomb`).
 2. Check the excitation: pivoted QR of the column-normalized ``Y_b``; parameters whose
    pivot falls below ``1 / max_condition`` of the first are not excited (an error
    naming them).
@@ -40,7 +42,7 @@ from pipeline.identify.defaults import (
     DEFAULT_MAX_CONDITION,
     DEFAULT_MIN_SPEED_RAD_S,
 )
-from pipeline.identify.model_file import TransitionSpeed
+from pipeline.identify.model_file import TransitionSpeed, coulomb_shape
 from pipeline.identify.regressor import (
     ARMATURE,
     COULOMB,
@@ -58,6 +60,11 @@ from pipeline.robots.spec import RobotSpec
 
 F64 = NDArray[np.float64]
 
+STUCK_SPEED_RAD_S = 1e-3
+"""A joint moving slower than this (unfiltered) sticks [rad/s]."""
+STUCK_SHARE = 0.01
+"""A filtered row is left out when this share of its low-passed torque comes from samples
+where the joint sticks (:func:`kept_rows`)."""
 NULL_SPACE_WEIGHT = 1e-4
 """Weight of the pull towards CAD in the unidentifiable directions (relative)."""
 MIN_ROWS_PER_PARAMETER = 10
@@ -139,6 +146,19 @@ class UnexcitedError(IdentificationError):
         self.weak = tuple(weak)
 
 
+def kept_rows(s: JointSamples, min_speed_rad_s: float) -> NDArray[np.bool_]:
+    """Which of a recording's joint samples (sample-major, as :func:`stacked` stacks them)
+    the fit uses: faster than ``min_speed_rad_s``, and, on filtered samples, no stuck
+    joint within the filter's reach (:meth:`.JointSamples.stuck_share` below
+    :data:`STUCK_SHARE`): while a joint sticks its friction is whatever holds it, no
+    ``fc sign(qd)``, and the low-pass spreads that into the rows around it."""
+    keep = np.abs(s.qd) >= min_speed_rad_s
+    share = s.stuck_share(STUCK_SPEED_RAD_S)
+    if share is not None:
+        keep &= share < STUCK_SHARE
+    return np.asarray(keep.ravel(), dtype=bool)
+
+
 def stacked(
     spec: RobotSpec,
     samples: Sequence[JointSamples],
@@ -150,8 +170,8 @@ def stacked(
     reg = Regressor(spec, transition_speed_rad_s=transition_speed_rad_s)
     ys, taus, joints = [], [], []
     for s in samples:
-        y = reg.stacked(s.q, s.qd, s.qdd)
-        keep = (np.abs(s.qd) >= min_speed_rad_s).ravel()
+        y = reg.stacked(s.q, s.qd, s.qdd, coulomb=s.coulomb(transition_speed_rad_s))
+        keep = kept_rows(s, min_speed_rad_s)
         ys.append(y[keep])
         taus.append(s.tau_nm.ravel()[keep])
         joints.append(np.tile(np.arange(spec.dof), s.q.shape[0])[keep])
@@ -193,16 +213,21 @@ def fitted_transition_speed(
     """
     with one_thread():
         y, tau, joint_of = stacked(spec, samples, min_speed_rad_s=min_speed_rad_s)
-        qd = np.concatenate(
-            [s.qd.ravel()[(np.abs(s.qd) >= min_speed_rad_s).ravel()] for s in samples]
-        )
+        kept = [kept_rows(s, min_speed_rad_s) for s in samples]
         base = base_parameters(spec)
         scale = 1.0 / np.maximum(_per_joint_rms(tau, joint_of, spec.dof), 1e-9)[joint_of]
         rows = np.arange(tau.size)
         coulomb = PER_JOINT * joint_of + COULOMB
 
         def cost(v_s: F64) -> float:
-            y[rows, coulomb] = np.tanh(qd / v_s[joint_of])
+            speeds = tuple(float(v) for v in v_s)
+            shapes = (s.coulomb(speeds) for s in samples)
+            y[rows, coulomb] = np.concatenate(
+                [
+                    (coulomb_shape(s.qd, speeds) if c is None else c).ravel()[k]
+                    for s, c, k in zip(samples, shapes, kept, strict=True)
+                ]
+            )
             y_b = y[:, base.columns] * scale[:, None]
             beta = np.linalg.lstsq(y_b, tau * scale, rcond=None)[0]
             return float(np.sum((tau * scale - y_b @ beta) ** 2))
@@ -228,7 +253,7 @@ def row_instants(
     """Each row of :func:`stacked`: its sample index and its recording index."""
     instants, recordings = [], []
     for r, s in enumerate(samples):
-        keep = (np.abs(s.qd) >= min_speed_rad_s).ravel()
+        keep = kept_rows(s, min_speed_rad_s)
         k = np.repeat(np.arange(s.q.shape[0]), spec.dof)[keep]
         instants.append(k)
         recordings.append(np.full(k.size, r, dtype=np.intp))

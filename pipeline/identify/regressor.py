@@ -121,11 +121,14 @@ class Regressor:
         inertial = [PER_JOINT * j + k for j in range(spec.dof) for k in range(10)]
         self._inertial_columns = np.array(inertial)
 
-    def stacked(self, q: F64, qd: F64, qdd: F64) -> F64:
+    def stacked(self, q: F64, qd: F64, qdd: F64, *, coulomb: F64 | None = None) -> F64:
         """Regressor rows of N samples, sample-major: row ``k * dof + j`` is joint j at k.
 
         Args:
             q, qd, qdd: (N, dof) position [rad], velocity [rad/s], acceleration [rad/s^2].
+            coulomb: (N, dof) the Coulomb columns when given (filtered samples: the
+                friction sign low-passed like the torque, :meth:`.JointSamples.coulomb`);
+                default ``sign(qd)`` or ``tanh(qd / v_s)``.
 
         Returns:
             (N dof, 14 dof) regressor.
@@ -141,7 +144,9 @@ class Regressor:
         base = PER_JOINT * joints
         if self.armature:
             out[:, joints, base + ARMATURE] = qdd
-        out[:, joints, base + COULOMB] = coulomb_shape(qd, self.transition_speed_rad_s)
+        if coulomb is None:
+            coulomb = coulomb_shape(qd, self.transition_speed_rad_s)
+        out[:, joints, base + COULOMB] = coulomb
         out[:, joints, base + VISCOUS] = qd
         out[:, joints, base + OFFSET] = 1.0
         return out.reshape(n * dof, self.n_standard)

@@ -12,7 +12,13 @@ Two ways to get velocities and accelerations:
   :data:`FILTER_ORDER`) of positions, velocities (when recorded) and torques alike
   ("parallel filtering", so filtering distorts both sides of ``tau = Y theta`` the same
   way), central differences for the derivatives, the filter's edge transients cut, then
-  decimation to about ten samples per cutoff period.
+  decimation to about ten samples per cutoff period. The Coulomb columns, the one term
+  that is no smooth function of the filtered signals, are filtered alike
+  (:meth:`JointSamples.coulomb`). Our recordings' effort is the torque held over the
+  following period (zero-order hold: ``tau[k]`` acts over ``[t_k, t_k+1]``); the torque
+  *at* ``t_k`` is then the mean of ``tau[k-1]`` and ``tau[k]`` (``effort_held``), which
+  aligns it with the states sampled at ``t_k`` (a real robot's log stamps the effort it
+  measured at the sample: left as is).
 - ``cutoff_hz == 0`` (exact): the recorded velocities and the forward difference
   ``qdd_k = (qd_{k+1} - qd_k) / dt``: exactly the acceleration the plant's semi-implicit
   Euler step applied with torque ``tau_k`` over ``[t_k, t_{k+1}]``, so noise-free
@@ -37,6 +43,7 @@ from numpy.typing import NDArray
 from scipy import signal
 
 from pipeline.errors import IdentificationError
+from pipeline.identify.model_file import TransitionSpeed, coulomb_shape
 from pipeline.log.reader import Recording
 from pipeline.robots.spec import RobotSpec
 
@@ -65,6 +72,13 @@ class JointSamples:
         repeated_values: messages dropped for repeating the previous values while moving.
         resampled: uneven stamps were resampled onto the median period's grid.
         period_range_s: the shortest and longest stamp period after the drops [s].
+        effort_held: the effort is a torque held over the following sample period (our
+            recordings), so the torque at a sample is the mean of the two held values
+            around it (filtered samples only; see the module docstring).
+        raw_qd: (M, dof) filtered samples: the velocity before filtering, at the full
+            rate (recorded, else differentiated positions) [rad/s]; None: exact samples.
+        filter_ba: the low-pass's (b, a) coefficients (filtered samples).
+        kept: (start, stop, step) of the full-rate samples kept after the filter.
     """
 
     source: str
@@ -79,6 +93,40 @@ class JointSamples:
     repeated_values: int = 0
     resampled: bool = False
     period_range_s: tuple[float, float] = (0.0, 0.0)
+    effort_held: bool = False
+    raw_qd: F64 | None = None
+    filter_ba: tuple[F64, F64] | None = None
+    kept: tuple[int, int, int] = (0, 0, 1)
+
+    def stuck_share(self, speed_rad_s: float) -> F64 | None:
+        """(N, dof) per kept sample, the low-passed indicator of the unfiltered velocity
+        being below ``speed_rad_s``: how much of the filtered torque there comes from
+        samples where the joint sticks (None: exact samples)."""
+        if self.raw_qd is None or self.filter_ba is None:
+            return None
+        stuck = (np.abs(self.raw_qd) < speed_rad_s).astype(float)
+        b, a = self.filter_ba
+        start, stop, step = self.kept
+        share = signal.filtfilt(b, a, stuck, axis=0)[start:stop:step]
+        return np.asarray(np.abs(share), dtype=float)
+
+    def coulomb(self, transition_speed_rad_s: TransitionSpeed) -> F64 | None:
+        """The Coulomb regressor columns, filtered like the torque (None: exact samples,
+        ``sign(qd)`` as is).
+
+        ``fc sign(qd)`` is the one term of ``tau = Y theta`` that is no smooth function
+        of the filtered signals: the low-passed torque changes over a cutoff period
+        around a reversal while ``sign`` of the filtered velocity jumps there, which
+        biases Coulomb up and viscous down. So the column is ``sign`` (or
+        ``tanh(qd / v_s)``) of the unfiltered velocity, low-passed, cut and decimated
+        exactly as the torque (parallel filtering: ``filter(Y) theta = filter(Y theta)``).
+        """
+        if self.raw_qd is None or self.filter_ba is None:
+            return None
+        column = coulomb_shape(self.raw_qd, transition_speed_rad_s)
+        b, a = self.filter_ba
+        start, stop, step = self.kept
+        return np.asarray(signal.filtfilt(b, a, column, axis=0)[start:stop:step], dtype=float)
 
 
 def _column(frame: pl.DataFrame, name: str, joints: tuple[str, ...], n: int) -> F64 | None:
@@ -167,7 +215,11 @@ def joint_samples(recording: Recording, spec: RobotSpec, *, cutoff_hz: float) ->
         qdd = np.diff(qd, axis=0) / dt_s
         out = JointSamples(where, sha, q[:-1], qd[:-1], qdd, tau[:-1], dt_s, truth)
     else:
+        held = recording.armlab_metadata
+        if held:  # tau[k] acts over [t_k, t_k+1]: at t_k, half of it and half of tau[k-1]
+            tau = np.vstack([tau[:1], 0.5 * (tau[1:] + tau[:-1])])
         out = _filtered(where, sha, q, qd, tau, dt_s=dt_s, cutoff_hz=cutoff_hz, truth=truth)
+        out = replace(out, effort_held=held)
     return replace(out, **counts)  # type: ignore[arg-type]
 
 
@@ -210,5 +262,8 @@ def _filtered(
     step = max(1, int(1.0 / (SAMPLES_PER_CUTOFF * cutoff_hz * dt_s)))
     keep = slice(trim, q.shape[0] - trim, step)
     return JointSamples(
-        where, sha, q_f[keep], qd_f[keep], qdd_f[keep], tau_f[keep], dt_s * step, truth
-    )
+        where, sha, q_f[keep], qd_f[keep], qdd_f[keep], tau_f[keep], dt_s * step, truth,
+        raw_qd=qd if qd is not None else np.gradient(q, dt_s, axis=0),
+        filter_ba=(np.asarray(b, dtype=float), np.asarray(a, dtype=float)),
+        kept=(trim, q.shape[0] - trim, step),
+    )  # fmt: skip

@@ -32,6 +32,7 @@ from pipeline.identify.fit import (
     fitted_transition_speed,
     from_prior,
     identify,
+    kept_rows,
     violations,
 )
 from pipeline.identify.identity import kinematics_mismatch, robot_file_sha256
@@ -508,7 +509,8 @@ def model_parameters(model: IdentifiedModel) -> F64:
 
 
 def predict(model: IdentifiedModel, samples: JointSamples, *, min_speed_rad_s: float) -> Prediction:
-    """The model's torque on a recording's samples (slow joint samples set to NaN)."""
+    """The model's torque on a recording's samples (the joint samples the fit would leave
+    out, slow or near a stuck joint, set to NaN)."""
     theta = model_parameters(model)
     n, dof = samples.q.shape
     reg = Regressor(
@@ -516,8 +518,10 @@ def predict(model: IdentifiedModel, samples: JointSamples, *, min_speed_rad_s: f
         transition_speed_rad_s=model.friction.transition_speed_rad_s,
         armature=model.torque_side == "motor",
     )
-    predicted = (reg.stacked(samples.q, samples.qd, samples.qdd) @ theta).reshape(n, dof)
-    slow = np.abs(samples.qd) < min_speed_rad_s
+    coulomb = samples.coulomb(model.friction.transition_speed_rad_s)
+    y = reg.stacked(samples.q, samples.qd, samples.qdd, coulomb=coulomb)
+    predicted = (y @ theta).reshape(n, dof)
+    slow = ~kept_rows(samples, min_speed_rad_s).reshape(n, dof)  # the rows fit leaves out
     measured = samples.tau_nm.copy()
     measured[slow] = np.nan
     predicted[slow] = np.nan
@@ -558,6 +562,7 @@ def validate_command(
     if not paths:
         raise IdentificationError("no recordings given")
     predictions = []
+    sampled = []
     for path in paths:
         recording = read_recording(Path(path), read_options(topics))
         recorded = recording.metadata.get("robot") if recording.armlab_metadata else None
@@ -566,6 +571,7 @@ def validate_command(
                 f"{path}: a recording of robot '{recorded}', the model is of '{model.spec.name}'"
             )
         samples = joint_samples(recording, model.spec, cutoff_hz=cutoff_hz)
+        sampled.append(samples)
         predictions.append(predict(model, samples, min_speed_rad_s=min_speed_rad_s))
     measured = np.concatenate([p.measured_nm for p in predictions])
     predicted = np.concatenate([p.predicted_nm for p in predictions])
@@ -585,6 +591,9 @@ def validate_command(
         "samples": int(measured.shape[0]),
         "cutoff_hz": cutoff_hz,
         "min_speed_rad_s": min_speed_rad_s,
+        "repeated_stamps_dropped": sum(s.repeated_stamps for s in sampled),
+        "repeated_values_dropped": sum(s.repeated_values for s in sampled),
+        "resampled": [s.source for s in sampled if s.resampled],
         "figure": str(figure),
     }
 

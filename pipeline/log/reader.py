@@ -19,6 +19,7 @@ labels and settings (:mod:`pipeline.log.labels`) and notes (:mod:`pipeline.log.n
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 from pipeline.errors import RecordingError
@@ -94,8 +95,12 @@ def read_recording(
         # the read ends (Ctrl-C and SIGTERM included)
         with wal_copies(files) as copies:
             if total > limit:
-                return read_windowed(source, files, options, sink, copies=copies)
-            return read_whole(source, files, options, copies=copies)
+                rec = read_windowed(source, files, options, sink, copies=copies)
+            else:
+                rec = read_whole(source, files, options, copies=copies)
+            if options.robot is None and options.tip is None:
+                return rec
+            return dataclasses.replace(rec, given_robot=options.robot, given_tip=options.tip)
     except RecordingError:
         raise
     except SinkError as err:  # the caller's sink failed, not the recording

@@ -88,6 +88,10 @@ class ReadOptions:
             joint states alone (identification: positions, velocities, efforts); its
             controller-state columns are null. The report never sets it (it needs the
             controller's reference and error).
+        robot: the robot (built-in name or file) of a bag without ``/robot_description``
+            (``report --robot``; :mod:`pipeline.log.robot_facts`).
+        tip: the TCP's frame of a robot from a bag's description or ``robot``
+            (``report --tip``): the last joint's link or a frame fixed to it.
     """
 
     topics: Mapping[str, str] = field(default_factory=dict)
@@ -98,6 +102,8 @@ class ReadOptions:
     stream_above_bytes: int | None = None
     window_steps: int = 0
     joint_states_only: bool = False
+    robot: str | None = None
+    tip: str | None = None
 
 
 @dataclass(frozen=True)
@@ -166,6 +172,8 @@ class Recording:
             :func:`pipeline.analysis.protocol.protocol_view` cut the pre-roll); None: from
             the frames.
         control_period_s: median ``/controller_state`` period [s]; None: from the frames.
+        given_robot, given_tip: :attr:`ReadOptions.robot` and :attr:`ReadOptions.tip`
+            as read with (:mod:`pipeline.log.robot_facts` uses them).
         duration_contradicted: the settings' trajectory duration is contradicted by the
             data (a note says how); :attr:`trajectory_duration_s` is then
             ``data_trajectory_duration_s``, the data's (None: unknown).
@@ -197,6 +205,8 @@ class Recording:
     control_period_s: float | None = None
     duration_contradicted: bool = False
     data_trajectory_duration_s: float | None = None
+    given_robot: str | None = None
+    given_tip: str | None = None
 
     @property
     def episode(self) -> str:

@@ -104,7 +104,7 @@ def test_a_joint_states_only_bag_fits_and_validates(
             effort=log["effort"],  # type: ignore[arg-type]
         )
         logs.append((path, log))
-    (fit_bag, fit_log), (check_bag, _) = logs
+    (fit_bag, fit_log), (check_bag, check_log) = logs
     # the report still needs its controller state; identification does not
     with pytest.raises(RecordingError, match="controller_state"):
         read_recording(fit_bag)
@@ -117,6 +117,16 @@ def test_a_joint_states_only_bag_fits_and_validates(
     assert s["resampled"] == [str(fit_bag)]
     check = validate_command(model, [check_bag], topics={"joint_states": TOPIC})
     assert max(check["rms_error_pct"]) < 3.0, check["rms_error_pct"]
+    # validate drops and resamples as fit does, and says so
+    assert check["repeated_stamps_dropped"] == check_log["twice"] > 0
+    assert check["repeated_values_dropped"] == check_log["stale"] > 0
+    assert check["resampled"] == [str(check_bag)]
+    proc = _cli("validate", str(model), str(check_bag), "--topic", f"joint_states={TOPIC}")
+    assert proc.returncode == 0, proc.stderr
+    assert (
+        f"samples: {check_log['twice']} repeated stamps and {check_log['stale']} repeated "
+        "values dropped; 1 of 1 recording(s) resampled"
+    ) in proc.stdout, proc.stdout
 
 
 def test_repeated_samples_are_dropped_and_uneven_stamps_resampled(
