@@ -23,9 +23,13 @@ def test_every_builtin_has_a_record_and_a_distinct_colour() -> None:
     assert None not in colours and len(set(colours)) == len(colours)
 
 
-def test_a_law_that_does_not_hold_gravity_says_why() -> None:
-    for info in builtin_info().values():
-        assert info.holds_gravity == (info.steady_offset == ""), info.name
+def test_holds_gravity_is_what_the_class_declares_and_a_law_that_does_not_says_why() -> None:
+    from pipeline.control.registry import CONTROLLERS
+
+    for name, info in builtin_info().items():
+        declared = str(getattr(CONTROLLERS[name].factory, "KIT_STEADY_OFFSET", ""))
+        assert info.steady_offset == declared, name
+        assert info.holds_gravity is (declared == ""), name
 
 
 @pytest.mark.parametrize("name", controller_names())
