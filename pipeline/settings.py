@@ -21,8 +21,8 @@ Times are from the recording's first sample: the motion starts at
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Annotated, Any, ClassVar, Literal, NoReturn, Self
 
 from pydantic import PlainValidator
@@ -610,11 +610,20 @@ class EpisodeSettings(Contract):
             object.__setattr__(self, "scenario", RecordedScenario.model_validate(self.scenario))
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready plain data (lists, not tuples)."""
-        out: dict[str, Any] = plain(asdict(self))
-        out["robot"] = robot_to_dict(self.robot)  # by value: its own form
-        out["scenario"] = self.scenario.recorded()
-        out["safety"] = self.safety.to_dict()  # with its derived keys, for readers of the JSON
+        """JSON-ready plain data (lists, not tuples). The robot, the scenario and the
+        safety are serialised once, each in its own form."""
+        own: dict[str, Callable[[], Any]] = {
+            "robot": lambda: robot_to_dict(self.robot),  # by value (pipeline.robots.recorded)
+            "scenario": self.scenario.recorded,
+            "safety": self.safety.to_dict,  # with its derived keys, for readers of the JSON
+        }
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name in own:
+                out[f.name] = own[f.name]()
+            else:
+                out[f.name] = plain(asdict(value) if is_dataclass(value) else value)
         out["plant"] = plant_as_recorded(out["plant"])
         if out["controller"].get("nominal") is None:  # the scenario's: as before it existed
             out["controller"].pop("nominal", None)
