@@ -17,7 +17,6 @@ import numpy as np
 from pipeline import __version__
 from pipeline.params import Episode, RecordedScenario, ScenarioParams, nominal_path
 from pipeline.planning import PlannedPath, TimedTrajectory
-from pipeline.robots.recorded import robot_to_dict
 from pipeline.robots.spec import RobotSpec
 from pipeline.settings import (
     ControllerSettings,
@@ -39,12 +38,6 @@ if TYPE_CHECKING:
     from pipeline.model.mjcf import PlantOptions
     from pipeline.model.uncertainty import DrawnFriction
     from pipeline.sim.result import EpisodeResult
-
-
-def spec_as_dict(spec: RobotSpec) -> dict[str, Any]:
-    """The robot spec as plain data (radians), as recorded in every bag: by value
-    (:func:`pipeline.robots.recorded.robot_to_dict`)."""
-    return robot_to_dict(spec)
 
 
 def scenario_spec(scenario: ScenarioParams) -> RobotSpec:
