@@ -131,12 +131,14 @@ class PlannerSettings(Contract):
     goal: Numbers = knob(shown=False, description="the joint-space goal it planned to")
 
 
-def plant_as_recorded(plant: dict[str, Any]) -> dict[str, Any]:
-    """A plant's plain data as recorded: the fields declared ``added`` (issue 28's) left
-    out while at their default, so plants without them record the same settings as
-    before (absent reads back as the default)."""
+def plant_as_recorded(
+    plant: dict[str, Any], cls: type[PlantSettings] = PlantSettings
+) -> dict[str, Any]:
+    """A plant's plain data (of ``cls``) as recorded: the fields declared ``added``
+    (issue 28's) left out while at their default, so plants without them record the
+    same settings as before (absent reads back as the default)."""
     omit_added(Uncertainty, plant["uncertainty"])
-    return omit_added(PlantSettings, plant)
+    return omit_added(cls, plant)
 
 
 @dataclass(frozen=True)
