@@ -11,7 +11,7 @@ unknown keys are ignored.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import MISSING, Field, dataclass, field, fields
 from typing import Annotated, Any, ClassVar, Self, cast
 
@@ -136,6 +136,14 @@ class Meta:
         shown: listed in its group's setup line (in declaration order).
         bounds: the range params accept (pydantic ``Field`` keywords: ``ge``, ``le``,
             ``lt``, ...); a recording's settings accept what the field's type does.
+        given: params take it as it is recorded (a plant field params pass through:
+            :func:`given_fields`); its default is the neutral value (the exact plant).
+        added: added after bags were written: absent in theirs (its default stands in),
+            and left out of settings and params dumps while at its default, so what
+            does not use it records the same bytes as before it existed.
+        refines: the field this one only refines (``velocity_cutoff_hz`` refines
+            ``velocity``): it plays no part while that one is at its default, so
+            :func:`at_defaults` does not look at it.
     """
 
     label: str = ""
@@ -143,6 +151,9 @@ class Meta:
     description: str = ""
     shown: bool = True
     bounds: Mapping[str, float] = field(default_factory=dict)
+    given: bool = False
+    added: bool = False
+    refines: str = ""
 
 
 def knob(
@@ -152,11 +163,14 @@ def knob(
     unit: str = "",
     description: str = "",
     shown: bool = True,
+    given: bool = False,
+    added: bool = False,
+    refines: str = "",
     **bounds: float,
 ) -> Any:
     """A dataclass field with its :class:`Meta` (``delay_s: NonNegative = knob(0.0,
     le=0.1, unit="s", description="...")``)."""
-    meta = Meta(label, unit, description, shown, dict(bounds))
+    meta = Meta(label, unit, description, shown, dict(bounds), given, added, refines)
     return field(default=default, metadata={"meta": meta})
 
 
@@ -175,11 +189,44 @@ def shown_fields(cls: type) -> Iterator[tuple[str, str]]:
             yield f.name, meta.label or f.name
 
 
+def given_fields(cls: type) -> tuple[Field[Any], ...]:
+    """The fields of a settings dataclass that params take as they are recorded
+    (``knob(..., given=True)``), in declaration order."""
+    return tuple(f for f in fields(cls) if meta_of(f).given)
+
+
+def added_defaults(cls: type) -> dict[str, Any]:
+    """Field name -> default as plain JSON data, for each field declared ``added``
+    (left out of dumps while it holds this value)."""
+    return {f.name: plain(f.default) for f in fields(cls) if meta_of(f).added}
+
+
+def omit_added(cls: type, data: dict[str, Any]) -> dict[str, Any]:
+    """``data`` (a dump of ``cls``, plain JSON data) without the ``added`` fields that
+    hold their default, in place."""
+    for key, default in added_defaults(cls).items():
+        if key in data and data[key] == default:
+            del data[key]
+    return data
+
+
+def at_defaults(value: Any, names: Iterable[str] | None = None) -> bool:
+    """Every field of a settings value (or those of ``names``) at its declared default,
+    but those that only refine another (``knob(refines=...)``): the neutral setting."""
+    wanted = None if names is None else set(names)
+    return all(
+        getattr(value, f.name) == f.default
+        for f in fields(value)
+        if not meta_of(f).refines and (wanted is None or f.name in wanted)
+    )
+
+
 class Contract:
     """What every settings dataclass shares: ``from_dict``, validated by its field types.
 
     Subclasses set ``_where`` (the field path their errors start with) and may name
-    ``_may_be_absent`` fields (added after bags were written; their default stands in).
+    ``_may_be_absent`` fields (added after bags were written; their default stands in);
+    a field declared ``knob(..., added=True)`` may be absent too.
     """
 
     _where: ClassVar[str]
@@ -207,7 +254,8 @@ class Contract:
     def __get_pydantic_core_schema__(cls, source: Any, handler: GetCoreSchemaHandler) -> CoreSchema:
         """pydantic's schema of the dataclass, behind a check that the data is a mapping
         holding every field (a dataclass default is the recorder's, not an old bag's)."""
-        required = sorted(f.name for f in fields(cls) if f.name not in cls._may_be_absent)  # type: ignore[arg-type]
+        absent = cls._may_be_absent | set(added_defaults(cls))
+        required = sorted(f.name for f in fields(cls) if f.name not in absent)  # type: ignore[arg-type]
 
         def check(value: Any) -> Any:
             if not isinstance(value, Mapping):

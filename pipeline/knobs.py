@@ -4,7 +4,13 @@ A scenario's ``loop:`` and ``plant.uncertainty:`` are these dataclasses: params 
 them at the edge (with the ranges each field's :func:`~pipeline.contract.knob` declares,
 ``pipeline.params.AsParams``), the episode records them as they are, and the report's
 setup lines list the fields their metadata shows. Adding a field here is the whole change.
-A campaign's :class:`CampaignInfo` is what params expand and the recording keeps.
+
+The plant as recorded (:class:`PlantSettings`) is mostly drawn and expanded per joint
+from params; its fields declared ``knob(..., given=True)`` are the ones params take as
+they are: ``pipeline.params.PlantParams`` gets each (type, default, range) from here,
+the recording copies it, the exact-plant check wants its default, and the plant line
+shows it. Adding such a field here is the whole change too (the simulation that uses it
+aside). A campaign's :class:`CampaignInfo` is what params expand and the recording keeps.
 """
 
 from __future__ import annotations
@@ -16,24 +22,23 @@ from typing import Annotated, Literal
 from pipeline.contract import (
     Contract,
     Count,
+    Finite,
+    Flag,
     NonNegative,
+    NonNegatives,
+    Numbers,
+    Positive,
     Scalar,
     Text,
+    at_defaults,
     guard,
     is_mapping,
     knob,
+    listed,
     rule,
 )
 
 MAX_LOOP_DELAY_S = 0.1  # a 100 ms actuation delay is a broken loop, not a setting
-
-# issue 28's draws at their unused values: left out of params dumps and settings then
-UNUSED_DRAWS: dict[str, float] = {
-    "coulomb_rel": 0.0,
-    "viscous_rel": 0.0,
-    "transition_rel": 0.0,
-    "payload_kg": 0.0,
-}
 
 VelocitySource = Literal["plant", "encoder"]
 VELOCITY_SOURCES: tuple[VelocitySource, ...] = ("plant", "encoder")
@@ -56,7 +61,6 @@ class Uncertainty(Contract):
     """
 
     _where = "plant.uncertainty"
-    _may_be_absent = frozenset(UNUSED_DRAWS)  # bags written before issue 28: none drawn
 
     mass_rel: NonNegative = knob(0.0, ge=0, lt=1, description="link mass x U[1 - r, 1 + r]")
     com_m: NonNegative = knob(0.0, ge=0, le=0.5, unit="m", description="per axis U[-r, r]")
@@ -66,17 +70,22 @@ class Uncertainty(Contract):
     armature_rel: NonNegative = knob(
         0.0, ge=0, lt=1, description="rotor armature x U[1 - r, 1 + r]"
     )
+    # issue 28's draws (added: bags written before it drew none)
     coulomb_rel: NonNegative = knob(
-        0.0, ge=0, lt=1, description="Coulomb friction (or a sigmoid's phi1) x U[1 - r, 1 + r]"
+        0.0,
+        ge=0,
+        lt=1,
+        added=True,
+        description="Coulomb friction (or a sigmoid's phi1) x U[1 - r, 1 + r]",
     )
     viscous_rel: NonNegative = knob(
-        0.0, ge=0, lt=1, description="viscous damping x U[1 - r, 1 + r]"
+        0.0, ge=0, lt=1, added=True, description="viscous damping x U[1 - r, 1 + r]"
     )
     transition_rel: NonNegative = knob(
-        0.0, ge=0, lt=1, description="a sigmoid's steepness phi2 x U[1 - r, 1 + r]"
+        0.0, ge=0, lt=1, added=True, description="a sigmoid's steepness phi2 x U[1 - r, 1 + r]"
     )
     payload_kg: NonNegative = knob(
-        0.0, ge=0, le=1000, unit="kg", description="extra payload U[0, r]"
+        0.0, ge=0, le=1000, unit="kg", added=True, description="extra payload U[0, r]"
     )
 
     @property
@@ -124,19 +133,129 @@ class LoopSettings(Contract):
         rule(f"one of {', '.join(VELOCITY_SOURCES)}", lambda v: v in VELOCITY_SOURCES),
     ] = knob("plant", description="plant, or encoder: differenced, low-passed")
     velocity_cutoff_hz: NonNegative = knob(
-        0.0, ge=0, le=1e6, unit="Hz", description="encoder velocity low-pass cutoff (0: unfiltered)"
+        0.0,
+        ge=0,
+        le=1e6,
+        unit="Hz",
+        refines="velocity",
+        description="encoder velocity low-pass cutoff (0: unfiltered)",
     )
 
     @property
     def ideal(self) -> bool:
-        """No delay, no jitter, no quantisation, the plant's velocity (the loop before
-        issue 18; ``velocity_cutoff_hz`` then plays no part)."""
-        return (
-            self.delay_s == 0
-            and self.jitter_s == 0
-            and self.encoder_counts_per_rev == 0
-            and self.velocity == "plant"
-        )
+        """Every field at its default: no delay, no jitter, no quantisation, the plant's
+        velocity (the loop before issue 18; ``velocity_cutoff_hz`` refines ``velocity``
+        and then plays no part). A new field's default is its ideal value."""
+        return at_defaults(self)
+
+
+LEGACY_FRICTION = "frictionloss at MuJoCo's default softness (creeps under the breakaway torque)"
+"""The friction law of bags that do not name theirs (recorded before it stuck)."""
+
+
+@dataclass(frozen=True)
+class LinkInertial(Contract):
+    """One link's rigid-body inertia as the plant has it (DH frame of its joint).
+
+    Attributes:
+        mass: [kg]. com: centre of mass [m].
+        inertia: [ixx, iyy, izz, ixy, ixz, iyz] about the centre of mass [kg m^2].
+    """
+
+    _where = "plant.links[0]"
+
+    mass: Positive
+    com: Annotated[
+        tuple[Finite, Finite, Finite], listed("a list of numbers", length=3, sized="3 numbers")
+    ]
+    inertia: Annotated[
+        tuple[Finite, Finite, Finite, Finite, Finite, Finite],
+        listed("a list of numbers", length=6, sized="6 numbers (ixx iyy izz ixy ixz iyz)"),
+    ]
+
+
+@dataclass(frozen=True)
+class SigmoidFrictionSettings(Contract):
+    """A plant's sigmoid joint friction per joint, as drawn (``pipeline.model.published``):
+    ``tau_f = phi1 / (1 + exp(-phi2 (qd + phi3))) - phi1 / (1 + exp(-phi2 phi3))``."""
+
+    _where = "plant.sigmoid_friction"
+
+    phi1_nm: NonNegatives
+    phi2_s_rad: NonNegatives
+    phi3_rad_s: Numbers
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlantSettings(Contract):
+    """The simulated plant, exactly enough to rebuild it (with the robot's geometry).
+
+    Attributes:
+        exact: the nominal model is the plant (no mismatch of any kind, no noise): the
+            controllers' model-based terms are exact by construction.
+        links: the plant's link inertials (drawn from ``uncertainty`` or the nominal ones).
+        armature: the plant's rotor armature per joint [kg m^2] (nominal + mismatch).
+        nominal_armature: the nominal model's armature per joint [kg m^2].
+        damping, frictionloss: per joint [N m s/rad], [N m] (the nominal model has none).
+        payload_kg: point mass at the flange the nominal model does not know [kg].
+        position_noise_std_rad, velocity_noise_std_rad_s: sensor noise (std).
+        uncertainty: the spread the links and armature were drawn from.
+        physics_dt_s, control_period_s: MuJoCo step and control period [s].
+        integrator, engine: MuJoCo's integrator, "mujoco".
+        friction_model: the joint friction law the plant ran (``frictionloss`` and ``damping``).
+        profile: the published plant's source (``plant.profile``), "" for the robot's own.
+        sigmoid_friction: the sigmoid friction the plant ran, None if none.
+        effort_offset_nm, effort_noise_std_nm: the torque sensor's offset per joint and
+            noise std on what is recorded as effort [N m] (empty, 0: exact).
+
+    The ``given`` fields are params' ``plant.<field>`` as given (their default: the exact
+    plant); ``added`` ones are left out of the settings while at their default (bags
+    written before issue 28 have none). The report's plant line lists the shown fields
+    in this order.
+    """
+
+    _where = "plant"
+    # bags written before the plant recorded its friction law ran MuJoCo's soft default
+    _may_be_absent = frozenset({"friction_model"})
+
+    exact: Flag
+    damping: NonNegatives
+    frictionloss: NonNegatives
+    armature: NonNegatives
+    nominal_armature: NonNegatives
+    payload_kg: NonNegative
+    position_noise_std_rad: NonNegative = knob(
+        0.0, ge=0, le=1.0, unit="rad", given=True, description="position sensor noise std"
+    )
+    velocity_noise_std_rad_s: NonNegative = knob(
+        0.0, ge=0, le=100.0, unit="rad/s", given=True, description="velocity sensor noise std"
+    )
+    uncertainty: Uncertainty
+    physics_dt_s: Positive
+    integrator: Text = "Euler"
+    control_period_s: Positive
+    engine: Text = "mujoco"
+    friction_model: Text = LEGACY_FRICTION
+    links: Annotated[tuple[LinkInertial, ...], listed("a list of link inertials", tuples=False)] = (
+        knob(shown=False, description="the plant's link inertials")
+    )
+    profile: Text = knob("", shown=False, added=True, description="the published plant's source")
+    sigmoid_friction: SigmoidFrictionSettings | None = knob(
+        None, shown=False, added=True, description="the sigmoid friction the plant ran"
+    )
+    effort_offset_nm: Numbers = knob(
+        (), shown=False, added=True, description="torque-sensor offset"
+    )
+    effort_noise_std_nm: NonNegative = knob(
+        0.0,
+        ge=0,
+        le=1000,
+        unit="N m",
+        shown=False,
+        given=True,
+        added=True,
+        description="torque-sensor noise std",
+    )
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Annotated, Any, Literal, cast
+from typing import TYPE_CHECKING, Annotated, Any, Literal, cast
 
 from pydantic import (
     BaseModel,
@@ -36,10 +36,10 @@ from pydantic import (
 from pydantic_core import CoreSchema, core_schema
 
 from pipeline.constants import MAX_SEED
-from pipeline.contract import meta_of
+from pipeline.contract import added_defaults, given_fields, meta_of, omit_added, plain
 from pipeline.errors import ParamsError, unknown_name_message
 from pipeline.knobs import MAX_LOOP_DELAY_S as MAX_LOOP_DELAY_S
-from pipeline.knobs import UNUSED_DRAWS, CampaignInfo, LoopSettings, Uncertainty
+from pipeline.knobs import CampaignInfo, LoopSettings, PlantSettings, Uncertainty
 from pipeline.robots.dh_yaml import format_validation_error
 from pipeline.robots.spec import Name
 from pipeline.yamlio import parse_yaml, refuse_bool_numbers
@@ -66,26 +66,34 @@ class _Strict(BaseModel):
         return data
 
 
+def _knob_fields(cls: type, only: tuple[str, ...] | None = None) -> dict[str, Any]:
+    """Pydantic field definitions of a settings dataclass's fields (or of ``only``): each
+    with its plain type, its default and the range its ``knob`` declares."""
+    hints = typing.get_type_hints(cls, include_extras=True)
+    fields_: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        if only is not None and f.name not in only:
+            continue
+        hint = hints[f.name]
+        plain_type = typing.get_args(hint)[0] if typing.get_origin(hint) is Annotated else hint
+        declared: dict[str, Any] = {"default": f.default, **meta_of(f).bounds}
+        fields_[f.name] = (plain_type, Field(**declared))
+    return fields_
+
+
 @functools.cache
 def params_model(cls: type) -> type[BaseModel]:
     """The params form of a shared settings dataclass (:mod:`pipeline.knobs`): each field
     with its plain type, its default and the range its ``knob`` declares, unknown keys
     refused, as every params model."""
-    hints = typing.get_type_hints(cls, include_extras=True)
-    fields_: dict[str, Any] = {}
-    for f in dataclasses.fields(cls):
-        hint = hints[f.name]
-        plain_type = typing.get_args(hint)[0] if typing.get_origin(hint) is Annotated else hint
-        declared: dict[str, Any] = {"default": f.default, **meta_of(f).bounds}
-        fields_[f.name] = (plain_type, Field(**declared))
+    fields_ = _knob_fields(cls)
     return cast(type[BaseModel], create_model(f"{cls.__name__}Params", __base__=_Strict, **fields_))
 
 
 def _dump_knobs(value: Any) -> dict[str, Any]:
     """A shared settings dataclass as params dump it: issue 28's draws left out while
     unused (the same dumps, so the same campaign fingerprints, as before them)."""
-    out: dict[str, Any] = dataclasses.asdict(value)
-    return _omit_defaults(out, UNUSED_DRAWS) if isinstance(value, Uncertainty) else out
+    return omit_added(type(value), plain(dataclasses.asdict(value)))
 
 
 class AsParams:
@@ -183,30 +191,51 @@ def _omit_defaults(out: dict[str, Any], defaults: Mapping[str, Any]) -> dict[str
     return {k: v for k, v in out.items() if k not in defaults or v != defaults[k]}
 
 
-_NEW_PLANT = {"profile": None, "effort_offset_nm": 0.0, "effort_noise_std_nm": 0.0}
+_NEW_PLANT = {"profile": None, "effort_offset_nm": 0.0}  # and the `added` given fields
 
 
-class PlantParams(_Strict):
-    """How the simulated plant differs from the nominal model (zero = identical)."""
+class _PlantParamsOwn(_Strict):
+    """How the simulated plant differs from the nominal model (zero = identical): the
+    fields params expand or draw before they are recorded. The ones recorded as given
+    come from :class:`pipeline.knobs.PlantSettings` (``knob(..., given=True)``)."""
 
     damping: PerJoint = 0.0
     frictionloss: PerJoint = 0.0
     armature: PerJoint = 0.0  # added to the robot's own armature (the plant's only)
     uncertainty: Annotated[Uncertainty, AsParams()] = Uncertainty()
     payload_kg: float = Field(default=0.0, ge=0, le=1000)
-    position_noise_std_rad: float = Field(default=0.0, ge=0, le=1.0)
-    velocity_noise_std_rad_s: float = Field(default=0.0, ge=0, le=100.0)
     # a published plant (pipeline/model/published.py): its link parameters and friction
     # replace the robot's on the plant only (the controllers keep their nominal model)
     profile: Literal["gaz-panda"] | None = None
     # the joint torque sensor (what is recorded as effort): an offset per joint drawn
-    # U[-r, r] per episode seed, and Gaussian noise per sample [N m]
+    # U[-r, r] per episode seed [N m]
     effort_offset_nm: float = Field(default=0.0, ge=0, le=1000)
-    effort_noise_std_nm: float = Field(default=0.0, ge=0, le=1000)
 
     @model_serializer(mode="wrap")
     def _dump(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
-        return _omit_defaults(handler(self), _NEW_PLANT)
+        added = added_defaults(PlantSettings)
+        given = [f.name for f in given_fields(PlantSettings)]
+        unused = {**_NEW_PLANT, **{k: added[k] for k in given if k in added}}
+        return _omit_defaults(handler(self), unused)
+
+
+def with_given(name: str, base: type[_Strict], settings: type) -> type[BaseModel]:
+    """``base`` plus the fields of ``settings`` declared ``knob(..., given=True)``, as
+    :func:`params_model` makes them (a new given field cannot be forgotten here)."""
+    given = _knob_fields(settings, tuple(f.name for f in given_fields(settings)))
+    model = create_model(name, __base__=base, __module__=__name__, __doc__=base.__doc__, **given)
+    return cast(type[BaseModel], model)
+
+
+if TYPE_CHECKING:
+
+    class PlantParams(_PlantParamsOwn):
+        """How the simulated plant differs from the nominal model (zero = identical)."""
+
+        def __getattr__(self, name: str) -> Any: ...  # the given fields (knobs.PlantSettings)
+
+else:
+    PlantParams = with_given("PlantParams", _PlantParamsOwn, PlantSettings)
 
 
 class ScenarioParams(_Strict):

@@ -21,8 +21,8 @@ Times are from the recording's first sample: the motion starts at
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Annotated, Any, ClassVar, Literal, NoReturn, Self
 
 from pydantic import PlainValidator
@@ -48,16 +48,20 @@ from pipeline.contract import (
     is_scalar,
     knob,
     listed,
+    omit_added,
     plain,
     rule,
     stated_error,
 )
 from pipeline.contract import SettingsError as SettingsError
 from pipeline.errors import SpecError
-from pipeline.knobs import UNUSED_DRAWS as _UNUSED_DRAWS
+from pipeline.knobs import LEGACY_FRICTION as LEGACY_FRICTION
 from pipeline.knobs import VELOCITY_SOURCES as VELOCITY_SOURCES
 from pipeline.knobs import CampaignInfo as CampaignInfo
+from pipeline.knobs import LinkInertial as LinkInertial
 from pipeline.knobs import LoopSettings as LoopSettings
+from pipeline.knobs import PlantSettings as PlantSettings
+from pipeline.knobs import SigmoidFrictionSettings as SigmoidFrictionSettings
 from pipeline.knobs import Uncertainty as Uncertainty
 from pipeline.knobs import VelocitySource as VelocitySource
 from pipeline.params import RecordedScenario
@@ -65,8 +69,6 @@ from pipeline.robots.recorded import robot_from_dict, robot_to_dict
 from pipeline.robots.spec import RobotSpec
 
 SETTINGS_VERSION = 2
-LEGACY_FRICTION = "frictionloss at MuJoCo's default softness (creeps under the breakaway torque)"
-"""The friction law of bags that do not name theirs (recorded before it stuck)."""
 
 
 ContactKind = Literal["obstacle", "floor", "self"]
@@ -129,106 +131,14 @@ class PlannerSettings(Contract):
     goal: Numbers = knob(shown=False, description="the joint-space goal it planned to")
 
 
-@dataclass(frozen=True)
-class LinkInertial(Contract):
-    """One link's rigid-body inertia as the plant has it (DH frame of its joint).
-
-    Attributes:
-        mass: [kg]. com: centre of mass [m].
-        inertia: [ixx, iyy, izz, ixy, ixz, iyz] about the centre of mass [kg m^2].
-    """
-
-    _where = "plant.links[0]"
-
-    mass: Positive
-    com: Annotated[
-        tuple[Finite, Finite, Finite], listed("a list of numbers", length=3, sized="3 numbers")
-    ]
-    inertia: Annotated[
-        tuple[Finite, Finite, Finite, Finite, Finite, Finite],
-        listed("a list of numbers", length=6, sized="6 numbers (ixx iyy izz ixy ixz iyz)"),
-    ]
-
-
-# issue 28's plant fields at their unused values: left out of settings then
-_UNUSED_PLANT: dict[str, Any] = dict(profile="", sigmoid_friction=None, effort_offset_nm=[])
-_UNUSED_PLANT["effort_noise_std_nm"] = 0
-
-
-def plant_as_recorded(plant: dict[str, Any]) -> dict[str, Any]:
-    """A plant's plain data as recorded: issue 28's fields left out while unused, so plants
-    without them record the same settings as before (absent reads back as the default)."""
-    for part, unused in ((plant, _UNUSED_PLANT), (plant["uncertainty"], _UNUSED_DRAWS)):
-        for key in [k for k, v in unused.items() if part.get(k) == v]:
-            del part[key]
-    return plant
-
-
-@dataclass(frozen=True)
-class SigmoidFrictionSettings(Contract):
-    """A plant's sigmoid joint friction per joint, as drawn (``pipeline.model.published``):
-    ``tau_f = phi1 / (1 + exp(-phi2 (qd + phi3))) - phi1 / (1 + exp(-phi2 phi3))``."""
-
-    _where = "plant.sigmoid_friction"
-
-    phi1_nm: NonNegatives
-    phi2_s_rad: NonNegatives
-    phi3_rad_s: Numbers
-
-
-@dataclass(frozen=True, kw_only=True)
-class PlantSettings(Contract):
-    """The simulated plant, exactly enough to rebuild it (with the robot's geometry).
-
-    Attributes:
-        exact: the nominal model is the plant (no mismatch of any kind, no noise): the
-            controllers' model-based terms are exact by construction.
-        links: the plant's link inertials (drawn from ``uncertainty`` or the nominal ones).
-        armature: the plant's rotor armature per joint [kg m^2] (nominal + mismatch).
-        nominal_armature: the nominal model's armature per joint [kg m^2].
-        damping, frictionloss: per joint [N m s/rad], [N m] (the nominal model has none).
-        payload_kg: point mass at the flange the nominal model does not know [kg].
-        position_noise_std_rad, velocity_noise_std_rad_s: sensor noise (std).
-        uncertainty: the spread the links and armature were drawn from.
-        physics_dt_s, control_period_s: MuJoCo step and control period [s].
-        integrator, engine: MuJoCo's integrator, "mujoco".
-        friction_model: the joint friction law the plant ran (``frictionloss`` and ``damping``).
-        profile: the published plant's source (``plant.profile``), "" for the robot's own.
-        sigmoid_friction: the sigmoid friction the plant ran, None if none.
-        effort_offset_nm, effort_noise_std_nm: the torque sensor's offset per joint and
-            noise std on what is recorded as effort [N m] (empty, 0: exact).
-
-    The report's plant line lists the shown fields in this order.
-    """
-
-    _where = "plant"
-    # bags written before the plant recorded its friction law ran MuJoCo's soft default;
-    # before issue 28 no plant had a profile, a sigmoid or a torque-sensor error
-    _may_be_absent = frozenset({"friction_model", *_UNUSED_PLANT})
-
-    exact: Flag
-    damping: NonNegatives
-    frictionloss: NonNegatives
-    armature: NonNegatives
-    nominal_armature: NonNegatives
-    payload_kg: NonNegative
-    position_noise_std_rad: NonNegative
-    velocity_noise_std_rad_s: NonNegative
-    uncertainty: Uncertainty
-    physics_dt_s: Positive
-    integrator: Text = "Euler"
-    control_period_s: Positive
-    engine: Text = "mujoco"
-    friction_model: Text = LEGACY_FRICTION
-    links: Annotated[tuple[LinkInertial, ...], listed("a list of link inertials", tuples=False)] = (
-        knob(shown=False, description="the plant's link inertials")
-    )
-    profile: Text = knob("", shown=False, description="the published plant's source")
-    sigmoid_friction: SigmoidFrictionSettings | None = knob(
-        None, shown=False, description="the sigmoid friction the plant ran"
-    )
-    effort_offset_nm: Numbers = knob((), shown=False, description="torque-sensor offset")
-    effort_noise_std_nm: NonNegative = knob(0.0, shown=False, description="torque-sensor noise")
+def plant_as_recorded(
+    plant: dict[str, Any], cls: type[PlantSettings] = PlantSettings
+) -> dict[str, Any]:
+    """A plant's plain data (of ``cls``) as recorded: the fields declared ``added``
+    (issue 28's) left out while at their default, so plants without them record the
+    same settings as before (absent reads back as the default)."""
+    omit_added(Uncertainty, plant["uncertainty"])
+    return omit_added(cls, plant)
 
 
 @dataclass(frozen=True)
@@ -613,11 +523,22 @@ class EpisodeSettings(Contract):
             object.__setattr__(self, "scenario", RecordedScenario.model_validate(self.scenario))
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready plain data (lists, not tuples)."""
-        out: dict[str, Any] = plain(asdict(self))
-        out["robot"] = robot_to_dict(self.robot)  # by value: its own form
-        out["scenario"] = self.scenario.recorded()
-        out["safety"] = self.safety.to_dict()  # with its derived keys, for readers of the JSON
+        """JSON-ready plain data (lists, not tuples). The robot, the scenario and the
+        safety are serialised once, each in its own form."""
+        own: dict[str, Callable[[], Any]] = {
+            "robot": lambda: robot_to_dict(self.robot),  # by value (pipeline.robots.recorded)
+            "scenario": self.scenario.recorded,
+            "safety": self.safety.to_dict,  # with its derived keys, for readers of the JSON
+        }
+        out: dict[str, Any] = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name in own:
+                out[f.name] = own[f.name]()
+            else:
+                out[f.name] = plain(
+                    asdict(value) if is_dataclass(value) and not isinstance(value, type) else value
+                )
         out["plant"] = plant_as_recorded(out["plant"])
         for own in ("nominal", "plant"):  # the scenario's: as before they existed
             if out["controller"].get(own) is None:

@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import pytest
@@ -151,12 +152,8 @@ def test_a_scenario_loop_is_validated_and_defaults_to_the_ideal_loop(tmp_path):
     params = load_params(REPO / "params.yaml")
     assert params.scenarios["paper"].loop == LoopSettings()  # the recorded type itself
     assert params.scenarios["paper"].model_dump()["loop"] == {
-        "delay_s": 0.0,
-        "jitter_s": 0.0,
-        "encoder_counts_per_rev": 0,
-        "velocity": "plant",
-        "velocity_cutoff_hz": 0.0,
-    }
+        f.name: f.default for f in dataclasses.fields(LoopSettings)
+    }  # every declared field at its default (a new one needs no edit here)
     data = _default()
     data["scenarios"]["paper"]["loop"] = {"delay_s": 0.001, "velocity": "observer"}
     with pytest.raises(ParamsError, match=r"scenarios\.paper\.loop\.velocity: Input should be"):

@@ -35,9 +35,7 @@ class ControllerInfo:
     Attributes:
         name: registry name.
         color: plot colour (RGB bytes); None: the next free palette colour.
-        holds_gravity: at its default gains it holds the arm still against gravity (no
-            steady offset; see ``steady_offset``).
-        steady_offset: why it does not hold gravity ("" when it does).
+        steady_offset: why it does not hold gravity ("" when it does; ``holds_gravity``).
         uses_nominal_model: its law evaluates the nominal rigid-body model.
         stiffness_gains: keys of its gains that are joint stiffnesses [N m/rad].
         summary: one line.
@@ -45,11 +43,15 @@ class ControllerInfo:
 
     name: str
     color: RGB | None
-    holds_gravity: bool
     steady_offset: str
     uses_nominal_model: bool
     stiffness_gains: tuple[str, ...]
     summary: str
+
+    @property
+    def holds_gravity(self) -> bool:
+        """At its default gains it holds the arm still against gravity (no steady offset)."""
+        return not self.steady_offset
 
 
 def info_of(name: str, obj: object) -> ControllerInfo | None:
@@ -76,7 +78,6 @@ def info_of(name: str, obj: object) -> ControllerInfo | None:
     return ControllerInfo(
         name=name,
         color=(int(color[0]), int(color[1]), int(color[2])) if color is not None else None,
-        holds_gravity=not offset,
         steady_offset=offset,
         uses_nominal_model=bool(getattr(factory, "USES_NOMINAL_MODEL", False)),
         stiffness_gains=tuple(g.key for g in gains if getattr(g, "stiffness", False)),
@@ -124,7 +125,6 @@ BUILTIN_INFO: tuple[ControllerInfo, ...] = (
     ControllerInfo(
         name="pid",
         color=(31, 119, 180),
-        holds_gravity=True,
         steady_offset="",
         uses_nominal_model=False,
         stiffness_gains=("kp",),
@@ -133,7 +133,6 @@ BUILTIN_INFO: tuple[ControllerInfo, ...] = (
     ControllerInfo(
         name="ctc",
         color=(255, 127, 14),
-        holds_gravity=True,
         steady_offset="",
         uses_nominal_model=True,
         stiffness_gains=(),
@@ -142,7 +141,6 @@ BUILTIN_INFO: tuple[ControllerInfo, ...] = (
     ControllerInfo(
         name="ctc_pid",
         color=(44, 160, 44),
-        holds_gravity=True,
         steady_offset="",
         uses_nominal_model=True,
         stiffness_gains=(),
@@ -151,7 +149,6 @@ BUILTIN_INFO: tuple[ControllerInfo, ...] = (
     ControllerInfo(
         name="pd_gravity",
         color=(148, 103, 189),
-        holds_gravity=True,
         steady_offset="",
         uses_nominal_model=True,
         stiffness_gains=("kp",),
@@ -160,7 +157,6 @@ BUILTIN_INFO: tuple[ControllerInfo, ...] = (
     ControllerInfo(
         name="pid_ff",
         color=(214, 39, 40),
-        holds_gravity=True,
         steady_offset="",
         uses_nominal_model=True,
         stiffness_gains=("kp",),
@@ -169,7 +165,6 @@ BUILTIN_INFO: tuple[ControllerInfo, ...] = (
     ControllerInfo(
         name="pid_humble",
         color=(23, 190, 207),
-        holds_gravity=False,
         steady_offset=(
             "i_clamp = 0 (Humble's default) switches the integral off: under gravity the arm "
             "settles g / kp away from the reference"
@@ -183,7 +178,6 @@ BUILTIN_INFO: tuple[ControllerInfo, ...] = (
     ControllerInfo(
         name="passivity",
         color=(140, 86, 75),
-        holds_gravity=True,
         steady_offset="",
         uses_nominal_model=True,
         stiffness_gains=(),
@@ -192,7 +186,6 @@ BUILTIN_INFO: tuple[ControllerInfo, ...] = (
     ControllerInfo(
         name="adaptive",
         color=(227, 119, 194),
-        holds_gravity=True,
         steady_offset="",
         uses_nominal_model=True,
         stiffness_gains=(),

@@ -1,4 +1,5 @@
-"""Controllers by name: one file per controller, one line here per controller.
+"""Controllers by name: one file per controller, one line here per built-in
+(``"pipeline.control.<module>:<Class>"`` in :data:`BUILTIN`).
 
 A name resolves to a built-in (:data:`CONTROLLERS`), else an installed entry point in
 the group ``armlab.controllers``, else ``package.module:Object`` (see
@@ -10,6 +11,7 @@ controller class that declares ``GAINS`` (a tuple of :class:`GainSpec`) and
 
 from __future__ import annotations
 
+import importlib
 import inspect
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -17,7 +19,6 @@ from typing import Any
 
 from numpy.typing import ArrayLike
 
-from pipeline.control import adaptive, ctc, ctc_pid, passivity, pd_gravity, pid, pid_ff, pid_humble
 from pipeline.control.controller import DEFAULT_OMEGA_N_RAD_S, DEFAULT_ZETA, Controller, GainSpec
 from pipeline.control.info import GROUP, RGB
 from pipeline.errors import ParamsError, PipelineError
@@ -74,21 +75,32 @@ def controller_entry_of_class(cls: Any) -> ControllerEntry:
     )
 
 
-# One line per built-in controller: its class (which declares its name, gains, colour, ...).
-BUILTIN_CLASSES: tuple[type, ...] = (
-    pid.PidController,
-    ctc.ComputedTorqueController,
-    ctc_pid.ComputedTorquePidController,
-    pd_gravity.PdGravityController,
-    pid_ff.PidFeedForwardController,
-    pid_humble.PidHumbleController,
-    passivity.PassivityController,
-    adaptive.AdaptiveController,
+# One line per built-in controller, "module:Class" (the class declares its name, gains,
+# colour, ...), in the order of their colours (matplotlib's tab10) and of the info table.
+BUILTIN: tuple[str, ...] = (
+    "pipeline.control.pid:PidController",
+    "pipeline.control.ctc:ComputedTorqueController",
+    "pipeline.control.ctc_pid:ComputedTorquePidController",
+    "pipeline.control.pd_gravity:PdGravityController",
+    "pipeline.control.pid_ff:PidFeedForwardController",
+    "pipeline.control.pid_humble:PidHumbleController",
+    "pipeline.control.passivity:PassivityController",
+    "pipeline.control.adaptive:AdaptiveController",
 )
 
+
+def _builtin(path: str) -> tuple[str, type]:
+    """The name and class a :data:`BUILTIN` line names (a typo fails at import, naming it)."""
+    module, _, attr = path.partition(":")
+    cls = getattr(importlib.import_module(module), attr, None)
+    name = getattr(cls, "NAME", None)
+    if not isinstance(cls, type) or not isinstance(name, str):
+        raise TypeError(f"pipeline.control.registry.BUILTIN: {path!r} is no controller class")
+    return name, cls
+
+
 CONTROLLERS: dict[str, ControllerEntry] = {
-    str(getattr(cls, "NAME")): controller_entry_of_class(cls)  # noqa: B009 - a built-in has one
-    for cls in BUILTIN_CLASSES
+    name: controller_entry_of_class(cls) for name, cls in map(_builtin, BUILTIN)
 }
 """The built-in controllers, by name (their colours are matplotlib's tab10)."""
 

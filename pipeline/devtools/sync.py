@@ -153,7 +153,6 @@ def info_py() -> str:
             "ControllerInfo(",
             f"    {_py_str('name', i.name, 8)}",
             f"    color={i.color!r},",
-            f"    holds_gravity={i.holds_gravity!r},",
             f"    {_py_str('steady_offset', i.steady_offset, 8)}",
             f"    uses_nominal_model={i.uses_nominal_model!r},",
             f"    stiffness_gains={i.stiffness_gains!r},",

@@ -15,9 +15,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from pipeline import __version__
+from pipeline.contract import given_fields
 from pipeline.params import Episode, RecordedScenario, ScenarioParams, nominal_path
 from pipeline.planning import PlannedPath, TimedTrajectory
-from pipeline.robots.recorded import robot_to_dict
 from pipeline.robots.spec import RobotSpec
 from pipeline.settings import (
     ControllerSettings,
@@ -39,12 +39,6 @@ if TYPE_CHECKING:
     from pipeline.model.mjcf import PlantOptions
     from pipeline.model.uncertainty import DrawnFriction
     from pipeline.sim.result import EpisodeResult
-
-
-def spec_as_dict(spec: RobotSpec) -> dict[str, Any]:
-    """The robot spec as plain data (radians), as recorded in every bag: by value
-    (:func:`pipeline.robots.recorded.robot_to_dict`)."""
-    return robot_to_dict(spec)
 
 
 def scenario_spec(scenario: ScenarioParams) -> RobotSpec:
@@ -184,20 +178,25 @@ def loop_settings(scenario: ScenarioParams) -> LoopSettings:
     return scenario.loop
 
 
+def given_plant(scenario: ScenarioParams) -> dict[str, Any]:
+    """The plant fields params pass through to the recording as given (each field of
+    :class:`PlantSettings` declared ``knob(..., given=True)``)."""
+    return {f.name: getattr(scenario.plant, f.name) for f in given_fields(PlantSettings)}
+
+
 def _plant_is_exact(spec: RobotSpec, plant_spec: RobotSpec, scenario: ScenarioParams) -> bool:
-    """The nominal model is the plant: nothing drawn, no friction, damping, payload, noise,
+    """The nominal model is the plant: nothing drawn, no friction, damping, payload,
+    torque-sensor offset, every given field (the sensors' noise, ...) at its default,
     and the loop is ideal (no delay, no quantisation, the plant's velocity)."""
     p = scenario.plant
-    zero = (
-        *plant_friction(plant_spec, scenario),
-        (p.payload_kg, p.uncertainty.payload_kg),
-        (p.position_noise_std_rad, p.velocity_noise_std_rad_s),
-        (p.effort_offset_nm, p.effort_noise_std_nm),
-    )
+    zero = (*plant_friction(plant_spec, scenario), (p.payload_kg, p.uncertainty.payload_kg))
+    given = given_plant(scenario)
     return (
         plant_spec == spec
         and p.profile is None
+        and p.effort_offset_nm == 0
         and all(x == 0 for group in zero for x in group)
+        and all(given[f.name] == f.default for f in given_fields(PlantSettings))
         and loop_settings(scenario).ideal
     )
 
@@ -219,8 +218,6 @@ def _published(scenario: ScenarioParams, drawn: DrawnFriction) -> dict[str, Any]
         )
     if drawn.effort_offset_nm:
         out["effort_offset_nm"] = drawn.effort_offset_nm
-    if p.effort_noise_std_nm:
-        out["effort_noise_std_nm"] = p.effort_noise_std_nm
     return out
 
 
@@ -266,7 +263,6 @@ def episode_settings(
 
     scenario = episode.scenario
     sim = episode.sim
-    p = scenario.plant
     k0 = result.motion_start_row
     at_start = min(k0, len(result.stamp_ns) - 1)
     drawn = scenario_friction(spec, scenario, seed=episode.seed)
@@ -279,13 +275,12 @@ def episode_settings(
         damping=drawn.damping,
         frictionloss=drawn.frictionloss,
         payload_kg=drawn.payload_kg,
-        position_noise_std_rad=p.position_noise_std_rad,
-        velocity_noise_std_rad_s=p.velocity_noise_std_rad_s,
         uncertainty=uncertainty,
         physics_dt_s=sim.physics_dt_s,
         control_period_s=sim.physics_dt_s * sim.control_period_steps,
         integrator=result.integrator,
         friction_model=result.friction_model,
+        **given_plant(scenario),
         **_published(scenario, drawn),
     )
     # planning_time_s is wall clock: printed, never recorded (recordings are byte-reproducible)

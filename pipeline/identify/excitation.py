@@ -427,8 +427,8 @@ def record_excitation(
     )
     if result.status != "ok":
         raise IdentificationError(f"excitation episode {result.status}: {result.reason}")
-    from pipeline.experiment.assemble import spec_as_dict
     from pipeline.identify.model_file import spec_document
+    from pipeline.robots.recorded import robot_to_dict
 
     excitation = {
         "variant": variant,
@@ -447,8 +447,8 @@ def record_excitation(
     name = out.name
     settings = {
         "episode": name,
-        # a DH robot whole, any other by its description file and SHA-256 (as episodes)
-        "robot": spec_document(spec) if spec.dh_rows is not None else spec_as_dict(spec),
+        # a DH robot whole, any other by value (as episodes: pipeline.robots.recorded)
+        "robot": spec_document(spec) if spec.dh_rows is not None else robot_to_dict(spec),
         "scenario": {"name": scenario_name, **scenario.model_dump()},
         "controller": {
             "name": controller_name,

@@ -20,7 +20,7 @@ from pipeline.settings import LoopSettings, PlannerSettings, PlantSettings, plan
 def _as_recorded(node: Any) -> dict[str, Any]:
     """A settings dataclass as its recording holds it: plain JSON data, keys sorted."""
     data: dict[str, Any] = json.loads(json.dumps(dataclasses.asdict(node), sort_keys=True))
-    return plant_as_recorded(data) if isinstance(node, PlantSettings) else data
+    return plant_as_recorded(data, type(node)) if isinstance(node, PlantSettings) else data
 
 
 def _given(node: Mapping[str, Any], key: str) -> Any:
@@ -32,11 +32,12 @@ def _given(node: Mapping[str, Any], key: str) -> Any:
 
 def _fields_line(node: Any, cls: type, *, skip: Sequence[str] = ()) -> str:
     """``label = value`` for each field of a settings value that its declaration shows
-    (:func:`pipeline.contract.shown_fields`), in declaration order, as recorded."""
+    (:func:`pipeline.contract.shown_fields`), in declaration order, as recorded (a field
+    declared ``added`` is not recorded at its default, and not shown then)."""
     if node is None:
         return md.NA
     recorded = _as_recorded(node)
-    shown = [(k, label) for k, label in shown_fields(cls) if k not in skip]
+    shown = [(k, label) for k, label in shown_fields(cls) if k not in skip and k in recorded]
     return "; ".join(f"{label} = {md.value(recorded[k])}" for k, label in shown) or md.NA
 
 

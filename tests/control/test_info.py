@@ -23,9 +23,13 @@ def test_every_builtin_has_a_record_and_a_distinct_colour() -> None:
     assert None not in colours and len(set(colours)) == len(colours)
 
 
-def test_a_law_that_does_not_hold_gravity_says_why() -> None:
-    for info in builtin_info().values():
-        assert info.holds_gravity == (info.steady_offset == ""), info.name
+def test_holds_gravity_is_what_the_class_declares_and_a_law_that_does_not_says_why() -> None:
+    from pipeline.control.registry import CONTROLLERS
+
+    for name, info in builtin_info().items():
+        declared = str(getattr(CONTROLLERS[name].factory, "KIT_STEADY_OFFSET", ""))
+        assert info.steady_offset == declared, name
+        assert info.holds_gravity is (declared == ""), name
 
 
 @pytest.mark.parametrize("name", controller_names())
@@ -80,3 +84,34 @@ def test_a_plugin_class_is_read_as_the_registry_reads_it() -> None:
     # what the registry refuses has no record (no colour, no stiffness gains)
     assert info_of("bad", _BadColour) is None
     assert info_of("bad", object()) is None
+
+
+def test_every_controller_class_in_the_package_is_one_builtin_line() -> None:
+    """A law added as a file in pipeline/control/ and not listed in BUILTIN fails here."""
+    import importlib
+    import pkgutil
+
+    import pipeline.control
+    from pipeline.control.registry import BUILTIN, CONTROLLERS
+
+    found = set()
+    for mod in pkgutil.iter_modules(pipeline.control.__path__):
+        module = importlib.import_module(f"pipeline.control.{mod.name}")
+        for attr, obj in vars(module).items():
+            if (
+                isinstance(obj, type)
+                and obj.__module__ == module.__name__
+                and isinstance(getattr(obj, "NAME", None), str)
+                and hasattr(obj, "GAINS")
+            ):
+                found.add(f"{module.__name__}:{attr}")
+    assert sorted(found) == sorted(BUILTIN)
+    assert len(CONTROLLERS) == len(BUILTIN)
+
+
+def test_a_builtin_line_that_names_no_controller_class_fails_naming_it() -> None:
+    from pipeline.control.registry import _builtin
+
+    assert _builtin("pipeline.control.pid:PidController")[0] == "pid"
+    with pytest.raises(TypeError, match=r"'pipeline\.control\.pid:Nope' is no controller class"):
+        _builtin("pipeline.control.pid:Nope")

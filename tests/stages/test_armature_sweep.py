@@ -12,10 +12,11 @@ import polars as pl
 import pytest
 import yaml
 
-from pipeline.experiment.assemble import scenario_spec, spec_as_dict
+from pipeline.experiment.assemble import scenario_spec
 from pipeline.log.reader import read_recording
 from pipeline.params import load_params
 from pipeline.robots.loaders import load_spec
+from pipeline.robots.recorded import robot_to_dict
 from pipeline.stages.campaign_run import completion_marker, plan_run
 from pipeline.stages.record import record
 
@@ -29,7 +30,7 @@ def test_armature_is_per_joint_size_with_its_source() -> None:
         # the big shoulder drives reflect more rotor inertia than the wrists
         assert spec.armature[0] > spec.armature[2] > spec.armature[3] > 0
     np.testing.assert_allclose(load_spec("ur5").armature, [0.4, 0.4, 0.2, 0.04, 0.04, 0.04])
-    assert spec_as_dict(load_spec("ur5"))["armature_source"] == load_spec("ur5").armature_source
+    assert robot_to_dict(load_spec("ur5"))["armature_source"] == load_spec("ur5").armature_source
 
 
 def test_armature_scale_scales_the_robot_for_plant_and_model_alike() -> None:
