@@ -6,8 +6,9 @@ Runs the real commands as child processes, exactly as a user types them:
 - campaign mode (default): ``pipeline record --params P --campaign bench -j J --out R`` on
   ``params.yaml`` plus one extra campaign (``paper-realistic``, ``--controllers`` x
   ``--seeds``, ``keep_bags: {every: K}``), then ``pipeline report --recordings R/bench``;
-- ``--demo``: ``pipeline record --params params.yaml --out R`` (the hand-listed episodes,
-  what ``make demo``'s record stages run without DVC) then ``pipeline report --baseline pid``.
+- ``--demo``: what ``make demo``'s DVC stages run, without DVC: ``pipeline record --params
+  params.yaml --out R`` (the hand-listed episodes), ``pipeline record --campaign C`` for
+  each of ``campaigns`` (one job, as dvc.yaml), then ``pipeline report --baseline pid``.
 
 Per command: wall (start to exit, imports included) and CPU (user + system of the child
 and its workers). The floor (``benches/floor.py``) is measured before and after the
@@ -102,30 +103,34 @@ def main() -> None:
         work = args.work or Path(tmp)
         work.mkdir(parents=True, exist_ok=True)
         rec, rep = work / "rec", work / "rep"
-        if args.demo:
-            record_cmd = ["record", "--params", str(REPO / "params.yaml"), "--out", str(rec)]
-            record_cmd += ["-j", str(args.jobs)] if args.jobs > 1 else []
+        if args.demo:  # what `make demo`'s DVC stages run: episodes, each campaign, report
+            params = str(REPO / "params.yaml")
+            campaigns = list(yaml.safe_load(Path(params).read_text()).get("campaigns") or {})
+            record_cmds = [["record", "--params", params, "--out", str(rec)]]
+            record_cmds += [["record", "--params", params, "--out", str(rec), "--campaign", c]
+                            for c in campaigns]  # fmt: skip
             report_cmd = ["report", "--recordings", str(rec), "--out", str(rep)]
             report_cmd += ["--baseline", "pid"]
         else:
-            params = _campaign_params(
+            params_path = _campaign_params(
                 work, seeds=args.seeds, controllers=args.controllers.split(","),
                 every=args.keep_every,
             )  # fmt: skip
-            record_cmd = ["record", "--params", str(params), "--campaign", "bench"]
-            record_cmd += ["-j", str(args.jobs), "--out", str(rec)]
+            record_cmds = [["record", "--params", str(params_path), "--campaign", "bench",
+                            "-j", str(args.jobs), "--out", str(rec)]]  # fmt: skip
             report_cmd = ["report", "--recordings", str(rec / "bench"), "--out", str(rep)]
-        record = _run(record_cmd, repo=repo)
+        runs = [_run(cmd, repo=repo) for cmd in record_cmds]
+        record = {k: round(sum(r[k] for r in runs), 2) for k in ("wall_s", "cpu_s")}
         report = _run(report_cmd, repo=repo)
         sim = yaml.safe_load((REPO / "params.yaml").read_text())["sim"]
         control_dt_s = sim["physics_dt_s"] * sim["control_period_steps"]
         episodes, steps = steps_in_report(rep / "metrics.json", control_dt_s=control_dt_s)
     floor = floor.merged(measure_floor())
-    cores = min(args.jobs, os.cpu_count() or 1)
+    cores = 1 if args.demo else min(args.jobs, os.cpu_count() or 1)
     total = {k: round(record[k] + report[k], 2) for k in record}
     result |= {
         "mode": "demo" if args.demo else "campaign",
-        "command_record": "pipeline " + " ".join(record_cmd),
+        "command_record": ["pipeline " + " ".join(cmd) for cmd in record_cmds],
         "command_report": "pipeline " + " ".join(report_cmd),
         "episodes": episodes,
         "jobs": args.jobs,
