@@ -81,10 +81,10 @@ class LoopProbe:
 
         if first == 0:  # an episode's first run
             self.wall_s = self.cpu_s = self.physics_wall_s = self.physics_cpu_s = 0.0
+        # the whole state (the constraint solver's warm start too: with the realistic plant's
+        # friction a replay from qpos and qvel alone leaves the trajectory)
         start = mujoco.MjData(loop.model)
-        start.qpos[:] = loop.data.qpos
-        start.qvel[:] = loop.data.qvel
-        mujoco.mj_forward(loop.model, start)
+        mujoco.mj_copyData(start, loop.model, loop.data)
         c0, w0 = time.thread_time(), time.perf_counter()
         rows, reason = self._run(loop, *args, first=first, stop=stop, final=final)
         self.wall_s += time.perf_counter() - w0
