@@ -38,6 +38,11 @@ import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benches"))
+
+from floor import Floor, floor_fields, floor_summary, measure_floor  # noqa: E402
+
+CONTROL_DT_S = 0.001  # params.yaml's sim: 0.5 ms x 2
 
 
 def _params(folder: Path, *, seeds: int) -> Path:
@@ -96,9 +101,10 @@ def _size(folder: Path) -> int:
     return sum(p.stat().st_size for p in folder.rglob("*") if p.is_file())
 
 
-def _record_campaign(params: Path, out: Path, **kwargs: Any) -> tuple[float, float]:
+def _record_campaign(params: Path, out: Path, **kwargs: Any) -> tuple[float, float, int]:
     """Wall time [s] of recording the bench campaign in this process (plans included),
-    and the sum of the episodes' own wall times [s] (busy time of the workers)."""
+    the sum of the episodes' own wall times [s] (busy time of the workers) and their
+    control steps."""
     from pipeline.params import load_params
     from pipeline.stages.campaign_run import completion_marker, plan_run
     from pipeline.stages.record import record
@@ -114,10 +120,11 @@ def _record_campaign(params: Path, out: Path, **kwargs: Any) -> tuple[float, flo
     bad = [o for o in outcomes if o.status != "ok"]
     if bad:
         raise SystemExit(f"{bad[0].name}: {bad[0].status}: {bad[0].reason}")
-    return wall, sum(o.wall_s for o in outcomes)
+    steps = sum(round(o.duration_s / CONTROL_DT_S) + 1 for o in outcomes)
+    return wall, sum(o.wall_s for o in outcomes), steps
 
 
-def efficiency(tmp: Path, *, seeds: int, ray: bool) -> dict[str, Any]:
+def efficiency(tmp: Path, *, seeds: int, ray: bool, floor: Floor) -> dict[str, Any]:
     """record() on 1 job, 2 jobs and Ray (instance started before the clock: a cluster
     users already run; its workers' start-up and imports are inside the clock)."""
     params = _params(tmp, seeds=seeds)
@@ -125,8 +132,10 @@ def efficiency(tmp: Path, *, seeds: int, ray: bool) -> dict[str, Any]:
     # utilization = busy / (workers x wall): the executor's own overhead (idle workers,
     # planning, start-up), which CPU contention from other processes does not inflate
     for name, jobs in (("jobs1", 1), ("jobs2", 2)):
-        wall, busy = _record_campaign(params, tmp / name, jobs=jobs)
+        wall, busy, steps = _record_campaign(params, tmp / name, jobs=jobs)
         out[f"{name}_s"] = round(wall, 2)
+        out[f"{name}_converged"] = floor_fields(floor, control_steps=steps, wall_s=wall,
+                                                cores=jobs)  # fmt: skip
         out[f"{name}_utilization"] = round(busy / (jobs * wall), 3)
     out["jobs2_efficiency"] = round(out["jobs1_s"] / (2 * out["jobs2_s"]), 3)
     digests = {_digest(tmp / name) for name in ("jobs1", "jobs2")}
@@ -137,7 +146,7 @@ def efficiency(tmp: Path, *, seeds: int, ray: bool) -> dict[str, Any]:
         ray_.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
         out["ray_init_s"] = round(time.perf_counter() - t0, 2)
         try:
-            wall, busy = _record_campaign(params, tmp / "ray", executor="ray")
+            wall, busy, _ = _record_campaign(params, tmp / "ray", executor="ray")
             out["ray_s"] = round(wall, 2)
             out["ray_utilization"] = round(busy / (2 * wall), 3)
         finally:
@@ -148,7 +157,7 @@ def efficiency(tmp: Path, *, seeds: int, ray: bool) -> dict[str, Any]:
     return out
 
 
-def scale(tmp: Path, *, episodes: int) -> dict[str, Any]:
+def scale(tmp: Path, *, episodes: int, floor: Floor) -> dict[str, Any]:
     params = _params(tmp, seeds=episodes // 2)
     rec, rep = tmp / "rec", tmp / "rep"
     record_s, record_peak = _timed(
@@ -158,8 +167,11 @@ def scale(tmp: Path, *, episodes: int) -> dict[str, Any]:
     report_s, report_peak = _timed(
         [sys.executable, "-m", "pipeline", "report", "--recordings", str(rec), "--out", str(rep)]
     )
+    runs = json.loads((rep / "metrics.json").read_text())["episodes"].values()
+    steps = sum(round(e["end_s"] / CONTROL_DT_S) + 1 for e in runs)
     return {
         "episodes": 2 * (episodes // 2),
+        "converged": floor_fields(floor, control_steps=steps, wall_s=record_s + report_s, cores=2),
         "record_s": round(record_s, 1),
         "report_s": round(report_s, 1),
         "total_s": round(record_s + report_s, 1),
@@ -187,13 +199,15 @@ def main() -> None:
         "machine": platform.machine(),
         "python": platform.python_version(),
     }
+    floor = measure_floor()  # benches/floor.py, stated beside each figure
     with tempfile.TemporaryDirectory() as tmp:
         if not args.no_efficiency:
             result["efficiency"] = efficiency(
-                Path(tmp) / "eff", seeds=args.eff_seeds, ray=not args.no_ray
+                Path(tmp) / "eff", seeds=args.eff_seeds, ray=not args.no_ray, floor=floor
             )
         if not args.no_scale:
-            result["scale"] = scale(Path(tmp) / "scale", episodes=args.episodes)
+            result["scale"] = scale(Path(tmp) / "scale", episodes=args.episodes, floor=floor)
+    result["converged_floor"] = floor_summary(floor.merged(measure_floor()))
     print(json.dumps(result, indent=2))
 
 

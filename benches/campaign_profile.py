@@ -69,6 +69,9 @@ import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benches"))
+
+from floor import floor_fields, floor_summary, measure_floor  # noqa: E402
 
 RECORD_STAGES = (
     "plan",
@@ -351,6 +354,7 @@ def main() -> None:
         run = plan_run(params, "profile", out=Path(tmp) / "rec")
         episodes = len(run.pending)
         # the floor before and after the run (best of both): other load moves it
+        converged = measure_floor()  # benches/floor.py: what every throughput bench states
         floors = [physics_floor_s(run.pending[0], 4011) for _ in range(3)]
         t0, c0 = time.perf_counter(), time.process_time()
         outcomes = _record_run(record, params, run)
@@ -372,6 +376,9 @@ def main() -> None:
         timers.total_s["other"] = record_s - timed
         control_dt_s = run.pending[0].sim.physics_dt_s * run.pending[0].sim.control_period_steps
         steps = round(outcomes[0].duration_s / control_dt_s) + 1
+        # the settled pre-roll makes episodes differ in length: every episode's own steps
+        total_steps = sum(round(o.duration_s / control_dt_s) + 1 for o in outcomes)
+        converged = converged.merged(measure_floor())
         floors = [f * steps / 4011 for f in floors]
         floors += [physics_floor_s(run.pending[0], steps) for _ in range(3)]
         floor_s = min(floors)
@@ -416,6 +423,14 @@ def main() -> None:
             result["report_s"] = round(report_s, 2)
             result["report_cpu_s"] = round(report_cpu_s, 2)
             result["report"] = _table(timers, REPORT_STAGES, episodes, floor_s)
+        result["converged_floor"] = floor_summary(converged)
+        result["converged_record"] = floor_fields(
+            converged, control_steps=total_steps, wall_s=record_s, cpu_s=record_cpu_s
+        )
+        result["converged_end_to_end"] = floor_fields(
+            converged, control_steps=total_steps, wall_s=record_s + report_s,
+            cpu_s=record_cpu_s + report_cpu_s,
+        )  # fmt: skip
         result |= _end_to_end(
             wall_s=record_s + report_s, cpu_s=record_cpu_s + report_cpu_s,
             episodes=episodes, floor_s=floor_s, plant_floor_s=plant_floor_s,

@@ -44,6 +44,9 @@ import psutil
 import yaml
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benches"))
+from floor import floor_fields, floor_summary, measure_floor, steps_in_report  # noqa: E402
+
 CONTROLLERS = ("pid", "ctc", "ctc_pid")
 TARGET_EPISODES = 1000
 TARGET_S = 60.0
@@ -182,6 +185,7 @@ def main() -> None:
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     sys.path.insert(0, str(REPO))
+    floor = measure_floor()  # benches/floor.py, stated beside each report time
 
     out: dict[str, Any] = {
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version()},
@@ -214,8 +218,12 @@ def main() -> None:
                 peak = max(peak, p)
             wall = min(walls)
             outputs = sum(p.stat().st_size for p in report_dir.rglob("*") if p.is_file())
+            _, steps = steps_in_report(report_dir / "metrics.json")
             out["runs"].append(
                 {
+                    "converged": floor_fields(
+                        floor, control_steps=steps, wall_s=wall, cpu_s=min(cpus)
+                    ),
                     "episodes": n,
                     "report_jobs": jobs or "default",
                     "recordings_mb": round(bag_bytes / 1e6, 1),
@@ -258,6 +266,7 @@ def main() -> None:
         out["profile_top20_cumulative"] = _profile(
             recordings, work / "report-profile", args.profile_out
         )
+    out["converged_floor"] = floor_summary(floor.merged(measure_floor()))
     if not args.keep:
         shutil.rmtree(work, ignore_errors=True)
     print(json.dumps(out, indent=2))

@@ -41,6 +41,9 @@ import yaml
 from campaign_report import _timed  # the wall time and peak RSS of a command's tree
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benches"))
+from floor import floor_fields, floor_summary, measure_floor, steps_in_report  # noqa: E402
+
 CONTROLLERS = ("pid", "ctc")
 TARGET_REPORT_S = 60.0
 TARGET_DISK_B = 1e9
@@ -150,6 +153,7 @@ def main() -> None:
                           "load_after": _load()}, indent=2))  # fmt: skip
         shutil.rmtree(work, ignore_errors=True)
         return
+    floor = measure_floor()  # benches/floor.py, stated beside the record and report times
     params = _params(work, seeds=args.seeds, every=args.every)
     episodes = args.seeds * len(CONTROLLERS)
     commit = subprocess.run(
@@ -169,6 +173,16 @@ def main() -> None:
     out["report"] = {"wall_s": round(wall, 1), "peak_rss_mb": round(peak / 2**20),
                      "target_s": TARGET_REPORT_S, "met": wall <= TARGET_REPORT_S,
                      "load_after": _load()}  # fmt: skip
+    floor = floor.merged(measure_floor())
+    _, steps = steps_in_report(work / "report" / "metrics.json")
+    out["converged_floor"] = floor_summary(floor)
+    for key in ("record", "report"):
+        out[key] |= floor_fields(floor, control_steps=steps, wall_s=out[key]["wall_s"],
+                                 cores=args.jobs)  # fmt: skip
+    out["record_plus_report"] = floor_fields(
+        floor, control_steps=steps, wall_s=out["record"]["wall_s"] + out["report"]["wall_s"],
+        cores=args.jobs,
+    )  # fmt: skip
     parts = _weigh(recordings / "bench")
     out["disk"] = parts
     bags = parts.get("bags", {"folders": 0, "bytes": 0, "disk_bytes": 0})

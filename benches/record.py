@@ -49,6 +49,7 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "benches"))
 
 from campaign_profile import episode_wall_s, physics_floor_s  # noqa: E402
+from floor import floor_summary, measure_floor, per_step_ratio  # noqa: E402
 
 import pipeline.sim.runner as runner  # noqa: E402
 from pipeline.params import Episode, load_params  # noqa: E402
@@ -80,10 +81,10 @@ class LoopProbe:
 
         if first == 0:  # an episode's first run
             self.wall_s = self.cpu_s = self.physics_wall_s = self.physics_cpu_s = 0.0
+        # the whole state (the constraint solver's warm start too: with the realistic plant's
+        # friction a replay from qpos and qvel alone leaves the trajectory)
         start = mujoco.MjData(loop.model)
-        start.qpos[:] = loop.data.qpos
-        start.qvel[:] = loop.data.qvel
-        mujoco.mj_forward(loop.model, start)
+        mujoco.mj_copyData(start, loop.model, loop.data)
         c0, w0 = time.thread_time(), time.perf_counter()
         rows, reason = self._run(loop, *args, first=first, stop=stop, final=final)
         self.wall_s += time.perf_counter() - w0
@@ -252,7 +253,14 @@ def main() -> None:
             "machine": platform.machine(),
         },
     }
+    converged = measure_floor()
     result |= measure(args.repeat, marginal=not args.no_marginal)
+    converged = converged.merged(measure_floor())  # benches/floor.py, same run
+    result["converged_floor"] = floor_summary(converged)
+    for case in result.values():
+        if isinstance(case, dict) and "whole_us_per_step" in case:
+            case["loop_x_converged_floor"] = per_step_ratio(converged, case["loop_us_per_step"])
+            case["whole_x_converged_floor"] = per_step_ratio(converged, case["whole_us_per_step"])
     if not args.no_jobs:
         result["jobs"] = jobs_scaling(hold_s=240.0)
     result["uptime_after"] = _shell("uptime")

@@ -18,6 +18,7 @@ import argparse
 import json
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import mujoco
@@ -31,6 +32,9 @@ from pipeline.robots.spec import RobotSpec
 from pipeline.robots.urdf import build_pinocchio_model
 from pipeline.sim.references import PAPER_GOAL_RAD, PAPER_START_RAD, QuinticReference
 from pipeline.sim.runner import run_episode
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from floor import floor_summary, measure_floor, per_step_ratio, uptime
 
 
 def physics_floor_s(
@@ -138,6 +142,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--physics-dt-s", type=float, default=0.0005)
     parser.add_argument("--period", type=int, default=2, help="physics steps per control step")
     args = parser.parse_args(argv)
+    floor, before = measure_floor(), uptime()
     out = measure(
         args.robot,
         seconds=args.seconds,
@@ -145,6 +150,10 @@ def main(argv: list[str] | None = None) -> int:
         physics_dt_s=args.physics_dt_s,
         period=args.period,
     )
+    floor = floor.merged(measure_floor())  # the converged floor (benches/floor.py), same run
+    out["converged_floor"] = floor_summary(floor) | {"uptime": [before, uptime()]}
+    for case in out["episodes"].values():
+        case["x_converged_floor"] = per_step_ratio(floor, case["us_per_control_step"])
     sys.stdout.write(json.dumps(out, indent=2) + "\n")
     return 0
 

@@ -18,6 +18,9 @@ from pipeline.errors import handle_sigterm, interrupt_exit
 def entry() -> None:
     """Console-script entry point: import the CLI, then run it."""
     handle_sigterm()
+    # nothing here renders with MuJoCo: skip its OpenGL probe (glfw, ~0.1-0.3 s per start);
+    # MUJOCO_GL set by the caller wins
+    os.environ.setdefault("MUJOCO_GL", "disable")
     if supervise.drives_ray(sys.argv[1:]) and supervise.MARK_ENV not in os.environ:
         sys.exit(supervise.run_supervised(sys.argv[1:]))  # Ray may end its driver abruptly
     supervise.mark_exit_when_python_exits()

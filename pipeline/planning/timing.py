@@ -26,8 +26,11 @@ lower limits until it complies.
 
 from __future__ import annotations
 
+import importlib
 import logging
 import math
+import sys
+import types
 from bisect import bisect_right
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -35,9 +38,6 @@ from itertools import pairwise
 from typing import Literal, Protocol
 
 import numpy as np
-import toppra
-import toppra.algorithm as toppra_algo
-import toppra.constraint as toppra_constraint
 from numpy.typing import ArrayLike, NDArray
 
 from pipeline.errors import PlanningError
@@ -46,6 +46,36 @@ from pipeline.planning.collision import CollisionChecker, motion_check_step_rad
 from pipeline.planning.planner import PlannedPath
 from pipeline.robots.spec import RobotSpec
 from pipeline.trajectory import TrajectorySamples
+
+
+class _DeferredModule(types.ModuleType):
+    """A module that imports the real one at its first attribute read."""
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(importlib.import_module(self.__name__), name)
+
+
+def _import_toppra_without_pyplot() -> None:
+    """Import toppra without the ``matplotlib.pyplot`` it imports for debug plots only
+    (0.5-2 s of a ``pipeline record`` start, issue 31): while toppra loads, matplotlib and
+    its pyplot are stand-ins that import the real ones when toppra first plots."""
+    if "toppra" in sys.modules or "matplotlib" in sys.modules:
+        return
+    mpl, pyplot = _DeferredModule("matplotlib"), _DeferredModule("matplotlib.pyplot")
+    mpl.pyplot = pyplot  # type: ignore[attr-defined]
+    sys.modules["matplotlib"], sys.modules["matplotlib.pyplot"] = mpl, pyplot
+    try:
+        import toppra  # noqa: F401
+    finally:
+        for name, stand_in in (("matplotlib", mpl), ("matplotlib.pyplot", pyplot)):
+            if sys.modules.get(name) is stand_in:
+                del sys.modules[name]
+
+
+_import_toppra_without_pyplot()
+import toppra  # noqa: E402
+import toppra.algorithm as toppra_algo  # noqa: E402
+import toppra.constraint as toppra_constraint  # noqa: E402
 
 F64 = NDArray[np.float64]
 Interpolation = Literal["spline", "stop_and_go"]
