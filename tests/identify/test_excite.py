@@ -149,19 +149,32 @@ def test_the_plant_a_scenario_draws_depends_on_the_seed_only() -> None:
     assert a != c
 
 
+@pytest.fixture(scope="module")
+def realistic_fit(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """An excitation of the drawn realistic plant (seed 3) and the model fitted to it: the
+    two tests below only read them."""
+    root = tmp_path_factory.mktemp("realistic")
+    record_excitation(
+        PARAMS, variant=1, out=root / "fit", scenario_name="paper-realistic", seed=3,
+        evaluations=1200, periods=2,
+    )  # fmt: skip
+    fit_command([root / "fit"], out=root / "model.yaml")
+    return root / "fit", root / "model.yaml"
+
+
 @pytest.mark.slow
-def test_realistic_plant_identifies_friction_and_predicts_torque(tmp_path: Path) -> None:
+def test_realistic_plant_identifies_friction_and_predicts_torque(
+    tmp_path: Path, realistic_fit: tuple[Path, Path]
+) -> None:
     """Drawn links and armature, MuJoCo frictionloss and damping, sensor noise: Coulomb
     friction within 10 % (frictionloss acts as Coulomb friction at the excitation's
     speeds; it is soft only near rest, which the fit leaves out), and another excitation
     of the same plant predicted within 5 % RMS per joint."""
+    fit, model = realistic_fit
     kw = {"scenario_name": "paper-realistic", "seed": 3, "evaluations": 1200, "periods": 2}
-    record_excitation(PARAMS, variant=1, out=tmp_path / "fit", **kw)  # type: ignore[arg-type]
     record_excitation(PARAMS, variant=2, out=tmp_path / "check", **kw)  # type: ignore[arg-type]
-    model = tmp_path / "model.yaml"
-    fit_command([tmp_path / "fit"], out=model)
     # an excitation's settings are its own (not the episode contract): read them raw
-    settings = json.loads(read_recording(tmp_path / "fit").metadata["settings"])
+    settings = json.loads(read_recording(fit).metadata["settings"])
     plant = settings["plant"]
     assert settings["excitation"]["evaluations"] == 1200  # the count, never the wall time
     from pipeline.identify.model_file import load_model
@@ -189,7 +202,7 @@ def test_nominal_of_another_robot_is_refused(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_ctc_on_the_identified_model_beats_ctc_on_cad(tmp_path: Path) -> None:
+def test_ctc_on_the_identified_model_beats_ctc_on_cad(realistic_fit: tuple[Path, Path]) -> None:
     """The paper's motion on a drawn realistic plant: CTC whose nominal model is identified
     from an excitation of that plant has a smaller max error on shoulder lift and elbow
     than CTC on the CAD model (the gravity error is what identification removes)."""
@@ -198,9 +211,7 @@ def test_ctc_on_the_identified_model_beats_ctc_on_cad(tmp_path: Path) -> None:
     from pipeline.sim.references import PAPER_GOAL_RAD, PAPER_START_RAD, QuinticReference
     from pipeline.sim.runner import run_episode
 
-    kw = {"scenario_name": "paper-realistic", "seed": 3, "evaluations": 1200, "periods": 2}
-    record_excitation(PARAMS, variant=1, out=tmp_path / "fit", **kw)  # type: ignore[arg-type]
-    fit_command([tmp_path / "fit"], out=tmp_path / "model.yaml")
+    _, model = realistic_fit
     scenario = load_params(PARAMS).scenarios["paper-realistic"]
     spec = load_spec("ur5")
     plant_spec, plant, _ = scenario_plant(spec, scenario, seed=3)
@@ -208,7 +219,7 @@ def test_ctc_on_the_identified_model_beats_ctc_on_cad(tmp_path: Path) -> None:
     max_error = {}
     for label, nominal in (
         ("cad", spec),
-        ("identified", nominal_spec(spec, str(tmp_path / "model.yaml"))),
+        ("identified", nominal_spec(spec, str(model))),
     ):
         result = run_episode(
             spec, reference=reference, controller=make_controller("ctc", nominal), seed=3,

@@ -32,7 +32,9 @@ def campaign(tmp_path_factory: pytest.TempPathFactory) -> tuple[ReportResult, li
         root / "recordings",
         paper_like("paper-ctc", "ctc", duration_s=0.3, motion_end_s=0.2, error_scale=5e-4),
     )
-    result = run_report(recordings_dir=root / "recordings", out_dir=root / "reports")
+    # jobs=1: a report worker pool's start-up repays nothing on the suite's busy cores, and the
+    # outputs do not depend on jobs (tests/stages/test_report_jobs.py)
+    result = run_report(recordings_dir=root / "recordings", out_dir=root / "reports", jobs=1)
     return result, episodes
 
 

@@ -63,7 +63,9 @@ def headline(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
                     error_scale=1e-3 * (1 + 0.1 * seed) * (1.5 if controller != "pid" else 1),
                 )  # fmt: skip
                 write_bag(root / "recordings", ep)
-    run_report(recordings_dir=root / "recordings", out_dir=root / "reports")
+    # jobs=1: a report worker pool's start-up repays nothing on the suite's busy cores, and the
+    # outputs do not depend on jobs (tests/stages/test_report_jobs.py)
+    run_report(recordings_dir=root / "recordings", out_dir=root / "reports", jobs=1)
     doc: dict[str, Any] = json.loads((root / "reports" / "headline.json").read_text("utf-8"))
     return doc
 

@@ -138,8 +138,9 @@ def test_existing_recording_is_not_overwritten_without_force(tmp_path):
 
 @pytest.mark.slow
 def test_killed_run_leaves_no_partial_bag_and_keeps_earlier_ones(tmp_path):
-    # a 10-minute hold: the simulation and the write take well over the kill delay
-    params = _params(tmp_path, "long.yaml", hold_s=600.0)
+    # a one-minute hold: its bag (~9 MB) takes about a second to write on a quiet machine,
+    # ~100 polls below (a 600 s hold proved the same at 5x the CPU time)
+    params = _params(tmp_path, "long.yaml", hold_s=60.0)
     out = tmp_path / "rec"
     quick = _params(tmp_path)
     assert _record(quick, out, "--only", "paper-pid").returncode == 0
@@ -151,8 +152,8 @@ def test_killed_run_leaves_no_partial_bag_and_keeps_earlier_ones(tmp_path):
         stderr=subprocess.DEVNULL,
         start_new_session=True,
     )
-    # kill while the bag is being written: its partial directory exists (the 600 s
-    # hold first simulates, a minute or more on a loaded machine, then writes ~90 MB);
+    # kill while the bag is being written: its partial directory exists (the 60 s hold
+    # first simulates, then writes);
     # no wall-clock deadline: a run that never writes ends, or meets pytest's timeout
     while not list(out.glob(".paper-ctc.partial-*")):
         assert proc.poll() is None, "the run ended before its bag was being written"

@@ -99,7 +99,8 @@ def test_sigkill_of_the_parent_takes_its_workers_and_publishes_nothing_after(
     tmp_path, cleanup, trial
 ):
     out = tmp_path / "rec"
-    proc = _start(_params(tmp_path, episodes=6, hold_s=30.0), out, "--jobs", "2")
+    # a 10 s hold: each bag takes a few polls to write (the SIGTERM test below catches 4 s ones)
+    proc = _start(_params(tmp_path, episodes=6, hold_s=10.0), out, "--jobs", "2")
     cleanup.append(proc)
     # kill while a worker is writing a bag: the moment a late publish would happen
     assert _wait_for(lambda: bool(_partials(out)), 120), proc.stderr.read() if proc.stderr else ""
@@ -142,7 +143,8 @@ def test_ctrl_c_stops_the_run_says_what_finished_and_leaves_nothing_half_done(
     tmp_path, cleanup, jobs, to_group, ignored
 ):
     out = tmp_path / "rec"
-    params = _params(tmp_path, episodes=6, hold_s=20.0)
+    # 4 s holds (as the SIGTERM test's): when the first is done, 3 or more are still queued
+    params = _params(tmp_path, episodes=6, hold_s=4.0)
     proc = _start(params, out, "--jobs", str(jobs), sigint_ignored=ignored)
     cleanup.append(proc)
     assert _wait_for(lambda: bool(_visible(out)), 120)  # one episode done, others queued
