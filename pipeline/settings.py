@@ -540,9 +540,9 @@ class EpisodeSettings(Contract):
                     asdict(value) if is_dataclass(value) and not isinstance(value, type) else value
                 )
         out["plant"] = plant_as_recorded(out["plant"])
-        for own in ("nominal", "plant"):  # the scenario's: as before they existed
-            if out["controller"].get(own) is None:
-                out["controller"].pop(own, None)
+        for override in ("nominal", "plant"):  # the scenario's: as before they existed
+            if out["controller"].get(override) is None:
+                out["controller"].pop(override, None)
         return out
 
     @classmethod
