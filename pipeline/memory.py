@@ -17,7 +17,14 @@ import errno
 import os
 import resource
 
-__all__ = ["OUT_OF_MEMORY_HINT", "out_of_memory", "quiet_unraisable_memory_errors"]
+__all__ = [
+    "OUT_OF_MEMORY_HINT",
+    "address_headroom_bytes",
+    "claim_blas_buffer_first",
+    "near_address_limit",
+    "out_of_memory",
+    "quiet_unraisable_memory_errors",
+]
 
 _OOM_TEXTS = ("failed to map segment", "cannot allocate memory", "out of memory")
 # a thread's stack that cannot be mapped ("can't start new thread") is the same shortage
@@ -48,6 +55,30 @@ def near_address_limit(*, used_bytes: int | None = None, limit_bytes: int | None
         if used_bytes is None:
             return False
     return used_bytes + _NEAR_LIMIT_BYTES >= limit_bytes
+
+
+def address_headroom_bytes() -> int | None:
+    """Address space left under ``RLIMIT_AS`` (limit minus this process's virtual size);
+    None without a limit (or where the size is unreadable)."""
+    soft, _hard = resource.getrlimit(resource.RLIMIT_AS)
+    used = _virtual_size_bytes()
+    if soft == resource.RLIM_INFINITY or used is None:
+        return None
+    return int(soft) - used
+
+
+def claim_blas_buffer_first() -> None:
+    """Under an address-space limit, make numpy's OpenBLAS take its work buffer now, while
+    the process is small. OpenBLAS allocates it at the first matrix product and, when that
+    fails, prints "Memory allocation still failed" and exits from C: no exception, no
+    one-line error. Taken first, the shortage surfaces later where Python sees it (an
+    import that cannot map its library, a MemoryError). Without a limit: nothing."""
+    soft, _hard = resource.getrlimit(resource.RLIMIT_AS)
+    if soft == resource.RLIM_INFINITY:
+        return
+    import numpy as np
+
+    np.dot(np.ones((2, 2)), np.ones((2, 2)))
 
 
 def _virtual_size_bytes() -> int | None:

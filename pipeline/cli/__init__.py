@@ -42,7 +42,12 @@ from pipeline.errors import (
     handle_sigterm,
     interrupt_exit,
 )
-from pipeline.memory import OUT_OF_MEMORY_HINT, out_of_memory, quiet_unraisable_memory_errors
+from pipeline.memory import (
+    OUT_OF_MEMORY_HINT,
+    claim_blas_buffer_first,
+    out_of_memory,
+    quiet_unraisable_memory_errors,
+)
 
 __all__ = ["app", "console", "main"]
 
@@ -108,6 +113,7 @@ def main() -> None:
     if not debug:
         quiet_unraisable_memory_errors()
     try:
+        claim_blas_buffer_first()  # before any library can fill the address space
         app()
     except SystemExit as exit_:
         if exit_.code == EXIT_INTERRUPTED:  # typer ends a command's Ctrl-C silently with 130
