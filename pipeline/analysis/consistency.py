@@ -5,15 +5,21 @@ the same settings; an interrupted re-run with a changed value (``hold_s: 0.3`` t
 ``0.8``) mixes two set-ups in one group, and every number of that group is then a blend.
 :func:`mixed_settings` finds each recorded setting with more than one value in a group:
 the scenario's settings across the whole group, a controller's gains within its episodes.
+A setting one episode's bag leaves out (a field added after others were recorded, or one
+left out of the dump while at its default: ``plant.profile``) counts as its declared
+default, so it differs from an episode that sets it.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections import Counter
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
+
+from pydantic import BaseModel
 
 from pipeline.log.recording import Recording
 
@@ -62,11 +68,59 @@ def _flat(node: Any, prefix: str = "") -> Iterable[tuple[str, Any]]:
         yield prefix, node
 
 
-def _differences(group: str, rows: Sequence[tuple[str, Mapping[str, Any]]], *,
+Declared = Callable[[str], tuple[bool, Any]]
+"""A flattened key -> (whether a declared field, its value): what an episode whose bag
+leaves the key out ran with."""
+
+
+def _json(value: Any) -> Any:
+    """A settings value as its dump holds it (plain JSON data)."""
+    if isinstance(value, BaseModel):
+        return value.model_dump(mode="json")
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return dataclasses.asdict(value)
+    return value
+
+
+def _field_names(node: Any) -> Iterable[str]:
+    """The declared fields of a settings value (a params model or a settings dataclass)."""
+    if isinstance(node, BaseModel):
+        return type(node).model_fields.keys()
+    if dataclasses.is_dataclass(node) and not isinstance(node, type):
+        return [f.name for f in dataclasses.fields(node)]
+    return ()
+
+
+def _declared_in(root: Any, *, skip: str = "") -> Declared:
+    """The value at a flattened key (``plant.profile``) of ``root``, a settings value read
+    back (a field its bag leaves out holds its declared default there); none for a key
+    that names no declared field or starts with ``skip``."""
+
+    def at(key: str) -> tuple[bool, Any]:
+        if skip and key.startswith(skip):
+            return False, None
+        node = root
+        for part in key.split("."):
+            if part not in _field_names(node):
+                return False, None
+            node = getattr(node, part)
+        return True, _json(node)
+
+    return at
+
+
+def _differences(group: str, rows: Sequence[tuple[str, Mapping[str, Any], Declared]], *,
                  label: str = "") -> list[MixedSetting]:  # fmt: skip
+    keys = {key: None for _, fields, _ in rows for key in fields}  # in first-seen order
     values: dict[str, dict[str, list[str]]] = {}
-    for episode, fields in rows:
-        for key, value in fields.items():
+    for episode, fields, declared in rows:
+        for key in keys:
+            if key in fields:
+                value = fields[key]
+            else:  # left out of this bag: its declared default, if the key is a field
+                known, value = declared(key)
+                if not known:
+                    continue
             text = json.dumps(value, sort_keys=True, default=str)
             values.setdefault(key, {}).setdefault(text, []).append(episode)
     found = []
@@ -88,8 +142,8 @@ def mixed_settings(groups: Mapping[str, Sequence[Recording]]) -> list[MixedSetti
     (which take no part in the comparisons), are left out."""
     found: list[MixedSetting] = []
     for group, recs in groups.items():
-        scenario_rows = []
-        gains_rows: dict[str, list[tuple[str, dict[str, Any]]]] = {}
+        scenario_rows: list[tuple[str, Mapping[str, Any], Declared]] = []
+        gains_rows: dict[str, list[tuple[str, Mapping[str, Any], Declared]]] = {}
         for rec in recs:
             s = rec.settings
             if s is None or rec.status != "ok":  # a failed episode is compared with nothing
@@ -99,13 +153,22 @@ def mixed_settings(groups: Mapping[str, Sequence[Recording]]) -> list[MixedSetti
             # compared among that controller's episodes only
             own_plant = s.controller.plant is not None
             plant = scenario.pop("plant", None) if own_plant else None
-            scenario_rows.append((rec.episode, dict(_flat(scenario))))
+            # (the scenario's plant of such an episode is the controller's: not filled in)
+            scenario_rows.append(
+                (
+                    rec.episode,
+                    dict(_flat(scenario)),
+                    _declared_in(s.scenario, skip="plant." if own_plant else ""),
+                )
+            )
             gains = dict(s.controller.gains)
             gains_rows.setdefault(rec.controller, []).append(
                 (
                     rec.episode,
                     {f"gains.{k}": v for k, v in _flat(gains)}
                     | ({f"plant.{k}": v for k, v in _flat(plant)} if own_plant else {}),
+                    # a controller's own plant is its scenario's as recorded; gains as a whole
+                    _declared_in(s.scenario, skip="" if own_plant else "plant."),
                 )
             )
         found += _differences(group, scenario_rows)

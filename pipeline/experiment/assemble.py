@@ -201,9 +201,10 @@ def _plant_is_exact(spec: RobotSpec, plant_spec: RobotSpec, scenario: ScenarioPa
     )
 
 
-def _published(scenario: ScenarioParams, drawn: DrawnFriction) -> dict[str, Any]:
+def published_plant(scenario: ScenarioParams, drawn: DrawnFriction) -> dict[str, Any]:
     """The plant settings a published profile or a torque sensor adds (none: nothing, so
-    the settings of plants without them read as before)."""
+    the settings of plants without them read as before): an episode's and an
+    excitation's (:func:`pipeline.identify.excitation.scenario_plant`)."""
     from pipeline.model.published import PROFILES
 
     p = scenario.plant
@@ -281,7 +282,7 @@ def episode_settings(
         integrator=result.integrator,
         friction_model=result.friction_model,
         **given_plant(scenario),
-        **_published(scenario, drawn),
+        **published_plant(scenario, drawn),
     )
     # planning_time_s is wall clock: printed, never recorded (recordings are byte-reproducible)
     return EpisodeSettings(

@@ -14,8 +14,10 @@ checked: within the position, velocity and acceleration limits and collision-fre
 
 Recording: the reference runs under one of the params' controllers on the plant the
 scenario draws for the seed (the record stage's draw: link parameters and armature from
-``plant.uncertainty``, friction, damping, payload, sensor noise), with the scenario's
-pre-roll and hold, and is written as a rosbag2 recording like ``pipeline record``'s.
+``plant.uncertainty``, friction, damping, payload, sensor noise, a published profile's
+sigmoid friction, the torque sensor's offset and noise), with the scenario's pre-roll and
+hold, and is written as a rosbag2 recording like ``pipeline record``'s, its settings'
+``plant`` describing that plant as an episode's does (:func:`scenario_plant`).
 """
 
 from __future__ import annotations
@@ -514,22 +516,36 @@ def scenario_plant(
     """The plant ``scenario`` draws for ``seed``: the record stage's draw, whatever the motion.
 
     Returns:
-        The plant's robot (drawn links, armature), its MuJoCo options, and plain settings.
+        The plant's robot (drawn links, armature), its MuJoCo options, and plain settings:
+        the drawn links, armature, friction and payload, the fields params give as they
+        are (the sensors' noise, ...: ``given_plant``) and what a published profile or a
+        torque sensor adds (its source, the drawn sigmoid friction, the drawn effort
+        offset), as an episode's plant records them; the fields declared ``added`` left
+        out while at their default (a plant without them records what it did before).
     """
-    from pipeline.experiment.assemble import draw_scenario_plant
+    from pipeline.contract import omit_added, plain
+    from pipeline.experiment.assemble import (
+        draw_scenario_plant,
+        given_plant,
+        published_plant,
+        scenario_friction,
+    )
     from pipeline.model.uncertainty import link_inertials
-    from pipeline.settings import per_joint
+    from pipeline.settings import PlantSettings, SigmoidFrictionSettings, per_joint
 
-    p = scenario.plant
     plant_spec, plant, uncertainty = draw_scenario_plant(spec, scenario, seed=seed)
+    drawn = scenario_friction(spec, scenario, seed=seed)  # what the run's options use
     settings = {
         "links": [asdict(x) for x in link_inertials(plant_spec)],
         "armature": [float(a) for a in plant_spec.armature],
         "damping": list(per_joint(plant.damping, spec.dof)),
         "frictionloss": list(per_joint(plant.frictionloss, spec.dof)),
         "payload_kg": plant.payload_kg,
-        "position_noise_std_rad": p.position_noise_std_rad,
-        "velocity_noise_std_rad_s": p.velocity_noise_std_rad_s,
+        **given_plant(scenario),
+        **{
+            k: plain(asdict(v) if isinstance(v, SigmoidFrictionSettings) else v)
+            for k, v in published_plant(scenario, drawn).items()
+        },
         "uncertainty": asdict(uncertainty),
     }
-    return plant_spec, plant, settings
+    return plant_spec, plant, omit_added(PlantSettings, settings)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from pipeline.analysis.findings import nominal_plant
@@ -91,14 +91,10 @@ def _loop_lines(loop: LoopSettings | None) -> list[str]:
     return [f"- Loop (the same for every law): {_fields_line(loop, LoopSettings)}."]
 
 
-def _armature_lines(
-    robot: RobotSpec | None, nominal: Sequence[float] | None, model: str | None
-) -> list[str]:
+def _armature_text(robot: RobotSpec, nominal: Sequence[float] | None, model: str | None) -> str:
     """The rotor armature the nominal model assumes (``nominal``: as the plant records
-    it), and where its values come from (``model``: the scenario's identified
-    ``nominal:`` model file, if any)."""
-    if robot is None:
-        return []
+    it), and where its values come from (``model``: the identified ``nominal:`` model
+    file, if any)."""
     shown = list(nominal) if nominal is not None else [float(a) for a in robot.armature]
     # a DH robot states its armature's source; a URDF/MJCF robot among its sidecar facts
     stated_by = robot.armature_source if robot.dh_rows is not None else ""
@@ -106,8 +102,49 @@ def _armature_lines(
     stated = source if source is not None else "not stated in the robot file"
     if model is not None:  # the controllers' model is an identified one, not the file
         stated = f"identified (`nominal: {model}`); the robot file's: {stated}"
-    values = md.value(shown)
-    return [f"- Rotor armature of the nominal model [kg m²]: {values}; source: {stated}."]
+    return f"{md.value(shown)}; source: {stated}"
+
+
+def _armature_lines(robot: RobotSpec | None, recs: Sequence[Any]) -> list[str]:
+    """The rotor armature of the nominal model: the first episode's, or each controller's
+    when one has a nominal model of its own (params ``controllers.NAME.nominal``) and
+    theirs differ."""
+    if robot is None:
+        return []
+    head = "- Rotor armature of the nominal model [kg m²]"
+
+    def text(rec: Any) -> str:
+        s = rec.settings
+        own = s.controller.nominal
+        model = own.file if own is not None else s.scenario.nominal
+        return _armature_text(robot, s.plant.nominal_armature, model)
+
+    if any(r.settings is not None and r.settings.controller.nominal for r in recs):
+        each = _per_controller(recs, text)
+        if len(each) > 1:
+            return [f"{head}, per controller:", *each]
+    return [f"{head}: {text(recs[0])}."]
+
+
+def _per_controller(
+    recs: Sequence[Any], text: Callable[[Any], str], *, say_if_varies: bool = True
+) -> list[str]:
+    """``  - `a`, `b`: <text>.`` per distinct ``text`` of each controller's first episode
+    with settings, controllers in the order they first appear; one entry when every
+    controller's is the same. ``say_if_varies``: name the episode shown when the
+    controller's episodes differ (a nominal model per seed)."""
+    firsts: dict[str, Any] = {}
+    for rec in recs:
+        if rec.settings is not None:
+            firsts.setdefault(rec.controller, rec)
+    shared: dict[str, list[str]] = {}
+    for name, rec in firsts.items():
+        shown = text(rec)
+        mine = {text(r) for r in recs if r.controller == name and r.settings is not None}
+        if say_if_varies and len(mine) > 1:
+            shown += f" (in {rec.episode}; its other episodes differ)"
+        shared.setdefault(shown, []).append(f"`{name}`")
+    return [f"  - {', '.join(names)}: {shown}." for shown, names in shared.items()]
 
 
 def _friction_lines(robot: RobotSpec | None) -> list[str]:
@@ -135,11 +172,9 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
     episode's settings, and one row per episode (per controller and gains when many)."""
     recs = data.in_group(scenario)
     mixed = [m for m in data.mixed_settings if m.group == scenario]
-    exact = nominal_plant(recs, data.protocol)
     first = recs[0]
     s = first.settings
     planner = s.planner if s is not None else None
-    plant = s.plant if s is not None else None
 
     def pose(key: str) -> str:
         # The planner records the joint-space start/goal it used.
@@ -158,23 +193,10 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
         f"hold after the motion: {md.value(s.scenario.hold_s if s is not None else None)} s"
         + (f" (in {first.episode}; settings differ, below)." if mixed else "."),
         f"- Planner: {_planner_line(planner)}.",
-        *_armature_lines(
-            robot,
-            plant.nominal_armature if plant is not None else None,
-            s.scenario.nominal if s is not None else None,
-        ),
+        *_armature_lines(robot, recs),
         *_friction_lines(robot),
         *_acceleration_lines(robot),
-        f"- Plant: {_fields_line(plant, PlantSettings)}"
-        + (
-            "; link masses, centres of mass and inertias (and the armature above) drawn per "
-            "episode seed, recorded in each bag's `settings.plant.links`."
-            if exact is False
-            else ": the controllers' nominal model **is** the plant, so model-based terms are "
-            "exact by construction."
-            if exact
-            else "."
-        ),
+        *_plant_line(data, recs),
         *_loop_lines(s.loop if s is not None else None),
         *(
             [
@@ -218,6 +240,43 @@ def setup_section(data: ReportData, scenario: str) -> list[str]:
         *_design_lines(recs),
         *_origin_lines(recs),
     ]
+
+
+def _plant_text(plant: PlantSettings | None, exact: bool | None) -> str:
+    """A plant's shown fields, then what ``exact`` (of its episodes) says of it."""
+    return f"{_fields_line(plant, PlantSettings)}" + (
+        "; link masses, centres of mass and inertias (and the armature above) drawn per "
+        "episode seed, recorded in each bag's `settings.plant.links`."
+        if exact is False
+        else ": the controllers' nominal model **is** the plant, so model-based terms are "
+        "exact by construction."
+        if exact
+        else "."
+    )
+
+
+def _plant_line(data: ReportData, recs: Sequence[Any]) -> list[str]:
+    """The plant: the first episode's, or each controller's (its first episode's) when one
+    has a plant or a nominal model of its own (params ``controllers.NAME.plant``,
+    ``nominal``) and theirs differ."""
+    first = recs[0].settings
+    exact = nominal_plant(recs, data.protocol)
+    line = f"- Plant: {_plant_text(first.plant if first is not None else None, exact)}"
+    if not any(
+        r.settings is not None and (r.settings.controller.plant or r.settings.controller.nominal)
+        for r in recs
+    ):
+        return [line]
+
+    def text(rec: Any) -> str:
+        mine = [r for r in recs if r.controller == rec.controller]
+        return _plant_text(rec.settings.plant, nominal_plant(mine, data.protocol))[:-1]
+
+    # (a drawn plant differs by seed: the line says so)
+    each = _per_controller(recs, text, say_if_varies=False)
+    return (
+        [line] if len(each) < 2 else ["- Plant, per controller (as in its first episode):", *each]
+    )
 
 
 def _plant_lines(recs: Sequence[Any]) -> list[str]:

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.constants import FINAL_EDGE_S, FINAL_WINDOW_S
-from pipeline.errors import PipelineError
+from pipeline.errors import ModelError, PipelineError
 from pipeline.experiment.assemble import (
     bag_metadata,
     draw_scenario_plant,
@@ -126,6 +126,14 @@ def controller_nominal(episode: Episode) -> tuple[str | None, str]:
     return episode.scenario.nominal, f"scenarios.{episode.scenario_name}"
 
 
+def plant_where(episode: Episode) -> str:
+    """Where the plant the episode runs on is set in params: its controller's own
+    ``plant:`` (``controllers.NAME.plant``), else its scenario's."""
+    if episode.controller.plant is not None:
+        return f"controllers.{episode.controller_name}.plant"
+    return f"scenarios.{episode.scenario_name}.plant"
+
+
 def _run_and_write(
     episode: Episode,
     path: PlannedPath,
@@ -178,10 +186,17 @@ def _simulate(
 
     scenario, sim = episode.scenario, episode.sim
     p = scenario.plant
-    where = f"scenarios.{episode.scenario_name}.plant.profile"
-    plant_spec, plant, uncertainty = draw_scenario_plant(
-        spec, scenario, seed=episode.seed, where=where
-    )
+    where = plant_where(episode)
+    try:
+        plant_spec, plant, uncertainty = draw_scenario_plant(
+            spec, scenario, seed=episode.seed, where=f"{where}.profile"
+        )
+        options = plant_run_options(spec, scenario, seed=episode.seed)
+    except ModelError as err:
+        message = str(err)
+        if message.startswith("plant."):  # a draw's field: say whose plant
+            raise ModelError(f"{where}{message.removeprefix('plant')}") from err
+        raise
     result = run_episode(
         spec,
         reference=trajectory,
@@ -200,7 +215,7 @@ def _simulate(
         loop=loop_settings(scenario),
         seed=episode.seed,
         progress=progress,
-        **plant_run_options(spec, scenario, seed=episode.seed),
+        **options,
     )
     return result, controller.gains_in_effect(), (plant_spec, uncertainty)
 

@@ -27,6 +27,7 @@ from pipeline.identify.stage import fit_command, validate_command
 from pipeline.log.reader import read_recording
 from pipeline.params import load_params
 from pipeline.robots.loaders import load_spec
+from tests.robots.test_urdf_loader import SHARE
 
 PARAMS = Path(__file__).parents[2] / "params.yaml"
 
@@ -240,3 +241,65 @@ def test_params_accept_a_nominal_model_path() -> None:
     params = parse_params(data, source="params.yaml")
     assert params.scenarios["paper-realistic"].nominal == "models/ur5.yaml"
     assert params.scenarios["paper"].nominal is None
+
+
+OLD_PLANT_KEYS = {
+    "links", "armature", "damping", "frictionloss", "payload_kg", "position_noise_std_rad",
+    "velocity_noise_std_rad_s", "uncertainty",
+}  # fmt: skip
+
+
+def test_an_excitation_records_the_torque_sensor_it_ran_and_nothing_new_without_one() -> None:
+    """The UR5 with per-seed draws and a torque sensor: the excitation's plant records the
+    drawn offset and the noise as the plant ran them; a plant without them (the paper's
+    realistic one) records the keys it did before (the same bytes)."""
+    from pipeline.experiment.assemble import plant_run_options
+
+    gaz = load_params(Path(__file__).parents[2] / "examples" / "params-panda-gaz.yaml")
+    scenario = gaz.scenarios["ur5-draws"]
+    spec = load_spec(scenario.robot)
+    _, _, plant = scenario_plant(spec, scenario, seed=2)
+    ran = plant_run_options(spec, scenario, seed=2)  # what run_episode is given
+    assert plant["effort_offset_nm"] == list(ran["effort_offset_nm"])
+    assert len(plant["effort_offset_nm"]) == 6 and max(map(abs, plant["effort_offset_nm"])) > 0
+    assert plant["effort_noise_std_nm"] == ran["effort_noise_std_nm"] == 0.1
+    assert "sigmoid_friction" not in plant and "profile" not in plant
+    realistic = load_params(PARAMS).scenarios["paper-realistic"]
+    assert set(scenario_plant(spec, realistic, seed=2)[2]) == OLD_PLANT_KEYS
+
+
+@pytest.mark.skipif(SHARE is None, reason="example-robot-data share not found")
+def test_an_excitation_bag_of_the_published_plant_records_the_plant_that_ran(
+    tmp_path: Path,
+) -> None:
+    """``identify excite`` on Gaz et al.'s Panda (seeded sigmoid, offset, payload draws):
+    the bag's plant settings name the profile and hold the drawn sigmoid friction, the
+    drawn torque-sensor offset and its noise, as the plant ran them (a short excitation,
+    no obstacle: what is checked is the settings, not the design)."""
+    from pipeline.experiment.assemble import scenario_friction
+    from pipeline.model.published import PROFILES
+    from pipeline.settings import SigmoidFrictionSettings
+
+    data = yaml.safe_load((PARAMS.parent / "examples" / "params-panda-gaz.yaml").read_text())
+    data["scenarios"]["panda-gaz"].update(
+        {"obstacles": [], "preroll_s": 0.1, "hold_s": 0.1, "hold_max_s": 0.1}
+    )
+    params = tmp_path / "params.yaml"
+    params.write_text(yaml.safe_dump(data))
+    record_excitation(
+        params, scenario_name="panda-gaz", seed=1, variant=0, out=tmp_path / "e",
+        evaluations=20, periods=1, base_frequency_hz=1.0, span_rad=0.3,
+    )  # fmt: skip
+    plant = json.loads(read_recording(tmp_path / "e").metadata["settings"])["plant"]
+    scenario = load_params(params).scenarios["panda-gaz"]
+    drawn = scenario_friction(load_spec("panda"), scenario, seed=1)
+    assert drawn.sigmoid is not None and drawn.effort_offset_nm
+    assert plant["profile"] == f"gaz-panda: {PROFILES['gaz-panda'].source}"
+    sigmoid = SigmoidFrictionSettings.from_dict(plant["sigmoid_friction"])
+    assert sigmoid.phi1_nm == drawn.sigmoid.phi1_nm
+    assert sigmoid.phi2_s_rad == drawn.sigmoid.phi2_s_rad
+    assert sigmoid.phi3_rad_s == drawn.sigmoid.phi3_rad_s
+    assert sigmoid.phi1_nm != PROFILES["gaz-panda"].friction.phi1_nm  # drawn, not as published
+    assert tuple(plant["effort_offset_nm"]) == drawn.effort_offset_nm
+    assert plant["effort_noise_std_nm"] == 0.05
+    assert plant["payload_kg"] == drawn.payload_kg > 0

@@ -18,17 +18,17 @@ def test_setup_names_a_delayed_loop_and_not_the_ideal_one() -> None:
 
 
 def test_setup_states_the_armature_and_its_source() -> None:
-    from pipeline.report.setup import _armature_lines
+    from pipeline.report.setup import _armature_lines, _armature_text
     from pipeline.robots.loaders import load_spec
 
     robot = load_spec("ur5")
     nominal = [0.4, 0.4, 0.2, 0.04, 0.04, 0.04]
-    (line,) = _armature_lines(robot, nominal, None)
+    line = _armature_text(robot, nominal, None)
     assert "[0.4, 0.4, 0.2, 0.04, 0.04, 0.04]" in line
     assert "source: estimated per joint size" in line
-    (line,) = _armature_lines(robot, nominal, "models/ur5-s{seed}.yaml")
+    line = _armature_text(robot, nominal, "models/ur5-s{seed}.yaml")
     assert "source: identified (`nominal: models/ur5-s{seed}.yaml`)" in line
-    assert _armature_lines(None, None, None) == []
+    assert _armature_lines(None, []) == []
 
 
 def test_the_gain_design_is_recorded_typed_and_shown_in_the_setup() -> None:

@@ -135,3 +135,41 @@ def test_a_controller_plant_is_kept_by_a_campaign_and_unused_dumps_as_before(
 
     with pytest.raises(ParamsError, match=r"sweeps plant.payload_kg, but controller pid_real"):
         expand(load_params(tmp_path / "params.yaml"), "c")
+
+
+@pytest.mark.parametrize(
+    ("owner", "plant", "expected"),
+    [
+        ("pid_real", {"profile": "gaz-panda"}, "controllers.pid_real.plant.profile: gaz-panda "),
+        (
+            "pid_real",
+            {"uncertainty": {"transition_rel": 0.2}},
+            "controllers.pid_real.plant.uncertainty.transition_rel: 0.2 spreads",
+        ),
+        ("s", {"profile": "gaz-panda"}, "scenarios.s.plant.profile: gaz-panda "),
+    ],
+)
+def test_the_episode_runner_names_whose_plant_it_refuses(
+    tmp_path: Path, owner: str, plant: dict[str, Any], expected: str
+) -> None:
+    """The runner's own check (an episode handed to a worker as it is, the record stage's
+    check aside) names the field the plant is set in: a controller's own ``plant:`` or
+    its scenario's."""
+    from pipeline.params import load_params
+    from pipeline.stages.episode import run_one
+    from pipeline.stages.plans import plan_scenario
+
+    data = yaml.safe_load(params_file(tmp_path).read_text())
+    if owner == "s":
+        data["scenarios"]["s"]["plant"] = plant
+    else:
+        data["controllers"][owner]["plant"] = plant
+    (tmp_path / "params.yaml").write_text(yaml.safe_dump(data))
+    params = load_params(tmp_path / "params.yaml")
+    controller = "pid" if owner == "s" else owner
+    episode = next(e for e in params.episodes if e.controller_name == controller)
+    plan = plan_scenario("s", episode.scenario, params.source)
+    outcome = run_one(episode, plan, out_dir=tmp_path / "rec", force=False, commit="test")
+    assert outcome.status == "failed"
+    assert outcome.reason.startswith(expected), outcome.reason
+    assert not (tmp_path / "rec" / episode.name).exists()
