@@ -9,7 +9,11 @@ KeyboardInterrupt traceback. ``record --executor ray`` runs supervised
 from __future__ import annotations
 
 import os
+import re
 import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
 
 from pipeline import supervise
 from pipeline.errors import handle_sigterm, interrupt_exit
@@ -22,7 +26,8 @@ def entry() -> None:
     # MUJOCO_GL set by the caller wins
     os.environ.setdefault("MUJOCO_GL", "disable")
     if supervise.drives_ray(sys.argv[1:]) and supervise.MARK_ENV not in os.environ:
-        sys.exit(supervise.run_supervised(sys.argv[1:]))  # Ray may end its driver abruptly
+        args = sys.argv[1:]  # Ray may end its driver abruptly
+        sys.exit(supervise.run_supervised(args, after_abrupt_end=lambda: _sweep_partials(args)))
     supervise.mark_exit_when_python_exits()
     try:
         from pipeline.cli import main
@@ -38,6 +43,43 @@ def entry() -> None:
         sys.stderr.write(f"error: {out_of_memory(err)}: {OUT_OF_MEMORY_HINT}\n")
         sys.exit(1)
     main()
+
+
+# a bag writer's work folder (pipeline/log/rosbag2.py): ``.<name>.partial-<pid>``
+_PARTIAL = re.compile(r"\..+\.partial-(?P<pid>\d+)")
+_SWEEP_WAIT_S = 30.0  # Ray ends a dead driver's workers within seconds
+
+
+def _sweep_partials(args: Sequence[str]) -> None:
+    """After a Ray run ended abruptly: remove the half-written bags of its workers (under
+    ``--out``, its campaign folders included) once their writers are gone; a writer still
+    alive after ``_SWEEP_WAIT_S`` finishes or leaves its folder to the next run's sweep."""
+    from pipeline.fsutil import pid_alive, remove_stale
+
+    out = Path(_option(args, "--out", "-o") or "recordings")
+    folders = [out, *(p for p in out.glob("*") if p.is_dir() and not p.name.startswith("."))]
+    deadline = time.monotonic() + _SWEEP_WAIT_S
+    while True:
+        for folder in folders:
+            remove_stale(folder, _PARTIAL)
+        left = [
+            p for f in folders for p in f.glob(".*.partial-*") if (m := _PARTIAL.fullmatch(p.name))
+            and pid_alive(int(m["pid"]))
+        ]  # fmt: skip
+        if not left or time.monotonic() > deadline:
+            return
+        time.sleep(0.2)
+
+
+def _option(args: Sequence[str], *names: str) -> str | None:
+    """The value of an option given as ``--out X``, ``--out=X`` or ``-o X`` (None: absent)."""
+    for i, arg in enumerate(args):
+        for name in names:
+            if arg == name and i + 1 < len(args):
+                return args[i + 1]
+            if arg.startswith(f"{name}="):
+                return arg.split("=", 1)[1]
+    return None
 
 
 if __name__ == "__main__":

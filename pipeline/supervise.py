@@ -23,7 +23,7 @@ import signal
 import subprocess
 import sys
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from types import FrameType
 
@@ -63,11 +63,14 @@ def _die_with_parent() -> None:  # runs in the child between fork and exec
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
 
 
-def run_supervised(args: Sequence[str]) -> int:
+def run_supervised(
+    args: Sequence[str], *, after_abrupt_end: Callable[[], None] | None = None
+) -> int:
     """Run ``python -m pipeline ARGS`` as a child, forward signals, and return its exit code.
 
     A child that ended without Python's exit (Ray's QuickExit, a signal) gets one
-    ``error:`` line here, and a non-zero code.
+    ``error:`` line here, and a non-zero code; ``after_abrupt_end`` runs first (the
+    caller's clean-up of what the child's workers left).
     """
     fd, mark_name = tempfile.mkstemp(prefix="armlab-exit-", suffix=".mark")
     os.close(fd)
@@ -95,6 +98,8 @@ def run_supervised(args: Sequence[str]) -> int:
         mark.unlink(missing_ok=True)
     if exited_in_python:
         return code
+    if after_abrupt_end is not None:
+        after_abrupt_end()
     how = f"signal {signal.Signals(-code).name}" if code < 0 else f"exit {code}"
     sys.stderr.write(
         f"error: record: the Ray run ended abruptly ({how}): one of Ray's processes died "

@@ -8,6 +8,7 @@ supervised (pipeline/supervise.py) and the supervisor says what happened.
 from __future__ import annotations
 
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -82,3 +83,22 @@ def test_killing_rays_dashboard_agent_ends_the_run_in_one_line(tmp_path: Path) -
             if str(tmp_path) in " ".join(p.info["cmdline"] or [])]  # fmt: skip
     assert left == [], left
     assert not [p for p in out.rglob("*") if ".partial-" in p.name]
+
+
+def test_after_an_abrupt_end_the_workers_half_written_bags_are_swept_once_their_writers_end(
+    tmp_path: Path,
+) -> None:
+    from pipeline.__main__ import _sweep_partials
+
+    writer = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(1.0)"])
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    out = tmp_path / "rec"
+    (out / "c" / f".pid.s2.partial-{writer.pid}").mkdir(parents=True)
+    (out / f".e0.partial-{dead.pid}").mkdir()
+    (out / "c" / "pid.s1").mkdir()  # a finished bag stays
+    try:
+        _sweep_partials(["record", "--out", str(out), "--executor", "ray"])
+    finally:
+        writer.wait()
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*")) == ["c", "c/pid.s1"]
