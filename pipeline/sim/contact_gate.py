@@ -90,10 +90,11 @@ class ContactGate:
 
     def before_period(self, q: NDArray[np.float64], qd: NDArray[np.float64], speed: float) -> None:
         """Set the contacts for the control period starting at ``q`` with joint velocity
-        ``qd`` (``speed``: its Euclidean norm)."""
+        ``qd`` (``speed``: its Euclidean norm); ``qd`` must stay unchanged until the next
+        call (the loop passes its recorded rows)."""
         dt = self.control_dt_s
         accel = math.hypot(*(qd - self.last_qd).tolist()) / dt  # NaN on the first row
-        self.last_qd[:] = qd
+        self.last_qd = qd  # (a row of the episode's arrays: kept as it is, not copied)
         if self.cooldown:
             self.cooldown -= 1
             self._set(off=False)
