@@ -46,7 +46,6 @@ def main() -> None:
     floor = measure_floor()
     inf = float("inf")
     best: dict[str, dict[str, float]] = {}
-    steps = 0
     for _ in range(args.repeat):
         for gate in (True, False):
             runner.run_episode = functools.partial(original, contact_gate=gate)  # type: ignore[assignment]
@@ -54,15 +53,17 @@ def main() -> None:
                 whole_s, steps = episode_wall_s(episode, plan)
                 key = f"{name} {'gated' if gate else 'always-on'}"
                 mine = best.setdefault(key, {"whole": inf, "loop": inf, "loop_cpu": inf})
+                mine["steps"] = steps
                 mine["whole"] = min(mine["whole"], whole_s)
                 mine["loop"] = min(mine["loop"], probe.wall_s)
                 mine["loop_cpu"] = min(mine["loop_cpu"], probe.cpu_s)
     runner.run_episode = original  # type: ignore[assignment]
     floor = floor.merged(measure_floor())
-    per_step = 1e6 / steps
-    out: dict[str, Any] = floor_summary(floor) | {"control_steps": steps}
+    out: dict[str, Any] = floor_summary(floor)
     for key, b in best.items():
+        per_step = 1e6 / b["steps"]
         out[key] = {
+            "control_steps": int(b["steps"]),
             "loop_us_per_step": round(b["loop"] * per_step, 2),
             "loop_x_floor": round(b["loop"] * per_step / floor.us_per_control_step, 3),
             "loop_cpu_x_floor_cpu": round(
