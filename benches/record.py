@@ -17,7 +17,10 @@ logging (4,011 control steps: 2 s pre-roll, the motion, 1 s hold). Per episode:
   rows, sensor noise, the divergence check);
 - ``physics``: the episode's own torques replayed on a copy of its plant from the same
   start (``mj_step`` alone along the same trajectory; checked to end in the same state):
-  ``loop - physics`` is what the Python around the physics costs;
+  ``loop - physics`` is what the Python around the physics costs. Since the contact gate
+  (``pipeline.sim.contact_gate``) the replay runs with the plant's contacts as the gate
+  left them at the end of the run (off in free space, as for nearly every period);
+  ``benches/contact_gate.py`` compares the loop with and without the gate;
 - ``whole``: ``run_one`` (controller and plant setup, loop, contact check, bag write).
 
 Each figure is the best of ``--repeat``, interleaved (the floors, then each episode), so

@@ -124,6 +124,19 @@ def principal_axes(inertia: Sequence[Sequence[float]]) -> tuple[list[float], lis
     return moments, quat
 
 
+def same_geometry(spec: RobotSpec, plant_spec: RobotSpec) -> bool:
+    """``plant_spec`` is ``spec`` but for link inertials and armature: the same geometry
+    and collision filtering (what ``pipeline.sim.contact_gate`` checks on ``spec``)."""
+    return (
+        len(spec.joints) == len(plant_spec.joints)
+        and all(
+            dataclasses.replace(p, inertial=j.inertial, armature=j.armature) == j
+            for j, p in zip(spec.joints, plant_spec.joints, strict=True)
+        )
+        and dataclasses.replace(plant_spec, joints=spec.joints) == spec
+    )
+
+
 def _same_robot_but_inertials(spec: RobotSpec, plant_spec: RobotSpec) -> bool:
     """``plant_spec`` is ``spec`` with other link inertials and armature only."""
     if (

@@ -40,8 +40,9 @@ from pipeline.model.published import SigmoidFriction
 from pipeline.model.scene import Box
 from pipeline.robots.spec import RobotSpec
 from pipeline.settings import LoopSettings
+from pipeline.sim.contact_gate import ContactGate
 from pipeline.sim.loop import Actuator, Sensor, check_loop
-from pipeline.sim.plant import SIGMOID_FRICTION, SigmoidForce, plant_model
+from pipeline.sim.plant import SIGMOID_FRICTION, SigmoidForce, plant_model, same_geometry
 from pipeline.sim.result import F64, EpisodeResult, Reference
 from pipeline.sim.settling import SETTLING, integral_state, settled
 
@@ -90,6 +91,7 @@ def run_episode(
     friction: SigmoidFriction | None = None,
     effort_offset_nm: Sequence[float] = (),
     effort_noise_std_nm: float = 0.0,
+    contact_gate: bool = True,
 ) -> EpisodeResult:
     """Run ``controller`` on the MuJoCo plant along ``reference``, then hold the goal.
 
@@ -137,6 +139,9 @@ def run_episode(
         effort_offset_nm, effort_noise_std_nm: the torque sensor's offset per joint and
             Gaussian noise [N m] on what is recorded as effort (``tau_nm``); the noise has
             its own stream of ``seed``, so it changes no other draw.
+        contact_gate: skip the plant's collision detection in control periods where no
+            contact is possible (``pipeline.sim.contact_gate``: the same states, bit for
+            bit); False: MuJoCo's collision detection in every step.
 
     Raises:
         SpecError: the robot has no dynamics.
@@ -177,6 +182,14 @@ def run_episode(
     )
     data = mujoco.MjData(model)
     dof = spec.dof
+    gate = None
+    if contact_gate and (plant_spec == spec or same_geometry(spec, plant_spec)):
+        gate = ContactGate(
+            model,
+            spec,
+            obstacles=tuple(obstacles),
+            control_dt_s=physics_dt_s * control_period_steps,
+        )
 
     duration_s = _reference_duration(reference)
     control_dt_s = physics_dt_s * control_period_steps
@@ -246,6 +259,7 @@ def run_episode(
         sensor=sensor,
         actuator=actuator,
         friction=SigmoidForce(friction, data) if friction is not None else None,
+        gate=gate,
     )
 
     def run_rows(first: int, stop: int, *, final: bool) -> tuple[int, str]:
@@ -460,6 +474,7 @@ class _Loop:
         sensor: Sensor | None = None,
         actuator: Actuator | None = None,
         friction: SigmoidForce | None = None,
+        gate: ContactGate | None = None,
     ) -> None:
         self.spec = spec
         self.model = model
@@ -473,6 +488,7 @@ class _Loop:
         self.sensor = sensor
         self.actuator = actuator
         self.friction = friction
+        self.gate = gate
 
     def run(
         self,
@@ -526,6 +542,7 @@ class _Loop:
         noisy = noise_qd is not None
         shape = (self.spec.dof,)
         sensor, actuator, friction = self.sensor, self.actuator, self.friction
+        gate = self.gate
 
         def physics(steps: int) -> None:
             step(model, data, steps)
@@ -544,8 +561,9 @@ class _Loop:
         for k, qt, vt, qm, vm, nq, nv, qr, vr, ar, tc_row in rows:
             qt[:] = qpos
             vt[:] = qvel
+            speed = hypot(*vt.tolist())
             if warn.tobytes() != clean or (
-                not hypot(*vt.tolist()) <= bound and not (vt * weights).dot(vt) <= limit_sq
+                not speed <= bound and not (vt * weights).dot(vt) <= limit_sq
             ):
                 reason = self._diagnose(k, qt, vt)
                 if reason:
@@ -574,6 +592,8 @@ class _Loop:
                 break
             if friction is not None:  # held over the control period, as the torque
                 friction.apply(vt)
+            if gate is not None:  # contacts on or off for this period
+                gate.before_period(qt, vt, speed)
             if actuator is None:
                 step(model, data, nstep)
             else:

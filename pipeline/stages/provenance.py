@@ -98,6 +98,7 @@ RECORD_CODE = (
     "robots/urdf_loader.py",
     "settings.py",
     "sim/__init__.py",
+    "sim/contact_gate.py",
     "sim/loop.py",
     "sim/plant.py",
     "sim/result.py",
