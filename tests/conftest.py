@@ -11,6 +11,15 @@ from pipeline.robots import RobotSpec, load_spec
 TESTS = Path(__file__).resolve().parent
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _private_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """The suite's converted meshes go to a cache of its own (subprocesses inherit it),
+    never the user's ~/.cache/armlab: a test sees what a first run does."""
+    import os
+
+    os.environ.setdefault("ARMLAB_CACHE_DIR", str(tmp_path_factory.mktemp("armlab-cache")))
+
+
 @pytest.fixture(scope="session")
 def ur5() -> RobotSpec:
     return load_spec("ur5")
