@@ -279,24 +279,33 @@ def _plant_line(data: ReportData, recs: Sequence[Any]) -> list[str]:
     )
 
 
+def _distinct_texts(recs: Sequence[Any], text: Callable[[Any], str]) -> dict[str, list[str]]:
+    """Per controller (in the order they first appear), the distinct ``text`` of its
+    episodes' settings, in episode order; episodes without settings are skipped."""
+    shown: dict[str, list[str]] = {}
+    for rec in recs:
+        if rec.settings is None:
+            continue
+        seen = shown.setdefault(rec.controller, [])
+        if (line := text(rec.settings)) not in seen:
+            seen.append(line)
+    return shown
+
+
 def _plant_lines(recs: Sequence[Any]) -> list[str]:
     """Which plant each controller ran on, when one has a plant of its own (params
     ``controllers.NAME.plant``): its plant as the bags record it, the others on their
     scenario's. No line when none has its own."""
     if not any(r.settings is not None and r.settings.controller.plant for r in recs):
         return []
-    shown: dict[str, list[str]] = {}
-    for rec in recs:
-        s = rec.settings
-        if s is None:
-            continue
+
+    def text(s: Any) -> str:
         own = s.controller.plant
         plant = json.dumps(dict(own) if own else s.scenario.recorded()["plant"], sort_keys=True)
         whose = "its own" if own is not None else "the scenario's"
-        text = f"{whose} `plant: {plant}`"
-        seen = shown.setdefault(rec.controller, [])
-        if text not in seen:
-            seen.append(text)
+        return f"{whose} `plant: {plant}`"
+
+    shown = _distinct_texts(recs, text)
     return [
         "",
         "Plant per controller (paired by seed: seed N draws each plant's own spread with N):",
@@ -309,21 +318,16 @@ def _nominal_lines(recs: Sequence[Any]) -> list[str]:
     (params ``controllers.NAME.nominal``): the file and its SHA-256 as each bag records
     them, the others on their scenario's (the robot description's CAD values, or the
     scenario's ``nominal:``). No line when none has its own."""
-    shown: dict[str, list[str]] = {}
-    for rec in recs:
-        s = rec.settings
-        if s is None:
-            continue
+
+    def text(s: Any) -> str:
         own = s.controller.nominal
         if own is not None:
-            text = f"`{own.file}` (SHA-256 {own.sha256[:16]}…)"
-        elif s.scenario.nominal is not None:
-            text = f"the scenario's `nominal: {s.scenario.nominal}`"
-        else:
-            text = "the robot description's (CAD) values"
-        seen = shown.setdefault(rec.controller, [])
-        if text not in seen:
-            seen.append(text)
+            return f"`{own.file}` (SHA-256 {own.sha256[:16]}…)"
+        if s.scenario.nominal is not None:
+            return f"the scenario's `nominal: {s.scenario.nominal}`"
+        return "the robot description's (CAD) values"
+
+    shown = _distinct_texts(recs, text)
     if not any(r.settings is not None and r.settings.controller.nominal for r in recs):
         return []
     return ["", "Nominal model per controller (what its model-based terms and gains use):", ""] + [
