@@ -20,6 +20,7 @@ import resource
 __all__ = [
     "OUT_OF_MEMORY_HINT",
     "address_headroom_bytes",
+    "address_limit_below_need",
     "claim_blas_buffer_first",
     "near_address_limit",
     "out_of_memory",
@@ -41,6 +42,15 @@ _ALLOCATION_KINDS: tuple[type[BaseException], ...] = (ImportError, SystemError, 
 
 OUT_OF_MEMORY_HINT = "raise the memory limit (ulimit -v), or use fewer --jobs"
 
+# The address space a command needs at the least: the peak virtual size (VmPeak) of its
+# smallest run, rounded up. `record` of one UR5 episode (0.3 s hold, one job) peaked at
+# 572 MB on the 2-core test machine (`benches`-free: /proc/self/status at exit, 2026-11-28).
+# Under a lower limit the run cannot succeed, and where it fails is luck: glibc may abort
+# from C while loading a library ("cannot allocate memory for thread-local data", exit 127),
+# before any line of ours. So such a limit is refused before anything is loaded. Above it,
+# a run that still runs short is caught where Python sees it (out_of_memory below).
+MIN_ADDRESS_SPACE_BYTES = {"record": 600 * 1024 * 1024}
+
 
 def near_address_limit(*, used_bytes: int | None = None, limit_bytes: int | None = None) -> bool:
     """Whether an address-space limit is set and ``used_bytes`` (default: this process's
@@ -55,6 +65,19 @@ def near_address_limit(*, used_bytes: int | None = None, limit_bytes: int | None
         if used_bytes is None:
             return False
     return used_bytes + _NEAR_LIMIT_BYTES >= limit_bytes
+
+
+def address_limit_below_need(command: str) -> str | None:
+    """The out-of-memory phrase when ``RLIMIT_AS`` is below what ``command`` needs at the
+    least (``MIN_ADDRESS_SPACE_BYTES``); None when no limit is set or it is enough."""
+    need = MIN_ADDRESS_SPACE_BYTES.get(command)
+    soft, _hard = resource.getrlimit(resource.RLIMIT_AS)
+    if need is None or soft == resource.RLIM_INFINITY or soft >= need:
+        return None
+    return (
+        f"out of memory: `pipeline {command}` needs at least {need >> 20} MiB of address "
+        f"space, the limit is {soft >> 20} MiB"
+    )
 
 
 def address_headroom_bytes() -> int | None:

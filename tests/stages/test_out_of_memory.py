@@ -69,6 +69,10 @@ def test_record_out_of_memory_is_one_line(tmp_path):
     (tmp_path / "params.yaml").write_text(yaml.safe_dump(data))
     done = _under_limit(["record", "--params", "params.yaml", "--out", "rec"], 500_000, tmp_path)
     _one_oom_line(done)
+    # refused before any library loads: below its measured need the run could only fail, at
+    # a place left to luck (glibc aborts from C while loading a library's thread-local data)
+    assert "`pipeline record` needs at least 600 MiB of address space" in done.stderr
+    assert not (tmp_path / "rec").exists()
 
 
 def test_what_counts_as_out_of_memory():
