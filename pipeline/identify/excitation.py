@@ -333,7 +333,7 @@ def record_excitation(
 
     wall0 = time.perf_counter()
     if export is not None:
-        from pipeline.fileio import check_output_file
+        from pipeline.fsutil import check_output_file
 
         check_output_file(Path(export))  # refused before the design and the run
     params = load_params(params_path)
