@@ -33,6 +33,7 @@ from pipeline.identify.fit import (
     from_prior,
     identify,
     kept_rows,
+    stuck_rows_method,
     violations,
 )
 from pipeline.identify.identity import kinematics_mismatch, robot_file_sha256
@@ -435,6 +436,7 @@ def fit_command(
             if cutoff_hz > 0
             else {"type": "none", "acceleration": "forward difference of recorded velocity"}
         ),
+        **({"stuck_rows": stuck_rows_method()} if cutoff_hz > 0 else {}),
         "min_speed_rad_s": min_speed_rad_s,
         "max_condition": max_condition,
         **transition,
