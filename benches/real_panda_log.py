@@ -29,7 +29,9 @@ What it does, as a user would:
    Samples: ``pipeline.identify.samples.joint_samples`` at the model's cutoff, i.e. the
    zero-phase Butterworth (5 Hz) of ``fit``/``validate``: filtered q, recorded velocity
    filtered, its central difference for qdd, filtered torque, decimated; joint samples
-   slower than the model's ``min_speed`` left out for both, exactly as ``validate`` does.
+   slower than the model's ``min_speed`` or near a stuck joint left out for both (and for
+   the offset's mean on the fit part), exactly as ``fit``/``validate`` do
+   (``pipeline.identify.fit.kept_rows``).
 
 Prints one JSON object, then a Markdown table.
 
@@ -251,6 +253,7 @@ def main() -> None:
     ap.add_argument("--model-dir", type=Path, required=True)
     args = ap.parse_args()
 
+    from pipeline.identify.fit import kept_rows
     from pipeline.identify.model_file import load_model
     from pipeline.identify.samples import joint_samples
     from pipeline.identify.stage import predict, read_options
@@ -320,14 +323,16 @@ def main() -> None:
         theirs_m[slow] = np.nan
         theirs_p[slow] = np.nan
         # their model given what ours fits besides the dynamics: a per-joint torque offset,
-        # the mean of their residual on the fit part's samples (same filter and threshold)
+        # the mean of their residual on the fit part's samples (same filter and rows)
         fit_samples = joint_samples(
             read_recording(fit_bag, read_options(None)), model.spec,
             cutoff_hz=float(validation["cutoff_hz"]),
         )  # fmt: skip
         fit_resid = matlab.torque(fit_samples.q, fit_samples.qd, fit_samples.qdd)
         fit_resid -= fit_samples.tau_nm
-        fit_resid[np.abs(fit_samples.qd) < float(validation["min_speed_rad_s"])] = np.nan
+        # the rows the fit leaves out (slow, or near a stuck joint): the same rule, one function
+        left_out = ~kept_rows(fit_samples, float(validation["min_speed_rad_s"]))
+        fit_resid[left_out.reshape(fit_resid.shape)] = np.nan
         their_offset = np.nanmean(fit_resid, axis=0)
     ours_err = rms(ours.predicted_nm - measured)
     matlab_err = rms(theirs_m - measured)

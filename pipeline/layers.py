@@ -26,7 +26,7 @@ LAYERS: tuple[tuple[str, tuple[str, ...]], ...] = (
         ),
     ),
     ("plumbing", ("contract", "fsutil", "plugins", "yamlio")),
-    ("descriptions", ("fileio", "knobs", "robots")),
+    ("descriptions", ("knobs", "robots")),
     ("params", ("params",)),
     ("recorded", ("settings",)),
     ("models", ("model",)),

@@ -16,7 +16,7 @@ import numpy as np
 
 from pipeline import __version__
 from pipeline.contract import given_fields
-from pipeline.params import Episode, RecordedScenario, ScenarioParams, nominal_path
+from pipeline.params import Episode, RecordedScenario, ScenarioParams, SimParams, nominal_path
 from pipeline.planning import PlannedPath, TimedTrajectory
 from pipeline.robots.spec import RobotSpec
 from pipeline.settings import (
@@ -136,6 +136,18 @@ def plant_run_options(spec: RobotSpec, scenario: ScenarioParams, *, seed: int) -
         "friction": drawn.sigmoid,
         "effort_offset_nm": drawn.effort_offset_nm,
         "effort_noise_std_nm": scenario.plant.effort_noise_std_nm,
+    }
+
+
+def plant_run_settings(sim: SimParams, result: EpisodeResult) -> dict[str, Any]:
+    """What a plant's settings record of how it was stepped (episode and excitation bags
+    alike): the physics step and control period [s], the integrator and the friction law
+    the run reports."""
+    return {
+        "physics_dt_s": sim.physics_dt_s,
+        "control_period_s": sim.physics_dt_s * sim.control_period_steps,
+        "integrator": result.integrator,
+        "friction_model": result.friction_model,
     }
 
 
@@ -277,10 +289,7 @@ def episode_settings(
         frictionloss=drawn.frictionloss,
         payload_kg=drawn.payload_kg,
         uncertainty=uncertainty,
-        physics_dt_s=sim.physics_dt_s,
-        control_period_s=sim.physics_dt_s * sim.control_period_steps,
-        integrator=result.integrator,
-        friction_model=result.friction_model,
+        **plant_run_settings(sim, result),
         **given_plant(scenario),
         **published_plant(scenario, drawn),
     )

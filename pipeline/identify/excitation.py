@@ -333,7 +333,7 @@ def record_excitation(
 
     wall0 = time.perf_counter()
     if export is not None:
-        from pipeline.fileio import check_output_file
+        from pipeline.fsutil import check_output_file
 
         check_output_file(Path(export))  # refused before the design and the run
     params = load_params(params_path)
@@ -405,7 +405,7 @@ def record_excitation(
         ),
         source=f"controllers.{controller_name}",
     )
-    from pipeline.experiment.assemble import plant_run_options
+    from pipeline.experiment.assemble import plant_run_options, plant_run_settings
 
     plant_spec, plant, plant_settings = scenario_plant(spec, scenario, seed=seed)
     sim = params.sim
@@ -457,7 +457,7 @@ def record_excitation(
             "type": cparams.type,
             "gains": controller.gains_in_effect(),
         },
-        "plant": plant_settings,
+        "plant": {**plant_settings, **plant_run_settings(sim, result)},
         "excitation": excitation,
         "planner": {"trajectory_duration_s": ref.duration_s},
         "protocol": {"motion_start_s": motion_start_s, "hold_s": scenario.hold_s},

@@ -146,6 +146,16 @@ class UnexcitedError(IdentificationError):
         self.weak = tuple(weak)
 
 
+def stuck_rows_method() -> dict[str, str | float]:
+    """The stuck-row rule of :func:`kept_rows` as a model file's ``method`` records it."""
+    return {
+        "rule": "a filtered row is left out of fit and validate when at least max_share of "
+        "its low-passed torque comes from samples whose unfiltered speed is below speed_rad_s",
+        "speed_rad_s": STUCK_SPEED_RAD_S,
+        "max_share": STUCK_SHARE,
+    }
+
+
 def kept_rows(s: JointSamples, min_speed_rad_s: float) -> NDArray[np.bool_]:
     """Which of a recording's joint samples (sample-major, as :func:`stacked` stacks them)
     the fit uses: faster than ``min_speed_rad_s``, and, on filtered samples, no stuck

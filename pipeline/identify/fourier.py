@@ -103,7 +103,7 @@ def write_csv(path: Path, reference: FourierReference, joint_names: Sequence[str
     header = ["time_s"] + [f"{k}_{n}" for k in ("q", "qd", "qdd") for n in joint_names]
     table = np.column_stack([t, q, qd, qdd])
     lines = [",".join(header)] + [",".join(repr(float(x)) for x in row) for row in table]
-    from pipeline.fileio import atomic_write_bytes
+    from pipeline.fsutil import atomic_write_bytes
 
     atomic_write_bytes(Path(path), ("\n".join(lines) + "\n").encode("utf-8"))
     return int(t.size)

@@ -295,7 +295,7 @@ def spec_document(spec: RobotSpec) -> dict[str, Any]:
 
 def write_model(path: Path, document: Mapping[str, Any]) -> None:
     """Write ``MODEL.yaml`` atomically."""
-    from pipeline.fileio import atomic_write_bytes  # the fit's; the record stage only reads
+    from pipeline.fsutil import atomic_write_bytes  # the fit's; the record stage only reads
 
     text = yaml.safe_dump(dict(document), sort_keys=False, width=100, default_flow_style=None)
     try:

@@ -33,6 +33,7 @@ from pipeline.identify.fit import (
     from_prior,
     identify,
     kept_rows,
+    stuck_rows_method,
     violations,
 )
 from pipeline.identify.identity import kinematics_mismatch, robot_file_sha256
@@ -398,7 +399,7 @@ def fit_command(
     Raises:
         PipelineError: unreadable recordings, unfit data (one line), unwritable output.
     """
-    from pipeline.fileio import check_output_file
+    from pipeline.fsutil import check_output_file
 
     wall0 = time.perf_counter()
     check_output_file(Path(out))  # a device, FIFO or folder: refused before the fit
@@ -435,6 +436,7 @@ def fit_command(
             if cutoff_hz > 0
             else {"type": "none", "acceleration": "forward difference of recorded velocity"}
         ),
+        **({"stuck_rows": stuck_rows_method()} if cutoff_hz > 0 else {}),
         "min_speed_rad_s": min_speed_rad_s,
         "max_condition": max_condition,
         **transition,
@@ -549,7 +551,7 @@ def validate_command(
     Raises:
         PipelineError: a bad model file, unreadable recordings, a recording of another robot.
     """
-    from pipeline.fileio import check_output_file
+    from pipeline.fsutil import check_output_file
 
     model = load_model(model_path, robot=load_spec(robot) if robot else None)
     check_output_file(figure or Path(model_path).with_suffix(".validation.png"))
@@ -617,7 +619,7 @@ def write_figure(path: Path, spec: RobotSpec, prediction: Prediction) -> None:
     axes[-1, 0].set_xlabel("time [s]")
     fig.suptitle(f"torque: identified model vs {Path(prediction.source).name}", fontsize=9)
     fig.tight_layout()
-    from pipeline.fileio import atomic_write_bytes
+    from pipeline.fsutil import atomic_write_bytes
 
     try:
         Path(path).parent.mkdir(parents=True, exist_ok=True)

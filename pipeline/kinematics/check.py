@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import KinematicsError
-from pipeline.fileio import atomic_write_bytes
+from pipeline.fsutil import atomic_write_bytes
 from pipeline.kinematics.fk import flange_pose
 from pipeline.kinematics.ik import IKOptions, pose_error, position_only
 from pipeline.kinematics.solvers import make_solver

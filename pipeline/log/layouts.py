@@ -426,7 +426,7 @@ def write_layouts(
     """Write both layouts (for ``joints``, drawing ``plots``) into ``folder``; return their
     paths."""
     folder.mkdir(parents=True, exist_ok=True)
-    from pipeline.fileio import atomic_write_bytes
+    from pipeline.fsutil import atomic_write_bytes
 
     fox = folder / FOXGLOVE_FILE
     text = json.dumps(foxglove_layout(joints, plots), indent=2, ensure_ascii=False) + "\n"

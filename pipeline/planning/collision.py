@@ -195,8 +195,17 @@ class CollisionChecker:
             )
         return arr
 
-    def _collide(self, q: ArrayLike) -> tuple[I64, F64]:
-        """Pairs within the padding at ``q`` (boxes resolved): (geom pairs, distances)."""
+    def pair_distances_m(self, q: ArrayLike) -> tuple[I64, F64]:
+        """The geom pairs that may collide and are closer than ``padding_m`` at ``q``
+        [rad] (or penetrate, with no padding), each with its signed distance.
+
+        An obstacle box's enclosing capsule is replaced by the box and the exact
+        robot-box distance. ``q`` is not checked (use the public checks for user input).
+
+        Returns:
+            (geom pairs, distances): (k, 2) MuJoCo geom ids of this checker's ``model``
+            and (k,) signed distances [m], negative for penetration.
+        """
         self.data.qpos[:] = q
         ncon = self.collide_current()
         contact = self.data.contact
@@ -315,7 +324,7 @@ class CollisionChecker:
 
     def in_collision(self, q: ArrayLike) -> bool:
         """True when any pair penetrates at ``q`` [rad] (limits not checked)."""
-        return bool((self._collide(q)[1] < 0.0).any())
+        return bool((self.pair_distances_m(q)[1] < 0.0).any())
 
     def within_limits(self, q: ArrayLike) -> bool:
         """True when every joint of ``q`` [rad] is within its position limits."""
@@ -347,7 +356,7 @@ class CollisionChecker:
     def contacts(self, q: ArrayLike) -> list[tuple[str, str]]:
         """Sorted unique pairs penetrating at ``q``: robot link (body) names, and the geom
         name (``ground``, ``pedestal``, an obstacle's name) for world geometry."""
-        pairs, dists = self._collide(self._as_q(q, "q"))
+        pairs, dists = self.pair_distances_m(self._as_q(q, "q"))
         return sorted(
             {
                 self._pair_names(g1, g2)
@@ -362,7 +371,7 @@ class CollisionChecker:
         Returns:
             (distance, pair), or (``padding_m``, None) when everything is farther.
         """
-        pairs, dists = self._collide(self._as_q(q, "q"))
+        pairs, dists = self.pair_distances_m(self._as_q(q, "q"))
         best: tuple[float, tuple[str, str] | None] = (self._padding_m, None)
         for (g1, g2), d in zip(pairs.tolist(), dists.tolist(), strict=True):
             if d < best[0]:

@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from pipeline.errors import PipelineError, SpecError
-from pipeline.fileio import atomic_write_bytes
+from pipeline.fsutil import atomic_write_bytes
 from pipeline.model.mjcf import build_mjcf
 from pipeline.robots.link_geometry import link_edges
 from pipeline.robots.spec import RobotSpec

@@ -20,7 +20,6 @@ import contextlib
 import functools
 import hashlib
 import os
-import tempfile
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -28,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.errors import SpecError
+from pipeline.fsutil import OutputPathError, atomic_write_bytes
 
 __all__ = ["GLB_MEDIA_TYPE", "cache_dir", "convert_glb", "mesh_glb"]
 
@@ -68,18 +68,9 @@ def _cached(key: str) -> bytes | None:
 def _store(key: str, glb: bytes) -> None:
     """Write the cache entry atomically; any failure just leaves it out."""
     folder = cache_dir()
-    try:
+    with contextlib.suppress(OSError, OutputPathError):
         folder.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{key}.", suffix=".tmp")
-    except OSError:
-        return
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(glb)
-        os.replace(tmp, folder / f"{key}.glb")
-    except OSError:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
+        atomic_write_bytes(folder / f"{key}.glb", glb)
 
 
 @functools.lru_cache(maxsize=128)

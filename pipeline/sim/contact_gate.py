@@ -115,7 +115,7 @@ class ContactGate:
 
     def _free_rad(self, q: NDArray[np.float64]) -> float:
         """min over pairs of distance / R_p at ``q`` [rad] (see module)."""
-        pairs, dists = self.checker._collide(q)
+        pairs, dists = self.checker.pair_distances_m(q)
         free = self.padding_m / self.reach_all_m
         chain, reach = self.chain_of, self.reach_m
         for (g1, g2), d in zip(pairs.tolist(), dists.tolist(), strict=True):

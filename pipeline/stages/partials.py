@@ -36,7 +36,6 @@ from __future__ import annotations
 import hashlib
 import io
 import json
-import os
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -44,6 +43,7 @@ from typing import TYPE_CHECKING, Any
 from pipeline.analysis.measure import Measured, Measurement
 from pipeline.analysis.task_space import FLANGE_TOOL
 from pipeline.errors import ReportError
+from pipeline.fsutil import atomic_write_bytes
 from pipeline.log.reader import read_recording
 
 if TYPE_CHECKING:
@@ -121,19 +121,13 @@ def _dumps(value: Any) -> str:
     return json.dumps(value, sort_keys=True, separators=(",", ":"))
 
 
-def _write_atomic(path: Path, data: bytes) -> None:
-    tmp = path.parent / f".{path.name}.tmp-{os.getpid()}"
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
-
-
 def _share(folder: Path, data: bytes, suffix: str) -> str:
     """Store ``data`` once under its content's name in ``folder``; returns the name."""
     name = f"{hashlib.sha256(data).hexdigest()[:32]}{suffix}"
     path = folder / name
     if not path.is_file():
         folder.mkdir(parents=True, exist_ok=True)
-        _write_atomic(path, data)
+        atomic_write_bytes(path, data)
     return name
 
 
@@ -225,7 +219,7 @@ def write_partial(partial: Partial, path: Path) -> None:
         ]
     )
     path.parent.mkdir(exist_ok=True)
-    _write_atomic(path, _ipc(table))
+    atomic_write_bytes(path, _ipc(table))
     path.with_suffix(LEGACY_SUFFIX).unlink(missing_ok=True)
 
 

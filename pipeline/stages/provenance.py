@@ -28,7 +28,6 @@ RECORD_CODE = (
     "control",
     "errors.py",
     "experiment",
-    "fileio.py",
     "fsutil.py",
     "identify/__init__.py",
     "identify/defaults.py",

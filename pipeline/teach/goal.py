@@ -21,7 +21,7 @@ from ruamel.yaml.comments import CommentedMap, CommentedSeq
 from ruamel.yaml.error import YAMLError
 
 from pipeline.errors import ParamsError, PipelineError
-from pipeline.fileio import atomic_write_bytes
+from pipeline.fsutil import atomic_write_bytes
 from pipeline.kinematics.ik import pose_summary
 from pipeline.params import Params, parse_params
 from pipeline.robots.loaders import load_spec

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import re
@@ -279,6 +280,7 @@ def test_an_excitation_bag_of_the_published_plant_records_the_plant_that_ran(
     from pipeline.experiment.assemble import scenario_friction
     from pipeline.model.published import PROFILES
     from pipeline.settings import SigmoidFrictionSettings
+    from pipeline.sim.plant import SIGMOID_FRICTION
 
     data = yaml.safe_load((PARAMS.parent / "examples" / "params-panda-gaz.yaml").read_text())
     data["scenarios"]["panda-gaz"].update(
@@ -303,3 +305,32 @@ def test_an_excitation_bag_of_the_published_plant_records_the_plant_that_ran(
     assert tuple(plant["effort_offset_nm"]) == drawn.effort_offset_nm
     assert plant["effort_noise_std_nm"] == 0.05
     assert plant["payload_kg"] == drawn.payload_kg > 0
+    assert plant["friction_model"] == SIGMOID_FRICTION  # the law the plant ran
+
+
+def test_an_excitation_bag_records_how_its_plant_was_stepped_as_an_episode_bag_does(
+    tmp_path: Path,
+) -> None:
+    """``identify excite`` with a sim other than the default (2 ms Euler steps, control
+    every other step): the bag's plant settings carry the physics step, control period,
+    integrator and friction law the plant ran, as an episode's plant does (a short
+    excitation: what is checked is the settings, not the design)."""
+    from pipeline.constants import PLANT_FRICTION
+    from pipeline.settings import PlantSettings
+
+    data = yaml.safe_load(PARAMS.read_text())
+    data["sim"].update({"physics_dt_s": 0.002, "control_period_steps": 2, "integrator": "Euler"})
+    data["scenarios"]["paper-realistic"].update({"preroll_s": 0.1, "hold_s": 0.1})
+    params = tmp_path / "params.yaml"
+    params.write_text(yaml.safe_dump(data))
+    record_excitation(
+        params, scenario_name="paper-realistic", seed=1, variant=0, out=tmp_path / "e",
+        evaluations=20, periods=1, base_frequency_hz=1.0, span_rad=0.3,
+    )  # fmt: skip
+    plant = json.loads(read_recording(tmp_path / "e").metadata["settings"])["plant"]
+    assert plant["physics_dt_s"] == 0.002
+    assert plant["control_period_s"] == 0.004
+    assert plant["integrator"] == "Euler"
+    assert plant["friction_model"] == PLANT_FRICTION  # frictionloss, no sigmoid
+    ran = {"physics_dt_s", "control_period_s", "integrator", "friction_model"}
+    assert ran <= {f.name for f in dataclasses.fields(PlantSettings)}  # the episode's names

@@ -46,6 +46,32 @@ def test_filtered_round_trip_predicts_another_recording(
     assert (tmp_path / "fig.png").stat().st_size > 10_000
 
 
+def test_model_file_records_the_stuck_row_rule_it_was_fitted_with(
+    ideal_bags: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """A filtered fit's ``method`` names the stuck-row rule with its numbers, and those
+    numbers, applied to the samples by hand, give the fit's equation count; an unfiltered
+    fit (no low-pass to spread a stuck sample) records no such rule."""
+    spec = load_spec("ur5")
+    filtered = tmp_path / "filtered.yaml"
+    fit_command([ideal_bags[0]], out=filtered)
+    method = load_model(filtered).identification["method"]
+    rule = method["stuck_rows"]
+    assert (rule["speed_rad_s"], rule["max_share"]) == (1e-3, 0.01)
+    assert "left out of fit and validate" in rule["rule"]
+    samples = joint_samples(
+        read_recording(ideal_bags[0]), spec, cutoff_hz=method["filter"]["cutoff_hz"]
+    )
+    share = samples.stuck_share(rule["speed_rad_s"])
+    assert share is not None
+    kept = (np.abs(samples.qd) >= method["min_speed_rad_s"]) & (share < rule["max_share"])
+    assert (share >= rule["max_share"]).any()  # the rule leaves rows out here
+    assert load_model(filtered).identification["equations"] == int(kept.sum())
+    unfiltered = tmp_path / "unfiltered.yaml"
+    fit_command([ideal_bags[0]], out=unfiltered, cutoff_hz=0.0)
+    assert "stuck_rows" not in load_model(unfiltered).identification["method"]
+
+
 def test_model_file_is_a_loadable_robot_with_provenance(
     ideal_bags: tuple[Path, Path], tmp_path: Path
 ) -> None:

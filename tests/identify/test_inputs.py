@@ -5,12 +5,10 @@ from __future__ import annotations
 import subprocess
 import sys
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from pipeline.errors import IdentificationError
 from pipeline.identify.fit import identify
@@ -18,10 +16,10 @@ from pipeline.identify.samples import joint_samples
 from pipeline.identify.stage import fit_command, validate_command
 from pipeline.log.reader import read_recording
 from pipeline.robots.loaders import load_spec
+from tests.log.rosbags_msgs import EMPTY, RosMsgs
 
 from .conftest import fourier, record
 
-CS_MSG = Path(__file__).parents[1] / "log" / "data" / "control_msgs" / "4.8.0"
 T0_NS = 1_700_000_000_000_000_000  # wall-clock stamps, as a real robot's bag has
 
 
@@ -36,51 +34,28 @@ def write_humble_db3(
 ) -> None:
     """A Humble robot's sqlite3 bag by rosbags: /joint_states (joints in ``names`` order)
     and the JTC's controller state, no armlab metadata, no robot description."""
-    store = get_typestore(Stores.ROS2_HUMBLE)
-    text = (CS_MSG / "JointTrajectoryControllerState.msg").read_text()
-    store.register(get_types_from_msg(text, "control_msgs/msg/JointTrajectoryControllerState"))
-    t = store.types
-    header_t, time_t = t["std_msgs/msg/Header"], t["builtin_interfaces/msg/Time"]
-    point_t, duration_t = (
-        t["trajectory_msgs/msg/JointTrajectoryPoint"],
-        t["builtin_interfaces/msg/Duration"],
-    )
-    multi_t = t["trajectory_msgs/msg/MultiDOFJointTrajectoryPoint"]
-    js_t, cs_t = (
-        t["sensor_msgs/msg/JointState"],
-        t["control_msgs/msg/JointTrajectoryControllerState"],
-    )
-    empty = np.zeros(0)
-    zero = duration_t(sec=0, nanosec=0)
-    multi = multi_t(transforms=[], velocities=[], accelerations=[], time_from_start=zero)
-
-    def point(pos: np.ndarray) -> Any:
-        return point_t(
-            positions=pos, velocities=empty, accelerations=empty, effort=empty, time_from_start=zero
-        )
-
+    m = RosMsgs("humble")
+    js_t = m.type("sensor_msgs/msg/JointState")
+    cs_t = m.type("control_msgs/msg/JointTrajectoryControllerState")
     with Writer(path, version=8, storage_plugin=StoragePlugin.SQLITE3) as w:
-        c_cs = w.add_connection("/arm_controller/state", cs_t.__msgtype__, typestore=store)
-        c_js = w.add_connection("/joint_states", js_t.__msgtype__, typestore=store)
+        c_cs = w.add_connection("/arm_controller/state", cs_t.__msgtype__, typestore=m.store)
+        c_js = w.add_connection("/joint_states", js_t.__msgtype__, typestore=m.store)
         for k in range(q.shape[0]):
             ns = T0_NS + k * period_ns
-            header = header_t(stamp=time_t(sec=ns // 10**9, nanosec=ns % 10**9), frame_id="")
-            p = point(q[k])
-            cs = cs_t(
-                header=header, joint_names=names, desired=p, actual=p, error=point(q[k] * 0),
-                reference=p, feedback=p, output=point(empty), multi_dof_joint_names=[],
-                multi_dof_reference=multi, multi_dof_feedback=multi, multi_dof_error=multi,
-                multi_dof_output=multi, multi_dof_desired=multi, multi_dof_actual=multi,
+            p = m.point(q[k])
+            cs = m.controller_state(
+                ns=ns, joints=names, reference=p, feedback=p, error=m.point(q[k] * 0),
+                output=m.point(),
             )  # fmt: skip
-            w.write(c_cs, ns, store.serialize_cdr(cs, cs_t.__msgtype__))
-            js = js_t(
-                header=header,
-                name=names,
+            w.write(c_cs, ns, m.cdr(cs))
+            js = m.joint_state(
+                ns=ns,
+                names=names,
                 position=q[k],
                 velocity=qd[k],
-                effort=effort[k] if effort is not None else empty,
+                effort=effort[k] if effort is not None else EMPTY,
             )
-            w.write(c_js, ns, store.serialize_cdr(js, js_t.__msgtype__))
+            w.write(c_js, ns, m.cdr(js))
 
 
 def _truth(bag: Path) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:

@@ -27,7 +27,8 @@ from pipeline.log.decode import Group
 from pipeline.log.msgdef import MsgTypes, parse_msgdef
 from pipeline.log.reader import read_recording
 from pipeline.log.schemas import message_types
-from tests.log.test_external_bags import JOINTS, store_for
+from tests.log.rosbags_msgs import store_for
+from tests.log.test_external_bags import JOINTS
 
 JT = "trajectory_msgs/msg/JointTrajectory"
 TF = "tf2_msgs/msg/TFMessage"

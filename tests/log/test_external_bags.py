@@ -8,31 +8,21 @@ from __future__ import annotations
 import json
 import sqlite3
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-from rosbags.typesys.store import Typestore
 
 from pipeline.errors import RecordingError
 from pipeline.log.reader import ReadOptions, read_recording
 from pipeline.stages.report import run_report
+from tests.log.rosbags_msgs import EMPTY, RosMsgs
 
 DATA = Path(__file__).parent / "data" / "control_msgs"
 JOINTS = ("shoulder", "elbow", "wrist")
 RATE_HZ = 500
 N = 1000  # 2 s
 WALL_T0_NS = 1_700_000_000_123_456_789  # wall-clock stamps, as a real robot's bag has
-
-
-def store_for(distro: str) -> Typestore:
-    store = get_typestore(Stores.ROS2_HUMBLE if distro == "humble" else Stores.ROS2_JAZZY)
-    version = "4.8.0" if distro == "humble" else "5.3.0"
-    text = (DATA / version / "JointTrajectoryControllerState.msg").read_text()
-    store.register(get_types_from_msg(text, "control_msgs/msg/JointTrajectoryControllerState"))
-    return store
 
 
 def signals(t0_ns: int = WALL_T0_NS) -> dict[str, np.ndarray]:
@@ -73,36 +63,13 @@ def write_external_bag(
     joint states that much after the controller state they go with; ``js_every``: joint
     states every k-th control step only; ``cs_flip_at``: the controller state lists its
     joints in reverse order from that message on."""
-    store = store_for(distro)
+    m = RosMsgs(distro)
+    store = m.store
     s = signals(t0_ns)
-    T = store.types
-    Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
-    Point, Duration = (
-        T["trajectory_msgs/msg/JointTrajectoryPoint"],
-        T["builtin_interfaces/msg/Duration"],
-    )
-    Multi = T["trajectory_msgs/msg/MultiDOFJointTrajectoryPoint"]
     JS, CS, Str = (
-        T["sensor_msgs/msg/JointState"],
-        T["control_msgs/msg/JointTrajectoryControllerState"],
-        T["std_msgs/msg/String"],
-    )
-    empty = np.zeros(0)
-
-    def header(ns: int) -> Any:
-        return Header(stamp=Time(sec=int(ns // 10**9), nanosec=int(ns % 10**9)), frame_id="")
-
-    def point(pos: np.ndarray = empty, vel: np.ndarray = empty, eff: np.ndarray = empty) -> Any:
-        return Point(
-            positions=pos,
-            velocities=vel,
-            accelerations=empty,
-            effort=eff,
-            time_from_start=Duration(sec=0, nanosec=0),
-        )
-
-    multi = Multi(
-        transforms=[], velocities=[], accelerations=[], time_from_start=Duration(sec=0, nanosec=0)
+        m.type("sensor_msgs/msg/JointState"),
+        m.type("control_msgs/msg/JointTrajectoryControllerState"),
+        m.type("std_msgs/msg/String"),
     )
     urdf = urdf or (
         f'<robot name="{robot_name}">'
@@ -133,21 +100,14 @@ def write_external_bag(
             if cs_flip_at is not None and k >= cs_flip_at:
                 ref, q, err, eff_k = (np.ascontiguousarray(a[::-1]) for a in (ref, q, err, eff_k))
                 cs_joints.reverse()
-            points = {
-                "reference": point(ref),
-                "feedback": point(q),
-                "error": point(err),
-                "output": point(eff=eff_k),
-            }
-            fields: dict[str, Any] = {"header": header(ns), "joint_names": cs_joints}
-            if distro == "humble":
-                points |= {"desired": point(ref), "actual": point(q)}
-            else:
-                fields["speed_scaling_factor"] = 1.0
-            fields |= points
-            fields["multi_dof_joint_names"] = []
-            fields |= {f"multi_dof_{p}": multi for p in points}
-            msg = CS(**fields)
+            msg = m.controller_state(
+                ns=ns,
+                joints=cs_joints,
+                reference=m.point(ref),
+                feedback=m.point(q),
+                error=m.point(err),
+                output=m.point(eff=eff_k),
+            )
             w.write(c_cs, ns, store.serialize_cdr(msg, CS.__msgtype__))
             if c_x is not None:
                 w.write(c_x, ns, store.serialize_cdr(msg, CS.__msgtype__))
@@ -156,9 +116,9 @@ def write_external_bag(
             eff = np.array(
                 [0.0 if j == "gripper" else s["effort"][k][joints.index(j)] for j in js_order]
             )
-            js = JS(
-                header=header(ns + js_offset_ns),
-                name=list(js_order),
+            js = m.joint_state(
+                ns=ns + js_offset_ns,
+                names=list(js_order),
                 position=pos,
                 velocity=pos * 0,
                 effort=eff,
@@ -166,13 +126,10 @@ def write_external_bag(
             if k % js_every == 0:
                 w.write(c_js, ns + js_offset_ns, store.serialize_cdr(js, JS.__msgtype__))
             if with_gripper and k % 5 == 0:  # a gripper driver publishing its own joint at 100 Hz
-                g = JS(
-                    header=header(ns + 1000),
-                    name=["gripper"],
-                    position=np.array([0.02]),
-                    velocity=empty,
-                    effort=empty,
-                )
+                g = m.joint_state(
+                    ns=ns + 1000, names=["gripper"], position=np.array([0.02]), velocity=EMPTY,
+                    effort=EMPTY,
+                )  # fmt: skip
                 w.write(c_js, ns + 1000, store.serialize_cdr(g, JS.__msgtype__))
     if drop_definitions:  # Humble's sqlite3 files carry no message definitions
         [db] = path.glob("*.db3")

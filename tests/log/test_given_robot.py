@@ -21,7 +21,7 @@ from pipeline.errors import RecordingError, SpecError
 from pipeline.log.reader import ReadOptions, read_recording
 from pipeline.log.robot_facts import robot_facts
 from pipeline.robots.packages import example_robot_data_share
-from tests.log.test_external_bags import store_for
+from tests.log.rosbags_msgs import store_for
 
 _SHARE = example_robot_data_share()
 assert _SHARE is not None, "example-robot-data is not installed"

@@ -22,7 +22,7 @@ from polars.testing import assert_frame_equal
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from pipeline.log.reader import Recording, read_recording
-from tests.log.test_external_bags import store_for
+from tests.log.rosbags_msgs import RosMsgs
 from tests.log.test_windowed import WINDOW, Windows, assert_same
 
 JOINTS = ("a", "b", "c")
@@ -37,65 +37,41 @@ def write_hard_bag(
 ) -> None:
     """``both_twice``: steps whose stamp both topics carry twice (the copy with other
     values); ``js_twice``: steps whose stamp ``/joint_states`` alone carries twice."""
-    store = store_for("jazzy")
-    T = store.types
-    Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
-    Point, Duration = (
-        T["trajectory_msgs/msg/JointTrajectoryPoint"],
-        T["builtin_interfaces/msg/Duration"],
-    )
-    Multi = T["trajectory_msgs/msg/MultiDOFJointTrajectoryPoint"]
-    JS, CS = T["sensor_msgs/msg/JointState"], T["control_msgs/msg/JointTrajectoryControllerState"]
-    empty = np.zeros(0)
-    zero = Duration(sec=0, nanosec=0)
-    multi = Multi(transforms=[], velocities=[], accelerations=[], time_from_start=zero)
-
-    def header(ns: int) -> Any:
-        return Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id="")
-
-    def point(pos: np.ndarray = empty, eff: np.ndarray = empty) -> Any:
-        return Point(
-            positions=pos, velocities=empty, accelerations=empty, effort=eff, time_from_start=zero
-        )
-
+    m = RosMsgs("jazzy")
+    JS = m.type("sensor_msgs/msg/JointState")
+    CS = m.type("control_msgs/msg/JointTrajectoryControllerState")
     order = list(range(STEPS))
     for k in SWAPPED:
         order[k], order[k + 1] = order[k + 1], order[k]
     log_ns = T0_NS
     with Writer(path, version=9, storage_plugin=storage) as w:
-        c_cs = w.add_connection("/controller_state", CS.__msgtype__, typestore=store)
-        c_js = w.add_connection("/joint_states", JS.__msgtype__, typestore=store)
+        c_cs = w.add_connection("/controller_state", CS.__msgtype__, typestore=m.store)
+        c_js = w.add_connection("/joint_states", JS.__msgtype__, typestore=m.store)
         for k in order:
             stamp = T0_NS + k * PERIOD_NS
             for copy in range(2 if k in both_twice else 1):
                 ref = np.sin(0.01 * k + np.arange(3)) + copy
                 q = ref - 1e-3 * np.cos(0.02 * k + np.arange(3))
-                cs = CS(
-                    header=header(stamp),
-                    joint_names=list(JOINTS),
-                    reference=point(ref),
-                    feedback=point(q),
-                    error=point(ref - q),
-                    output=point(eff=2.0 * q),
-                    speed_scaling_factor=1.0,
-                    multi_dof_joint_names=[],
-                    multi_dof_reference=multi,
-                    multi_dof_feedback=multi,
-                    multi_dof_error=multi,
-                    multi_dof_output=multi,
+                cs = m.controller_state(
+                    ns=stamp,
+                    joints=list(JOINTS),
+                    reference=m.point(ref),
+                    feedback=m.point(q),
+                    error=m.point(ref - q),
+                    output=m.point(eff=2.0 * q),
                 )
                 log_ns += 1000
-                w.write(c_cs, log_ns, store.serialize_cdr(cs, CS.__msgtype__))
+                w.write(c_cs, log_ns, m.cdr(cs))
                 for extra in range(2 if k in js_twice else 1):
-                    js = JS(
-                        header=header(stamp),
-                        name=list(JOINTS),
+                    js = m.joint_state(
+                        ns=stamp,
+                        names=list(JOINTS),
                         position=q + extra,
                         velocity=q * 0.5,
                         effort=2.0 * q,
                     )
                     log_ns += 1000
-                    w.write(c_js, log_ns, store.serialize_cdr(js, JS.__msgtype__))
+                    w.write(c_js, log_ns, m.cdr(js))
 
 
 def value(rec: Recording) -> dict[str, Any]:

@@ -5,9 +5,6 @@ the nominal it ran on; a missing file or another robot's model refused in one li
 from __future__ import annotations
 
 import hashlib
-import json
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +13,8 @@ import yaml
 
 from pipeline.identify.model_file import FORMAT, model_robot_document, write_model
 from pipeline.robots.loaders import load_spec
+from tests.stages.controller_study import cli, settings_of
+from tests.stages.controller_study import params_file as study_params
 
 SEEDS = (0, 1)
 
@@ -37,56 +36,16 @@ def model_file(path: Path, robot: str, *, mass_scale: float) -> Path:
 
 def params_file(folder: Path, nominal: str) -> Path:
     """UR5, short episodes: ctc on the CAD model and ctc on ``nominal``, seeds 0 and 1."""
-    scenario = {
-        "robot": "ur5",
-        "start": [0.0] * 6,
-        "goal": {"joints": [-0.15, -0.5, 0.785, -1.15, -0.3925, 0.0]},
-        "planner": {"time_limit_s": 5.0, "simplify": True, "seed": 0},
-        "timing": {"velocity_scaling": 1.0, "acceleration_scaling": 1.0},
-        "plant": {"payload_kg": 1.0},
-        "preroll_s": 0.1,
-        "hold_s": 0.1,
-    }
     controllers = {"ctc": {"type": "ctc"}, "ctc_id": {"type": "ctc", "nominal": nominal}}
-    params = {
-        "sim": {"physics_dt_s": 0.002, "control_period_steps": 1, "integrator": "Euler"},
-        "scenarios": {"s": scenario},
-        "controllers": controllers,
-        "episodes": {
-            f"{c}-{seed}": {"scenario": "s", "controller": c, "seed": seed}
-            for c in controllers
-            for seed in SEEDS
+    return study_params(
+        folder,
+        controllers=controllers,
+        seeds={c: SEEDS for c in controllers},
+        scenario_extra={
+            "timing": {"velocity_scaling": 1.0, "acceleration_scaling": 1.0},
+            "plant": {"payload_kg": 1.0},
         },
-    }
-    path = folder / "params.yaml"
-    path.write_text(yaml.safe_dump(params))
-    return path
-
-
-def cli(*argv: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "pipeline", *argv],
-        capture_output=True, text=True, timeout=600, check=False, cwd=cwd,
-    )  # fmt: skip
-
-
-def settings_of(bag_dir: Path) -> dict[str, Any]:
-    meta = yaml.safe_load((bag_dir / "metadata.yaml").read_text())
-    found: list[dict[str, Any]] = []
-
-    def walk(node: Any) -> None:
-        if isinstance(node, dict):
-            for key, value in node.items():
-                if key == "settings" and isinstance(value, str):
-                    found.append(json.loads(value))
-                walk(value)
-        elif isinstance(node, list):
-            for value in node:
-                walk(value)
-
-    walk(meta)
-    assert found, f"no settings in {bag_dir}/metadata.yaml"
-    return found[0]
+    )
 
 
 @pytest.mark.slow

@@ -4,15 +4,14 @@ hand-listed comparison of plants that shares no seed refused in one line."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
 import yaml
 
-from tests.stages.test_controller_nominal import settings_of
+from tests.stages.controller_study import cli, settings_of
+from tests.stages.controller_study import params_file as study_params
 
 SEEDS = (0, 1)
 REALISTIC = {
@@ -25,39 +24,13 @@ REALISTIC = {
 
 def params_file(folder: Path, *, seeds: dict[str, tuple[int, ...]] | None = None) -> Path:
     """UR5, short episodes: pid on the scenario's ideal plant and pid on a realistic one."""
-    scenario = {
-        "robot": "ur5",
-        "start": [0.0] * 6,
-        "goal": {"joints": [-0.15, -0.5, 0.785, -1.15, -0.3925, 0.0]},
-        "planner": {"time_limit_s": 5.0, "simplify": True, "seed": 0},
-        "preroll_s": 0.1,
-        "hold_s": 0.1,
-    }
     controllers: dict[str, Any] = {
         "pid": {"type": "pid"},
         "pid_real": {"type": "pid", "plant": REALISTIC},
     }
-    seeds = seeds or {c: SEEDS for c in controllers}
-    params = {
-        "sim": {"physics_dt_s": 0.002, "control_period_steps": 1, "integrator": "Euler"},
-        "scenarios": {"s": scenario},
-        "controllers": controllers,
-        "episodes": {
-            f"{c}-{seed}": {"scenario": "s", "controller": c, "seed": seed}
-            for c in controllers
-            for seed in seeds[c]
-        },
-    }
-    path = folder / "params.yaml"
-    path.write_text(yaml.safe_dump(params))
-    return path
-
-
-def cli(*argv: str, cwd: Path) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "pipeline", *argv],
-        capture_output=True, text=True, timeout=600, check=False, cwd=cwd,
-    )  # fmt: skip
+    return study_params(
+        folder, controllers=controllers, seeds=seeds or {c: SEEDS for c in controllers}
+    )
 
 
 @pytest.mark.slow

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.fileio import OutputPathError, atomic_write_bytes
+from pipeline.fsutil import OutputPathError, atomic_write_bytes
 
 
 def test_a_fifo_is_refused_without_blocking(tmp_path: Path) -> None:
