@@ -27,7 +27,7 @@ from pipeline.log.decode import Group
 from pipeline.log.msgdef import MsgTypes, parse_msgdef
 from pipeline.log.reader import read_recording
 from pipeline.log.schemas import message_types
-from tests.log.rosbags_msgs import store_for
+from tests.log.rosbags_msgs import RosMsgs, store_for
 from tests.log.test_external_bags import JOINTS
 
 JT = "trajectory_msgs/msg/JointTrajectory"
@@ -240,45 +240,28 @@ def planned_point_by_point(data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndar
 def write_rosbags_bag_with_plan(path: Path) -> bytes:
     """A Jazzy robot's bag written by rosbags: joint states, a controller state and a planned
     trajectory whose points differ in shape. Returns the trajectory's CDR bytes."""
-    store = store_for("jazzy")
-    T = store.types
+    ros = RosMsgs("jazzy")
     rng = np.random.default_rng(11)
-    plan = bytes(store.serialize_cdr(trajectory(rng, store), JT))
-    Header, Time, Duration = (
-        T["std_msgs/msg/Header"],
-        T["builtin_interfaces/msg/Time"],
-        T["builtin_interfaces/msg/Duration"],
-    )
-    empty = np.zeros(0)
-    multi = T["trajectory_msgs/msg/MultiDOFJointTrajectoryPoint"](
-        transforms=[], velocities=[], accelerations=[], time_from_start=Duration(sec=0, nanosec=0)
-    )
+    plan = ros.cdr(trajectory(rng, ros.store))
     cs_type, js_type = (
         "control_msgs/msg/JointTrajectoryControllerState",
         "sensor_msgs/msg/JointState",
     )
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
-        c_plan = w.add_connection("/planned_trajectory", JT, typestore=store)
-        c_js = w.add_connection("/joint_states", js_type, typestore=store)
-        c_cs = w.add_connection("/controller_state", cs_type, typestore=store)
+        c_plan = w.add_connection("/planned_trajectory", JT, typestore=ros.store)
+        c_js = w.add_connection("/joint_states", js_type, typestore=ros.store)
+        c_cs = w.add_connection("/controller_state", cs_type, typestore=ros.store)
         w.write(c_plan, 1, plan)
         for k in range(200):
             ns = 1_000_000_000 + k * 2_000_000
-            header = Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id="")
             q = np.sin(k * 0.01 + np.arange(3))
-            js = T[js_type](header=header, name=list(JOINTS), position=q, velocity=q, effort=q)
-            w.write(c_js, ns, store.serialize_cdr(js, js_type))
-            pt = T["trajectory_msgs/msg/JointTrajectoryPoint"](
-                positions=q, velocities=q, accelerations=empty, effort=q,
-                time_from_start=Duration(sec=0, nanosec=0),
-            )  # fmt: skip
-            cs = T[cs_type](
-                header=header, joint_names=list(JOINTS), reference=pt, feedback=pt, error=pt,
-                output=pt, multi_dof_joint_names=[], multi_dof_reference=multi,
-                multi_dof_feedback=multi, multi_dof_error=multi, multi_dof_output=multi,
-                speed_scaling_factor=1.0,
-            )  # fmt: skip
-            w.write(c_cs, ns, store.serialize_cdr(cs, cs_type))
+            js = ros.joint_state(ns=ns, names=list(JOINTS), position=q, velocity=q, effort=q)
+            w.write(c_js, ns, ros.cdr(js))
+            pt = ros.point(q, q, q)
+            cs = ros.controller_state(
+                ns=ns, joints=list(JOINTS), reference=pt, feedback=pt, error=pt, output=pt
+            )
+            w.write(c_cs, ns, ros.cdr(cs))
     return plan
 
 

@@ -10,7 +10,6 @@ import json
 import subprocess
 import sys
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
@@ -21,7 +20,7 @@ from pipeline.errors import RecordingError, SpecError
 from pipeline.log.reader import ReadOptions, read_recording
 from pipeline.log.robot_facts import robot_facts
 from pipeline.robots.packages import example_robot_data_share
-from tests.log.rosbags_msgs import store_for
+from tests.log.rosbags_msgs import RosMsgs
 
 _SHARE = example_robot_data_share()
 assert _SHARE is not None, "example-robot-data is not installed"
@@ -37,43 +36,27 @@ T0_NS = 1_700_000_000_000_000_000
 
 def write_bag(path: Path) -> None:
     """A Jazzy MCAP bag of a 6-joint arm: JTC state + /joint_states, no description."""
-    store = store_for("jazzy")
-    t = store.types
-    header_t, time_t = t["std_msgs/msg/Header"], t["builtin_interfaces/msg/Time"]
-    point_t = t["trajectory_msgs/msg/JointTrajectoryPoint"]
-    duration_t = t["builtin_interfaces/msg/Duration"]
-    multi_t = t["trajectory_msgs/msg/MultiDOFJointTrajectoryPoint"]
-    js_t = t["sensor_msgs/msg/JointState"]
-    cs_t = t["control_msgs/msg/JointTrajectoryControllerState"]
-    zero = duration_t(sec=0, nanosec=0)
-    empty = np.zeros(0)
-
-    def point(pos: np.ndarray = empty, eff: np.ndarray = empty) -> Any:
-        return point_t(positions=pos, velocities=empty, accelerations=empty, effort=eff,
-                       time_from_start=zero)  # fmt: skip
-
-    multi = multi_t(transforms=[], velocities=[], accelerations=[], time_from_start=zero)
+    ros = RosMsgs("jazzy")
     s = np.arange(N)[:, None] / RATE_HZ
     k = np.arange(6)[None, :]
     ref = 0.6 * np.sin(1.5 * s + k) + np.array([0.0, -1.2, 1.2, -1.0, 0.5, 0.0])
     err = 1e-3 * (1 + k) * np.sin(7.0 * s)
     effort = 3.0 * np.cos(s + k)
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
-        cs_topic = "/arm_controller/controller_state"
-        c_cs = w.add_connection(cs_topic, cs_t.__msgtype__, typestore=store)
-        c_js = w.add_connection("/joint_states", js_t.__msgtype__, typestore=store)
+        cs_type = "control_msgs/msg/JointTrajectoryControllerState"
+        c_cs = w.add_connection("/arm_controller/controller_state", cs_type, typestore=ros.store)
+        c_js = w.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=ros.store)
         for i in range(N):
             ns = T0_NS + i * (10**9 // RATE_HZ)
-            header = header_t(stamp=time_t(sec=ns // 10**9, nanosec=ns % 10**9), frame_id="")
-            points = {"reference": point(ref[i]), "feedback": point(ref[i] - err[i]),
-                      "error": point(err[i]), "output": point(eff=effort[i])}  # fmt: skip
-            msg = cs_t(header=header, joint_names=list(JOINTS), speed_scaling_factor=1.0,
-                       multi_dof_joint_names=[], **points,
-                       **{f"multi_dof_{p}": multi for p in points})  # fmt: skip
-            w.write(c_cs, ns, store.serialize_cdr(msg, cs_t.__msgtype__))
-            js = js_t(header=header, name=list(JOINTS), position=ref[i] - err[i],
-                      velocity=0 * ref[i], effort=effort[i])  # fmt: skip
-            w.write(c_js, ns, store.serialize_cdr(js, js_t.__msgtype__))
+            state = ros.controller_state(
+                ns=ns, joints=list(JOINTS), reference=ros.point(ref[i]),
+                feedback=ros.point(ref[i] - err[i]), error=ros.point(err[i]),
+                output=ros.point(eff=effort[i]),
+            )  # fmt: skip
+            w.write(c_cs, ns, ros.cdr(state))
+            js = ros.joint_state(ns=ns, names=list(JOINTS), position=ref[i] - err[i],
+                                 velocity=0 * ref[i], effort=effort[i])  # fmt: skip
+            w.write(c_js, ns, ros.cdr(js))
 
 
 @pytest.fixture(scope="module")
