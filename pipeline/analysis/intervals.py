@@ -44,8 +44,15 @@ def mean_ci(values: Iterable[Any], *, confidence: float = CONFIDENCE) -> MeanCI:
     mean = math.fsum(xs) / n
     if n < 2:
         return MeanCI(n, mean, None, None)
-    from scipy import stats  # SciPy loads when a statistic is asked for (~1 s)
-
     std = math.sqrt(math.fsum((x - mean) ** 2 for x in xs) / (n - 1))
-    t = float(stats.t.ppf(1.0 - (1.0 - confidence) / 2.0, n - 1))
+    t = t_quantile(1.0 - (1.0 - confidence) / 2.0, n - 1)
     return MeanCI(n, mean, std, t * std / math.sqrt(n))
+
+
+def t_quantile(q: float, df: int) -> float:
+    """The ``q`` quantile of Student's t with ``df`` degrees of freedom: SciPy's
+    ``special.stdtrit``, the function ``scipy.stats.t.ppf`` evaluates (the same bits), without
+    importing ``scipy.stats`` (~1 s of a report's start; ``scipy.special`` ~0.4 s)."""
+    from scipy import special  # loads when a statistic is asked for
+
+    return float(special.stdtrit(df, q))

@@ -22,10 +22,15 @@ cannot hold two rules (issue 28):
 
 from __future__ import annotations
 
+import functools
+import itertools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
 
 from pipeline.analysis.intervals import mean_ci
 
@@ -129,9 +134,7 @@ def compare(
         )
         if n < MIN_PAIRS:
             return _verdict(equivalent, TOO_FEW, None, n, True, margin, mean)
-        from scipy import stats
-
-        p = 1.0 if all(d == 0 for d in diffs) else float(stats.wilcoxon(diffs).pvalue)
+        p = 1.0 if all(d == 0 for d in diffs) else signed_rank_p(diffs)
         return _verdict(equivalent, WILCOXON, p, n, True, margin, mean)
     bs, cs = list(b.values()), list(c.values())
     n = min(len(bs), len(cs))
@@ -162,6 +165,59 @@ def _tost(diffs: list[float], margin: float) -> bool:
     if ci.mean is None or ci.half_width is None:
         return False
     return -margin < ci.mean - ci.half_width and ci.mean + ci.half_width < margin
+
+
+# scipy.stats.wilcoxon's method="auto": the exact null distribution up to this many
+# differences, the normal approximation above.
+EXACT_MAX_PAIRS = 50
+
+
+def signed_rank_p(diffs: list[float]) -> float:
+    """Two-sided p of the Wilcoxon signed-rank test of ``diffs`` (finite, not all zero):
+    ``scipy.stats.wilcoxon(diffs).pvalue``, the same bits.
+
+    Without zeros or tied magnitudes (measured floats: the usual case) it is computed here
+    with SciPy's own arithmetic: the exact null distribution of the positive rank sum
+    (:func:`_signed_rank_pmf`) up to :data:`EXACT_MAX_PAIRS` differences, the normal
+    approximation above. That spares a report the import of ``scipy.stats`` (~1 s of its
+    start). Zeros or ties take SciPy's other paths (a permutation test for a few
+    differences, tie-corrected otherwise), so SciPy computes those."""
+    n = len(diffs)
+    order = sorted(range(n), key=lambda i: abs(diffs[i]))
+    magnitudes = [abs(diffs[i]) for i in order]
+    if magnitudes[0] == 0.0 or any(a == b for a, b in itertools.pairwise(magnitudes)):
+        from scipy import stats
+
+        return float(stats.wilcoxon(diffs).pvalue)
+    # ranks 1..n of |d|; the sum of the positive differences' ranks (an integer)
+    r_plus = sum(rank for rank, i in enumerate(order, start=1) if diffs[i] > 0)
+    if n > EXACT_MAX_PAIRS:
+        from scipy import special
+
+        count = float(n)
+        mean = count * (count + 1.0) * 0.25
+        se = math.sqrt(count * (count + 1.0) * (2.0 * count + 1.0) / 24)
+        return float(2 * special.ndtr(-abs((r_plus - mean) / se)))
+    pmf = _signed_rank_pmf(n)
+    mean = n * (n + 1) / 4
+    sf = pmf[r_plus:].sum() if r_plus <= mean else 1 - pmf[:r_plus].sum()
+    cdf = pmf[: r_plus + 1].sum() if r_plus <= mean else 1 - pmf[r_plus + 1 :].sum()
+    return float(min(max(2 * min(sf, cdf), 0.0), 1.0))
+
+
+@functools.cache
+def _signed_rank_pmf(n: int) -> NDArray[np.float64]:
+    """P(positive rank sum = r), r = 0 .. n(n + 1)/2, under the null, for n differences
+    without ties: SciPy's recursion (``scipy.stats._hypotests._get_wilcoxon_distr``), each
+    rank in or out with probability 1/2."""
+    c = np.ones(1, dtype=np.float64)
+    for k in range(1, n + 1):
+        prev = c
+        c = np.zeros(k * (k + 1) // 2 + 1, dtype=np.float64)
+        m = len(prev)
+        c[:m] = prev * 0.5
+        c[-m:] += prev * 0.5
+    return c
 
 
 def _median(xs: list[float]) -> float:
