@@ -209,52 +209,51 @@ def _collide_rows(
         chords = np.linalg.norm(np.diff(qs[rows], axis=0), axis=1)
         length = np.concatenate([[0.0], np.cumsum(chords)]).tolist()
         per_m = 1.0 / reach_m_per_rad
-    # flat buffers for every contact, grown when full; filtered after the loop
-    size = 2 * len(rows) + 16  # the floor test outgrows this: growth is exercised
-    row_buf = np.empty(size, dtype=np.int64)
-    geom_buf = np.empty((size, 2), dtype=np.int64)
-    dist_buf = np.empty(size)
-    filled = 0
+    # each checked row's contacts, copied out of MjData (a row is a few contacts: lists of
+    # small arrays joined once cost less than filling preallocated buffers row by row)
+    contact_rows: list[int] = []
+    contact_geoms: list[NDArray[np.int64]] = []
+    contact_dists: list[NDArray[np.float64]] = []
     row_list = rows.tolist()
+    last = len(row_list) - 1
     checked: list[int] = []
     pos = 0
-    while pos < len(row_list):
+    while pos <= last:
         k = row_list[pos]
         checked.append(k)
         qpos[:] = qs[k]
         ncon = collide()
         nearest = padding
         if ncon:
-            end = filled + ncon
-            if end > size:
-                size = 2 * end
-                row_buf, geom_buf, dist_buf = (
-                    np.resize(row_buf, size),
-                    np.resize(geom_buf, (size, 2)),
-                    np.resize(dist_buf, size),
-                )
-            contact = data.contact
-            row_buf[filled:end] = k
-            geom_buf[filled:end] = contact.geom[:ncon]
-            dist_buf[filled:end] = contact.dist[:ncon]
+            contact = data.contact  # the ncon contacts just found
+            dist = contact.dist.copy()
+            contact_rows.append(k)
+            contact_geoms.append(contact.geom.copy())
+            contact_dists.append(dist)
             if skipping:
                 # capsules around boxes are nearer than the boxes: a lower bound too
-                nearest = float(dist_buf[filled:end].min())
-            filled = end
+                nearest = min(dist.tolist())
         if not skipping:
             pos += 1
             continue
         threshold = min(skip_within_m, nearest)
-        if threshold <= 0.0 or pos >= len(row_list) - 2:
+        if threshold <= 0.0 or pos >= last - 1:
             pos += 1
             continue
         # skip the rows within threshold / reach of joint path length (the last row stays)
         target = length[pos] + threshold * per_m
-        pos = min(max(pos + 1, bisect_left(length, target, pos + 1)), len(row_list) - 1)
-    row_of, geom_pairs, dists = row_buf[:filled], geom_buf[:filled], dist_buf[:filled]
+        pos = min(max(pos + 1, bisect_left(length, target, pos + 1)), last)
+    counts = [len(d) for d in contact_dists]
+    row_of = np.repeat(np.array(contact_rows, dtype=np.int64), counts)
+    geom_pairs = (
+        np.concatenate(contact_geoms).astype(np.int64, copy=False)
+        if contact_geoms
+        else np.empty((0, 2), dtype=np.int64)
+    )
+    dists = np.concatenate(contact_dists) if contact_dists else np.empty(0)
     candidate = bounds[geom_pairs].any(axis=1)
     found = [(row_of[~candidate], geom_pairs[~candidate], dists[~candidate])]
-    at = np.flatnonzero(candidate)  # in row order, as the buffers were filled
+    at = np.flatnonzero(candidate)  # in row order, as the rows were checked
     rows_at, first = np.unique(row_of[at], return_index=True)
     groups = np.split(at, first[1:]) if len(at) else []
     for k, group in zip(rows_at.tolist(), groups, strict=True):

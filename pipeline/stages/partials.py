@@ -298,6 +298,8 @@ class _Shared:
 
 
 _SHARED = _Shared()
+# (schemas part name, frame name) -> that frame, empty: see ``_parse``
+_EMPTY_FRAMES: dict[tuple[str, str], pl.DataFrame] = {}
 
 
 def read_partial(path: Path) -> Partial:
@@ -372,7 +374,14 @@ def _parse(path: Path, data: bytes) -> Partial:
     schemas = _SHARED.get(path, header["schemas"])
 
     def empty(name: str) -> pl.DataFrame:
-        return pl.DataFrame(schema=schemas.get_column(name).dtype.inner.to_schema())
+        # the schemas' part is named by its content: its empty frames are built once per
+        # process (a frame from a schema costs ~0.2 ms, clearing one ~2 us)
+        key = (str(header["schemas"]), name)
+        frame = _EMPTY_FRAMES.get(key)
+        if frame is None:
+            frame = pl.DataFrame(schema=schemas.get_column(name).dtype.inner.to_schema())
+            _EMPTY_FRAMES[key] = frame
+        return frame.clear()
 
     scalars = dict(header["recording"])
     for key in _TUPLES:

@@ -165,6 +165,11 @@ def test_a_dropped_bag_is_never_written_and_bad_partials_are_refused(tmp_path, m
     assert plan_run(params, "c", out=tmp_path).pending == ()  # both done: resume skips
     path = partial_path(run.out_dir, dropped)
     assert read_partial(path).bag == dropped
+    # each read has frames of its own (their empty schemas are built once per process)
+    first = read_partial(path)
+    first.recording.samples.insert_column(0, pl.Series("changed", [], dtype=pl.Int64))
+    again = read_partial(path).recording.samples
+    assert "changed" not in again.columns and again.height == 0
     good = path.read_bytes()
     for bad, why in (
         (good[: len(good) // 2], "unreadable metric partial"),
