@@ -50,8 +50,9 @@ def _fixed(short_s: float = 0.0) -> Any:
     """The pre-roll before issue 31: the whole cap (less ``short_s``), whatever the state."""
 
     def preroll(
-        run_rows: Any, controller: Any, q_true: Any, qd_true: Any, q_ref: Any, cap: int, w: int
-    ) -> tuple[int, bool, int, str]:
+        run_rows: Any, controller: Any, q_true: Any, qd_true: Any, q_ref: Any, cap: int, w: int,
+        *, check: bool = True,
+    ) -> tuple[int, bool, int, str]:  # fmt: skip
         rows = cap - round(short_s / 0.001) if cap else 0  # the default 1 kHz control
         if rows <= 0:
             return 0, True, 0, ""
