@@ -100,9 +100,24 @@ def _time_sorted(frame: pl.DataFrame) -> pl.DataFrame:
     recording without the topic.
     """
     absent = [c for c in PAIRED_COLUMNS if c not in frame.columns]
-    return frame.with_columns(pl.lit(None, pl.Float64).alias(c) for c in absent).sort(
-        "episode", "time_s", maintain_order=True
-    )
+    if absent:
+        frame = frame.with_columns(pl.lit(None, pl.Float64).alias(c) for c in absent)
+    if _in_time_order(frame):
+        return frame  # what the stable sort would give, unchanged
+    return frame.sort("episode", "time_s", maintain_order=True)
+
+
+def _in_time_order(frame: pl.DataFrame) -> bool:
+    """True when ``frame`` is already in (episode, time) order, no nulls nor NaN in either
+    (as recorded): the stable sort would leave it as it is. False says nothing."""
+    h = frame.height
+    if h < 2:
+        return True
+    ep, t = frame.get_column("episode"), frame.get_column("time_s")
+    if ep.null_count() or t.null_count():
+        return False
+    e0, e1, t0, t1 = ep.slice(0, h - 1), ep.slice(1), t.slice(0, h - 1), t.slice(1)
+    return bool(((e0 < e1) | ((e0 == e1) & (t0 <= t1))).all())
 
 
 def _prepared_controller_states(

@@ -240,9 +240,11 @@ def _states(group: pl.DataFrame, joints: Sequence[str]) -> tuple[Array, Array, A
     cols = ("reference_position_rad", "feedback_position_rad")
     n = len(joints)
     names = group.get_column("joint")
+    h = group.height
     if (
-        group.height % n == 0
-        and (names.to_numpy().reshape(-1, n) == np.asarray(joints, dtype=object)).all()
+        h % n == 0
+        and names.head(n).to_list() == list(joints)
+        and names.slice(n).eq_missing(names.slice(0, h - n)).all()
     ):
         t = group.get_column("time_s").to_numpy()[::n]
         ref, act = (group.get_column(c).cast(pl.Float64).to_numpy().reshape(-1, n) for c in cols)

@@ -47,3 +47,16 @@ def test_the_report_warns_about_duplicated_messages(tmp_path):
     result = run_report(recordings_dir=rec, out_dir=tmp_path / "rep")
     assert any(ep == "paper-pid" and "more than once" in note for ep, note in result.warnings)
     assert not any(ep == "paper-ctc" for ep, _ in result.warnings)
+
+
+def test_duplicate_stamps_are_found_the_same_in_recorded_and_shuffled_row_order(tmp_path):
+    # the recorded layout takes a hash-free check; any other order the group-by: same answer
+    from pipeline.analysis.checks import duplicate_stamps
+
+    clean = paper_like("clean", "pid", duration_s=0.5, motion_end_s=0.3)
+    dup = _with_repeated_rows("dup", [10, 10, 40])
+    for name, ep, rows in (("clean", clean, []), ("dup", dup, [10, 10, 40])):
+        frame = read_recording(write_bag(tmp_path / name, ep)).samples
+        shuffled = frame.sample(fraction=1.0, shuffle=True, seed=3)
+        assert duplicate_stamps(frame) == duplicate_stamps(shuffled)
+        assert (duplicate_stamps(frame) is None) == (not rows)
