@@ -10,6 +10,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -269,6 +270,20 @@ def test_an_excitation_records_the_torque_sensor_it_ran_and_nothing_new_without_
     assert set(scenario_plant(spec, realistic, seed=2)[2]) == OLD_PLANT_KEYS
 
 
+def _excited_plant(tmp_path: Path, data: dict[str, Any], scenario: str) -> dict[str, Any]:
+    """The ``plant`` settings of a short excitation (seed 1, variant 0, 20
+    evaluations, one 1 Hz period, 0.3 rad) of ``scenario`` under params ``data``, written
+    to ``tmp_path/params.yaml`` and recorded into ``tmp_path/e``."""
+    params = tmp_path / "params.yaml"
+    params.write_text(yaml.safe_dump(data))
+    record_excitation(
+        params, scenario_name=scenario, seed=1, variant=0, out=tmp_path / "e",
+        evaluations=20, periods=1, base_frequency_hz=1.0, span_rad=0.3,
+    )  # fmt: skip
+    plant: dict[str, Any] = json.loads(read_recording(tmp_path / "e").metadata["settings"])["plant"]
+    return plant
+
+
 @pytest.mark.skipif(SHARE is None, reason="example-robot-data share not found")
 def test_an_excitation_bag_of_the_published_plant_records_the_plant_that_ran(
     tmp_path: Path,
@@ -286,14 +301,8 @@ def test_an_excitation_bag_of_the_published_plant_records_the_plant_that_ran(
     data["scenarios"]["panda-gaz"].update(
         {"obstacles": [], "preroll_s": 0.1, "hold_s": 0.1, "hold_max_s": 0.1}
     )
-    params = tmp_path / "params.yaml"
-    params.write_text(yaml.safe_dump(data))
-    record_excitation(
-        params, scenario_name="panda-gaz", seed=1, variant=0, out=tmp_path / "e",
-        evaluations=20, periods=1, base_frequency_hz=1.0, span_rad=0.3,
-    )  # fmt: skip
-    plant = json.loads(read_recording(tmp_path / "e").metadata["settings"])["plant"]
-    scenario = load_params(params).scenarios["panda-gaz"]
+    plant = _excited_plant(tmp_path, data, "panda-gaz")
+    scenario = load_params(tmp_path / "params.yaml").scenarios["panda-gaz"]
     drawn = scenario_friction(load_spec("panda"), scenario, seed=1)
     assert drawn.sigmoid is not None and drawn.effort_offset_nm
     assert plant["profile"] == f"gaz-panda: {PROFILES['gaz-panda'].source}"
@@ -321,13 +330,7 @@ def test_an_excitation_bag_records_how_its_plant_was_stepped_as_an_episode_bag_d
     data = yaml.safe_load(PARAMS.read_text())
     data["sim"].update({"physics_dt_s": 0.002, "control_period_steps": 2, "integrator": "Euler"})
     data["scenarios"]["paper-realistic"].update({"preroll_s": 0.1, "hold_s": 0.1})
-    params = tmp_path / "params.yaml"
-    params.write_text(yaml.safe_dump(data))
-    record_excitation(
-        params, scenario_name="paper-realistic", seed=1, variant=0, out=tmp_path / "e",
-        evaluations=20, periods=1, base_frequency_hz=1.0, span_rad=0.3,
-    )  # fmt: skip
-    plant = json.loads(read_recording(tmp_path / "e").metadata["settings"])["plant"]
+    plant = _excited_plant(tmp_path, data, "paper-realistic")
     assert plant["physics_dt_s"] == 0.002
     assert plant["control_period_s"] == 0.004
     assert plant["integrator"] == "Euler"
