@@ -14,6 +14,8 @@ control period. A scenario's ``loop`` settings change that, the same for every l
 The runner uses them only when ``LoopSettings.ideal`` is False, so the ideal loop's
 recordings stay byte for byte what they were. The jitter has its own generator
 (:func:`jitter_rng`): the sensor-noise draws of a seed do not move when jitter is on.
+Every per-row draw (noise, jitter) is aligned to the motion's start
+(:func:`align_to_motion`): however long the pre-roll held, the motion meets the same draws.
 """
 
 from __future__ import annotations
@@ -21,8 +23,10 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from pipeline.errors import SimulationError
 from pipeline.settings import LoopSettings
@@ -35,6 +39,17 @@ JITTER_STREAM = 0x6A17
 def jitter_rng(seed: int) -> np.random.Generator:
     """The episode's jitter generator: a stream of its own, so the noise draws stay put."""
     return np.random.default_rng([int(seed), JITTER_STREAM])
+
+
+def align_to_motion(draws: NDArray[Any], *, start_row: int, cap_rows: int) -> None:
+    """Give the motion's rows, in place, the per-row draws a full pre-roll would have
+    given them: row ``start_row + j`` gets draw ``cap_rows + j`` (the rows before
+    ``start_row``, already used, keep theirs; the last ``cap_rows - start_row`` rows, which
+    the episode cannot reach, keep stale values). A pre-roll that ran to its cap changes
+    nothing, so a fixed pre-roll's episode and a settled one meet the same noise, jitter
+    and effort noise along the motion (and so do two laws whose pre-rolls differ)."""
+    if 0 <= start_row < cap_rows:
+        draws[start_row : len(draws) - (cap_rows - start_row)] = draws[cap_rows:]
 
 
 def whole_steps(value_s: float, physics_dt_s: float, *, field: str) -> int:
@@ -156,24 +171,44 @@ class Actuator:
     ) -> None:
         delay = whole_steps(loop.delay_s, physics_dt_s, field="loop.delay_s")
         jitter = whole_steps(loop.jitter_s, physics_dt_s, field="loop.jitter_s")
+        self.nstep = nstep
+        self.delay_steps = delay
+        self.jitter_steps = jitter
+        # per command, the jitter drawn [physics steps]
+        self._jitter = (
+            jitter_rng(seed).integers(0, jitter + 1, size=rows)
+            if jitter
+            else np.zeros(rows, dtype=np.int64)
+        )
+        self.in_effect = np.empty(0, dtype=np.int64)
+        self._runs: list[tuple[tuple[int, int], ...]] = []
+        self._schedule(first_row=0)
+
+    def _schedule(self, *, first_row: int) -> None:
+        """(Re)compute which command is in effect at every physics step from
+        ``first_row``'s period on (a command never arrives before it is computed, so the
+        periods before ``first_row`` keep their schedule)."""
+        nstep, rows = self.nstep, len(self._jitter)
         k = np.arange(rows)
-        arrive = k * nstep + delay
-        if jitter:
-            arrive = arrive + jitter_rng(seed).integers(0, jitter + 1, size=rows)
+        arrive = k * nstep + self.delay_steps + self._jitter
         total = rows * nstep
         newest = np.full(total, -1, dtype=np.int64)
         inside = arrive < total
         np.maximum.at(newest, arrive[inside], k[inside])
         np.maximum.accumulate(newest, out=newest)
-        self.nstep = nstep
-        self.delay_steps = delay
-        self.jitter_steps = jitter
         self.in_effect = newest  # per physics step, the command applied (-1: none yet)
-        self._runs: list[tuple[tuple[int, int], ...]] = []
-        for r in range(rows):
+        del self._runs[first_row:]
+        for r in range(first_row, rows):
             period = newest[r * nstep : (r + 1) * nstep]
             cuts = [0, *(np.flatnonzero(np.diff(period)) + 1).tolist(), nstep]
             self._runs.append(tuple((b - a, int(period[a])) for a, b in itertools.pairwise(cuts)))
+
+    def align_to_motion(self, *, start_row: int, cap_rows: int) -> None:
+        """Give the commands from ``start_row`` on the jitter a full pre-roll of
+        ``cap_rows`` would have given them (:func:`align_to_motion`)."""
+        if self.jitter_steps and 0 <= start_row < cap_rows:
+            align_to_motion(self._jitter, start_row=start_row, cap_rows=cap_rows)
+            self._schedule(first_row=start_row)
 
     def advance(self, k: int, tau_cmd: F64, ctrl: F64, step: Callable[[int], None]) -> None:
         """Run control period ``k``'s physics steps with the commands in effect.

@@ -41,7 +41,7 @@ from pipeline.model.scene import Box
 from pipeline.robots.spec import RobotSpec
 from pipeline.settings import LoopSettings
 from pipeline.sim.contact_gate import ContactGate
-from pipeline.sim.loop import Actuator, Sensor, check_loop
+from pipeline.sim.loop import Actuator, Sensor, align_to_motion, check_loop
 from pipeline.sim.plant import SIGMOID_FRICTION, SigmoidForce, plant_model, same_geometry
 from pipeline.sim.result import F64, EpisodeResult, Reference
 from pipeline.sim.settling import SETTLING, integral_state, settled
@@ -197,7 +197,9 @@ def run_episode(
     # rows: the pre-roll (at most cap_rows, in windows of the settling criterion), then the
     # motion and the hold (motion_rows, the last one recorded but not stepped; up to
     # max_motion_rows while the hold is not settled); n bounds them all, so the noise and
-    # the jitter draws do not depend on where the pre-roll or the hold ends
+    # the jitter draws do not depend on where the hold ends. When the pre-roll ends early
+    # the motion's rows are given the draws of the rows a full pre-roll would have given
+    # them (align_to_motion): the motion meets the same noise however long it was held
     cap_rows = round(preroll_s / control_dt_s)
     window_rows = max(1, round(SETTLING.window_s / control_dt_s))
     motion_rows = math.ceil((duration_s + hold_s) / control_dt_s - 1e-9) + 1
@@ -275,6 +277,11 @@ def run_episode(
         )
         hold_settled = False
         if not reason:
+            if noisy:
+                align_to_motion(noise_q, start_row=start_row, cap_rows=cap_rows)
+                align_to_motion(noise_qd, start_row=start_row, cap_rows=cap_rows)
+            if actuator is not None:
+                actuator.align_to_motion(start_row=start_row, cap_rows=cap_rows)
             end = start_row + max_motion_rows
             q_ref[start_row:end] = motion_q
             qd_ref[start_row:end] = motion_qd
@@ -307,7 +314,10 @@ def run_episode(
     applied = tau_cmd if actuator is None else actuator.applied(tau_cmd, rows)
     np.clip(applied[:rows], -effort, effort, out=tau_app[:rows])
     saturated = np.abs(tau_cmd[:rows]) > effort
-    _torque_sensor(tau_app[:rows], effort_offset_nm, effort_noise_std_nm, seed=seed, rows=n)
+    _torque_sensor(
+        tau_app[:rows], effort_offset_nm, effort_noise_std_nm,
+        seed=seed, rows=n, start_row=start_row, cap_rows=cap_rows,
+    )  # fmt: skip
     warnings = {
         name: int(count)
         for name, count in zip(_WARNING_NAMES, data.warning.number, strict=True)
@@ -352,18 +362,28 @@ def run_episode(
 
 
 def _torque_sensor(
-    tau: F64, offset_nm: Sequence[float], noise_std_nm: float, *, seed: int, rows: int
+    tau: F64,
+    offset_nm: Sequence[float],
+    noise_std_nm: float,
+    *,
+    seed: int,
+    rows: int,
+    start_row: int,
+    cap_rows: int,
 ) -> None:
     """Add the torque sensor's offset and noise to ``tau`` in place (what is recorded as
     effort). The noise is drawn for all ``rows`` the episode may have, in one block of its
-    own stream, so where the episode ends does not change a row's noise."""
+    own stream, and aligned to the motion's start (:func:`align_to_motion`), so where the
+    pre-roll or the episode ends does not change the motion's noise."""
     if len(offset_nm):
         tau += np.asarray(offset_nm, dtype=np.float64)
     if noise_std_nm > 0:
         from pipeline.model.uncertainty import EFFORT_NOISE_STREAM
 
         rng = np.random.default_rng([int(seed), EFFORT_NOISE_STREAM])
-        tau += rng.standard_normal((rows, tau.shape[1]))[: tau.shape[0]] * noise_std_nm
+        noise = rng.standard_normal((rows, tau.shape[1]))
+        align_to_motion(noise, start_row=start_row, cap_rows=cap_rows)
+        tau += noise[: tau.shape[0]] * noise_std_nm
 
 
 def _no_progress(fraction: float) -> None:

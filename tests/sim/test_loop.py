@@ -179,6 +179,25 @@ def test_jitter_delays_each_command_within_its_bounds():
     assert np.array_equal(j, again.in_effect)
 
 
+def test_jitter_aligned_to_the_motion_gives_its_commands_the_full_pre_rolls_delays():
+    loop = LoopSettings(delay_s=0.001, jitter_s=0.002)
+    full = Actuator(loop, rows=400, nstep=2, physics_dt_s=0.001, seed=4)
+    early = Actuator(loop, rows=400, nstep=2, physics_dt_s=0.001, seed=4)
+    before = early.in_effect.copy()
+    early.align_to_motion(start_row=100, cap_rows=250)
+    # the pre-roll's periods, already run, keep their schedule
+    assert np.array_equal(early.in_effect[:200], before[:200])
+    # once the pre-roll's last commands are through (delay + jitter <= 3 steps), motion
+    # command start + m arrives as command cap + m of the full pre-roll did
+    steps = np.arange(200 + 3, 2 * (400 - 150))
+    assert np.array_equal(early.in_effect[steps] - 100, full.in_effect[steps + 300] - 250)
+    assert not np.array_equal(before[steps] - 100, full.in_effect[steps + 300] - 250)
+    # a pre-roll that ran to its cap changes nothing
+    capped = Actuator(loop, rows=400, nstep=2, physics_dt_s=0.001, seed=4)
+    capped.align_to_motion(start_row=250, cap_rows=250)
+    assert np.array_equal(capped.in_effect, full.in_effect)
+
+
 @pytest.mark.parametrize(
     ("loop", "kwargs", "message"),
     [

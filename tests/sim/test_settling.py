@@ -121,6 +121,39 @@ def test_the_hold_goes_on_until_settled_by_the_same_criterion_up_to_its_cap(ur5)
     assert len(capped.stamp_ns) == len(short.stamp_ns) + round(0.2 / 0.001)
 
 
+def test_the_motion_meets_the_same_noise_however_long_the_pre_roll_held(ur5):
+    # the sensor's and the torque sensor's draws along the motion do not depend on where
+    # the pre-roll ended: a settled episode meets the noise the full pre-roll's would, so
+    # two laws (or a fixed and a settled pre-roll) are compared on the same noise
+    def episode(settle):
+        return run_episode(
+            ur5,
+            reference=QuinticReference.between(PAPER_START_RAD, PAPER_GOAL_RAD, duration_s=0.5),
+            controller=make_controller("ctc", ur5),
+            hold_s=0.2,
+            preroll_s=1.0,
+            settle=settle,
+            seed=7,
+            position_noise_std_rad=1e-5,
+            velocity_noise_std_rad_s=1e-4,
+            effort_noise_std_nm=0.05,
+        )
+
+    settled_, fixed = episode(True), episode(False)
+    k0, k1 = settled_.motion_start_row, fixed.motion_start_row
+    assert 0 < k0 < k1 == 1000
+    n = len(fixed.stamp_ns) - k1
+    assert len(settled_.stamp_ns) - k0 == n
+    for measured, true in (("q", "q_true"), ("qd", "qd_true"), ("tau_nm", "tau_cmd_nm")):
+        a = getattr(settled_, measured)[k0:] - getattr(settled_, true)[k0:]
+        b = getattr(fixed, measured)[k1:] - getattr(fixed, true)[k1:]
+        np.testing.assert_allclose(a, b, atol=1e-12, err_msg=measured)
+        # and the pre-roll's own rows keep the draws they met
+        c = getattr(settled_, measured)[:k0] - getattr(settled_, true)[:k0]
+        d = getattr(fixed, measured)[:k0] - getattr(fixed, true)[:k0]
+        np.testing.assert_allclose(c, d, atol=1e-12, err_msg=measured)
+
+
 def test_settle_false_holds_the_whole_pre_roll_and_still_reports_the_last_window(ur5):
     fixed = run_episode(
         ur5,
