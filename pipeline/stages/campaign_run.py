@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING
 import polars as pl
 
 from pipeline.errors import ParamsError, PipelineError
-from pipeline.fsutil import file_kind
+from pipeline.fsutil import atomic_write_bytes, file_kind
 from pipeline.params import (
     CampaignParams,
     Episode,
@@ -251,9 +251,7 @@ def mark_done(out_dir: Path, name: str, fingerprint: str, *, target: Path | None
     folder = out_dir / DONE_DIR
     folder.mkdir(exist_ok=True)
     held = content_hash(out_dir / name if target is None else target) or ""
-    tmp = folder / f".{name}.tmp-{os.getpid()}"
-    tmp.write_text(f"{fingerprint}\n{held}\n", encoding="ascii")
-    os.replace(tmp, folder / name)
+    atomic_write_bytes(folder / name, f"{fingerprint}\n{held}\n".encode("ascii"))
 
 
 def unmark(out_dir: Path, name: str) -> None:
