@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from pipeline import supervise
+from pipeline.argv import command_name
 from pipeline.errors import handle_sigterm, interrupt_exit
 from pipeline.memory import OUT_OF_MEMORY_HINT, address_limit_below_need
 
@@ -30,7 +31,7 @@ def entry() -> None:
         args = sys.argv[1:]  # Ray may end its driver abruptly
         sys.exit(supervise.run_supervised(args, after_abrupt_end=lambda: _sweep_partials(args)))
     supervise.mark_exit_when_python_exits()
-    short = address_limit_below_need(_command(sys.argv[1:]))
+    short = address_limit_below_need(command_name(sys.argv[1:]))
     if short is not None and "--debug" not in sys.argv[1:]:
         sys.stderr.write(f"error: {short}: {OUT_OF_MEMORY_HINT}\n")
         sys.exit(1)
@@ -74,20 +75,6 @@ def _sweep_partials(args: Sequence[str]) -> None:
         if not left or time.monotonic() > deadline:
             return
         time.sleep(0.2)
-
-
-def _command(args: Sequence[str]) -> str:
-    """The subcommand's name: the first word that is not a root option (``--debug``,
-    ``--package-path DIR``); "" when there is none."""
-    i = 0
-    while i < len(args):
-        if args[i] == "--package-path":
-            i += 2
-        elif args[i].startswith("-"):
-            i += 1
-        else:
-            return args[i]
-    return ""
 
 
 def _option(args: Sequence[str], *names: str) -> str | None:

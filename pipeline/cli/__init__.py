@@ -35,6 +35,7 @@ from pipeline.cli import (  # noqa: F401
 
 # isort: on
 from pipeline import supervise
+from pipeline.argv import hoist_root_options
 from pipeline.errors import (
     EXIT_INTERRUPTED,
     EXIT_TERMINATED,
@@ -73,29 +74,6 @@ def _stop(err: BaseException) -> NoReturn:
 
 
 _DISK_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS, errno.EFBIG})
-
-
-def hoist_root_options(args: list[str]) -> list[str]:
-    """``args`` with the root command's options moved before the command.
-
-    ``--debug`` and ``--package-path DIR`` (or ``--package-path=DIR``) are accepted anywhere
-    on the line (``pipeline fk arm.urdf 0 0 --package-path ~/ws/src``), as users of
-    ``ros2`` and ``colcon`` type them; a value that is itself an option is left alone.
-    """
-    front: list[str] = []
-    rest: list[str] = []
-    i = 0
-    while i < len(args):
-        arg = args[i]
-        if arg == "--debug" or arg.startswith("--package-path="):
-            front.append(arg)
-        elif arg == "--package-path" and i + 1 < len(args) and not args[i + 1].startswith("-"):
-            front += [arg, args[i + 1]]
-            i += 1
-        else:
-            rest.append(arg)
-        i += 1
-    return [*front, *rest]
 
 
 def main() -> None:

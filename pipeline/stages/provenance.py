@@ -22,6 +22,7 @@ RECORD_CODE = (
     "analysis/metrics.py",
     "analysis/protocol.py",
     "analysis/task_space.py",
+    "argv.py",
     "cli",
     "constants.py",
     "contract.py",
