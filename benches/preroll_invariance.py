@@ -251,8 +251,13 @@ def compare(old: dict[str, Any], new: dict[str, Any]) -> tuple[list[dict[str, An
         )
         b = new_leaves.get(path)
         name = "/".join(path)
+        quantity, sources = _sources(old, path)
+        # a reduction that appears or vanishes (its baseline crosses the 1e-9 floor) is
+        # judged like one that moves: by whether its errors are resolvable
+        gone = _unresolved((old, new), quantity, sources)
+        tail = "; its errors all below the resolution" if gone else ""
         if b is None:
-            moves.append(Move(name, "missing in the other run", practical=False))
+            moves.append(Move(name, f"missing in the other run{tail}", practical=gone))
             continue
         s["n"] += 1
         half = None
@@ -260,13 +265,12 @@ def compare(old: dict[str, Any], new: dict[str, Any]) -> tuple[list[dict[str, An
             (va, half), (vb, _) = _interval(a), _interval(b)
             if va is None or vb is None:
                 if (va is None) != (vb is None):
-                    moves.append(Move(name, f"{va} -> {vb}", practical=False))
+                    moves.append(Move(name, f"{va} -> {vb}{tail}", practical=gone))
                 continue
             a, b = va, vb
         if not (isinstance(b, int | float) and math.isfinite(a) and math.isfinite(b)):
             continue
         delta = abs(b - a)
-        quantity, sources = _sources(old, path)
         if half:
             s["with_ci"] += 1
             ratio = delta / half
