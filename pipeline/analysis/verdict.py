@@ -42,9 +42,15 @@ EQUIVALENCE_REL = 0.02
 """Practical-equivalence margin as a fraction of the baseline's mean (2 %)."""
 ENCODER_RESOLUTION_RAD = 2.0 * math.pi / 2**20
 """A 20-bit absolute joint encoder's step, 6.0e-6 rad (UR e-Series, Franka: 19-20 bits)."""
-RESOLUTION_BY_UNIT = {"rad": ENCODER_RESOLUTION_RAD, "m": 1.0 * ENCODER_RESOLUTION_RAD}
+RESOLUTION_BY_UNIT = {
+    "rad": ENCODER_RESOLUTION_RAD,
+    "mrad": 1e3 * ENCODER_RESOLUTION_RAD,
+    "m": 1.0 * ENCODER_RESOLUTION_RAD,
+    "mm": 1e3 * ENCODER_RESOLUTION_RAD,
+}
 """The smallest difference of a quantity that is resolved [its unit]: a joint angle's,
-and at the TCP the encoder step times 1 m of reach."""
+at the TCP the encoder step as an orientation and times 1 m of reach as a position, in
+the units the catalog's metrics are in (``mrad``, ``mm``)."""
 
 WILCOXON = "Wilcoxon signed-rank (paired by seed)"
 MANN_WHITNEY = "Mann-Whitney U (unpaired: seeds do not pair)"

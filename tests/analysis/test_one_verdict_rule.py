@@ -41,6 +41,18 @@ def test_a_microradian_difference_on_a_joint_that_never_moved_is_equivalent(n: i
     assert tiny.outcome == "equivalent"
 
 
+def test_every_compared_error_has_a_resolution_in_its_own_unit() -> None:
+    # the margin's floor is looked up by the catalog's unit: a unit missing from the table
+    # would judge a TCP difference against 2 % of its mean alone
+    for m in (catalog.metric(name) for name in catalog.COMPARED_METRICS):
+        if m.name.endswith("_error"):
+            assert equivalence_margin(m.unit, 0.0) > 0.0, m.name
+    assert equivalence_margin("mm", 0.0) == pytest.approx(1e3 * ENCODER_RESOLUTION_RAD)
+    assert equivalence_margin("mrad", 0.0) == pytest.approx(1e3 * ENCODER_RESOLUTION_RAD)
+    tiny = compare({s: 1e-4 for s in range(6)}, {s: 4e-3 for s in range(6)}, unit="mm")
+    assert tiny.outcome == "equivalent"  # 4 um at the flange: below a 1 m reach's step
+
+
 def test_a_real_difference_is_tested_only_from_the_minimum_pairs() -> None:
     for n in range(1, MIN_PAIRS):
         v = compare({s: 2e-3 for s in range(n)}, {s: 1e-3 for s in range(n)}, unit="rad")
