@@ -11,16 +11,22 @@ the physics the episode runs.
 Episodes (planning and time-parameterization excluded: once per scenario, shared):
 the paper's CTC episode (ideal plant) and the ``paper-realistic`` pid, ctc and ctc_pid
 episodes (seed 1: a drawn plant, friction, damping, sensor noise), all with full
-logging (4,011 control steps: 2 s pre-roll, the motion, 1 s hold). Per episode:
+logging (their own control steps since issue 31's settled pre-roll and hold: every figure
+per step divides by the episode's own; until this was fixed they all divided by the last
+episode's). Per episode:
 
 - ``loop``: ``sim.runner._Loop.run``, the hot loop (physics, the law, the logged state
   rows, sensor noise, the divergence check);
 - ``physics``: the episode's own torques replayed on a copy of its plant from the same
   start (``mj_step`` alone along the same trajectory; checked to end in the same state):
-  ``loop - physics`` is what the Python around the physics costs. Since the contact gate
-  (``pipeline.sim.contact_gate``) the replay runs with the plant's contacts as the gate
-  left them at the end of the run (off in free space, as for nearly every period);
-  ``benches/contact_gate.py`` compares the loop with and without the gate;
+  ``loop - physics`` is what the Python around the physics costs. The replay runs with
+  the plant's contacts off, as the floor does (where the loop's contact gate ran them on,
+  no contact was possible: the same states); ``benches/contact_gate.py`` compares the
+  loop with and without the gate;
+- ``motion_floor``: the replay plus one RNEA (nominal model) per control step at the
+  episode's own states: the floor's work along this episode's motion instead of at rest;
+  ``realistic_pid_ctc_*``: the realistic pid and ctc episodes together, per step of both
+  (the campaign benches' laws);
 - ``whole``: ``run_one`` (controller and plant setup, loop, contact check, bag write).
 
 Each figure is the best of ``--repeat``, interleaved (the floors, then each episode), so
@@ -67,6 +73,8 @@ class LoopProbe:
 
     def __init__(self) -> None:
         self.wall_s = self.cpu_s = self.physics_wall_s = self.physics_cpu_s = 0.0
+        self.rnea_wall_s = self.rnea_cpu_s = 0.0
+        self._pin: dict[str, Any] = {}
         self._run = runner._Loop.run
         probe = self
 
@@ -84,6 +92,7 @@ class LoopProbe:
 
         if first == 0:  # an episode's first run
             self.wall_s = self.cpu_s = self.physics_wall_s = self.physics_cpu_s = 0.0
+            self.rnea_wall_s = self.rnea_cpu_s = 0.0
         # the whole state (the constraint solver's warm start too: with the realistic plant's
         # friction a replay from qpos and qvel alone leaves the trajectory)
         start = mujoco.MjData(loop.model)
@@ -95,19 +104,45 @@ class LoopProbe:
         if loop.actuator is None and not reason:
             steps = rows - first - (1 if final else 0)
             self._replay(loop, start, tau_cmd=args[9], first=first, steps=steps)
+            self._rnea(loop, q=args[0], qd=args[1], first=first, steps=steps)
         return rows, reason
+
+    def _rnea(self, loop: Any, *, q: Any, qd: Any, first: int, steps: int) -> None:
+        """One RNEA (nominal model) per control step at the episode's own states: with
+        the physics replay, the converged floor's work along this motion."""
+        import numpy as np
+        import pinocchio as pin
+
+        from pipeline.robots.urdf import build_pinocchio_model
+
+        name = loop.spec.name
+        if name not in self._pin:
+            pmodel = build_pinocchio_model(loop.spec)
+            self._pin[name] = (pmodel, pmodel.createData())
+        pmodel, pdata = self._pin[name]
+        zeros, rnea = np.zeros(loop.spec.dof), pin.rnea
+        c0, w0 = time.thread_time(), time.perf_counter()
+        for k in range(first, first + steps):
+            rnea(pmodel, pdata, q[k], qd[k], zeros)
+        self.rnea_wall_s += time.perf_counter() - w0
+        self.rnea_cpu_s += time.thread_time() - c0
 
     def _replay(self, loop: Any, data: Any, *, tau_cmd: Any, first: int, steps: int) -> None:
         """The same torques on the same plant from the same start: ``mj_step`` alone."""
         import mujoco
 
         model, step, ctrl, nstep = loop.model, mujoco.mj_step, data.ctrl, loop.nstep
+        # contacts off, as the floor: where the loop ran them on (its contact gate), no
+        # contact was possible, so the states are the same (checked below)
+        flags = int(model.opt.disableflags)
+        model.opt.disableflags = flags | int(mujoco.mjtDisableBit.mjDSBL_CONTACT)
         c0, w0 = time.thread_time(), time.perf_counter()
         for k in range(first, first + steps):
             ctrl[:] = tau_cmd[k]
             step(model, data, nstep)
         self.physics_wall_s += time.perf_counter() - w0
         self.physics_cpu_s += time.thread_time() - c0
+        model.opt.disableflags = flags
         if not (data.qpos == loop.data.qpos).all():
             raise RuntimeError("the physics replay left the episode's trajectory")
 
@@ -150,23 +185,28 @@ def measure(repeat: int, *, marginal: bool) -> dict[str, Any]:
     floor = {"wall": inf, "cpu": inf}
     plant_floor = inf
     steps = 0
+    case_steps: dict[str, int] = {}  # each episode's own control steps (the settled
+    # pre-roll and hold make them differ: a figure per step divides by its own)
     for _ in range(repeat):
         for name, episode, plan in cases:
-            whole_s, steps = episode_wall_s(episode, plan)
+            whole_s, case_steps[name] = episode_wall_s(episode, plan)
             got = {
                 "whole": whole_s,
                 "loop": probe.wall_s,
                 "loop_cpu": probe.cpu_s,
                 "physics": probe.physics_wall_s,
                 "physics_cpu": probe.physics_cpu_s,
+                "motion_floor": probe.physics_wall_s + probe.rnea_wall_s,
+                "motion_floor_cpu": probe.physics_cpu_s + probe.rnea_cpu_s,
             }
             mine = best.setdefault(name, dict.fromkeys(got, inf))
             for key, value in got.items():
                 mine[key] = min(mine[key], value)
+        steps = case_steps[next(name for name, e, _ in cases if e is realistic)]
         for key, value in _floors(realistic, steps).items():
             floor[key] = min(floor[key], value)
         plant_floor = min(plant_floor, physics_floor_s(realistic, steps, drawn=True))
-    per_step = 1e6 / steps
+    per_step = 1e6 / steps  # the floors' steps (the first realistic episode's)
     out: dict[str, Any] = {
         "control_steps": steps,
         "physics_steps_per_control_step": realistic.sim.control_period_steps,
@@ -178,19 +218,38 @@ def measure(repeat: int, *, marginal: bool) -> dict[str, Any]:
         "plant_floor_x_floor": round(plant_floor / floor["wall"], 3),
         "target_ratio_to_floor": TARGET_RATIO,
     }
+    floor_us = floor["wall"] * per_step
+    floor_cpu_us = floor["cpu"] * per_step
     for name, b in best.items():
+        own = 1e6 / case_steps[name]
         out[name] = {
-            "loop_us_per_step": round(b["loop"] * per_step, 2),
-            "loop_x_floor": round(b["loop"] / floor["wall"], 3),
-            "loop_cpu_x_floor_cpu": round(b["loop_cpu"] / floor["cpu"], 3),
-            "physics_us_per_step": round(b["physics"] * per_step, 2),
-            "physics_x_floor": round(b["physics"] / floor["wall"], 3),
-            "physics_cpu_x_floor_cpu": round(b["physics_cpu"] / floor["cpu"], 3),
-            "python_us_per_step": round((b["loop"] - b["physics"]) * per_step, 2),
-            "python_cpu_us_per_step": round((b["loop_cpu"] - b["physics_cpu"]) * per_step, 2),
-            "whole_us_per_step": round(b["whole"] * per_step, 2),
-            "whole_x_floor": round(b["whole"] / floor["wall"], 3),
+            "control_steps": case_steps[name],
+            "loop_us_per_step": round(b["loop"] * own, 2),
+            "loop_x_floor": round(b["loop"] * own / floor_us, 3),
+            "loop_cpu_x_floor_cpu": round(b["loop_cpu"] * own / floor_cpu_us, 3),
+            "physics_us_per_step": round(b["physics"] * own, 2),
+            "physics_x_floor": round(b["physics"] * own / floor_us, 3),
+            "physics_cpu_x_floor_cpu": round(b["physics_cpu"] * own / floor_cpu_us, 3),
+            "python_us_per_step": round((b["loop"] - b["physics"]) * own, 2),
+            "python_cpu_us_per_step": round((b["loop_cpu"] - b["physics_cpu"]) * own, 2),
+            "whole_us_per_step": round(b["whole"] * own, 2),
+            "whole_x_floor": round(b["whole"] * own / floor_us, 3),
+            # the floor's work (mj_step + 1 RNEA) along this episode's own motion
+            "motion_floor_us_per_step": round(b["motion_floor"] * own, 2),
+            "motion_floor_x_floor": round(b["motion_floor"] * own / floor_us, 3),
+            "loop_x_motion_floor": round(b["loop"] / b["motion_floor"], 3),
+            "whole_x_motion_floor": round(b["whole"] / b["motion_floor"], 3),
         }
+    # the realistic pid + ctc pair (the campaign benches' laws), each weighted by its steps
+    pair = [f"realistic-{c}" for c in ("pid", "ctc")]
+    pair_steps = sum(case_steps[n] for n in pair)
+    for key in ("motion_floor", "loop", "whole"):
+        out[f"realistic_pid_ctc_{key}_us_per_step"] = round(
+            1e6 * sum(best[n][key] for n in pair) / pair_steps, 2
+        )
+    out["realistic_pid_ctc_motion_floor_x_floor"] = round(
+        out["realistic_pid_ctc_motion_floor_us_per_step"] / floor_us, 3
+    )
     for key in ("loop_x_floor", "loop_cpu_x_floor_cpu"):  # the campaign profile's laws
         pair = [out[f"realistic-{c}"][key] for c in ("pid", "ctc")]
         out[f"realistic_pid_ctc_{key}"] = round(sum(pair) / 2, 3)
