@@ -14,7 +14,9 @@ Per command: wall (start to exit, imports included) and CPU (user + system of th
 and its workers). The floor (``benches/floor.py``) is measured before and after the
 commands; the episodes' control steps come from the report's ``metrics.json``
 (``end_s`` per episode, pre-roll included). The wall figure is set against the floor of
-all steps on ``-j`` cores, the CPU figure against the CPU floor on one.
+all steps on ``-j`` cores, the CPU figure against the CPU floor on one. With ``-j`` above
+1 every figure is also given ``at_jobs_*``: against the floor measured with ``-j`` floor
+loops at once (``floor.measure_floor_jobs``), the peer of work spread over ``-j`` workers.
 
 ``--repo`` runs another checkout's code (e.g. a ``git archive`` of ``main``) with this
 bench's floor, for a before/after on the same load. Output stays under ``--work``
@@ -46,6 +48,7 @@ from floor import (
     floor_fields,
     floor_summary,
     measure_floor,
+    measure_floor_jobs,
     steps_in_report,
     uptime,
 )
@@ -99,6 +102,8 @@ def main() -> None:
             ["git", "rev-parse", "--short", "HEAD"], cwd=repo, capture_output=True, text=True
         ).stdout.strip()
     floor: Floor = measure_floor()
+    parallel = 1 if args.demo else min(args.jobs, os.cpu_count() or 1)
+    floor_j = measure_floor_jobs(parallel) if parallel > 1 else None
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or Path(tmp)
         work.mkdir(parents=True, exist_ok=True)
@@ -126,8 +131,19 @@ def main() -> None:
         control_dt_s = sim["physics_dt_s"] * sim["control_period_steps"]
         episodes, steps = steps_in_report(rep / "metrics.json", control_dt_s=control_dt_s)
     floor = floor.merged(measure_floor())
-    cores = 1 if args.demo else min(args.jobs, os.cpu_count() or 1)
+    if floor_j is not None:
+        floor_j = floor_j.merged(measure_floor_jobs(parallel))
+    cores = parallel
     total = {k: round(record[k] + report[k], 2) for k in record}
+
+    def at_jobs(wall_s: float, cpu_s: float) -> dict[str, Any]:
+        """The same figure against the floor of ``-j`` loops at once (its own peer)."""
+        if floor_j is None:
+            return {}
+        return floor_fields(
+            floor_j, control_steps=steps, wall_s=wall_s, cpu_s=cpu_s, cores=cores, name="at_jobs"
+        )
+
     result |= {
         "mode": "demo" if args.demo else "campaign",
         "command_record": ["pipeline " + " ".join(cmd) for cmd in record_cmds],
@@ -135,18 +151,22 @@ def main() -> None:
         "episodes": episodes,
         "jobs": args.jobs,
         **floor_summary(floor),
+        **({f"at_jobs_{k}": v for k, v in floor_summary(floor_j).items()} if floor_j else {}),
         "record": record
         | floor_fields(
             floor, control_steps=steps, wall_s=record["wall_s"], cpu_s=record["cpu_s"], cores=cores
-        ),
+        )
+        | at_jobs(record["wall_s"], record["cpu_s"]),
         "report": report
         | floor_fields(
             floor, control_steps=steps, wall_s=report["wall_s"], cpu_s=report["cpu_s"], cores=cores
-        ),
+        )
+        | at_jobs(report["wall_s"], report["cpu_s"]),
         "record_plus_report": total
         | floor_fields(
             floor, control_steps=steps, wall_s=total["wall_s"], cpu_s=total["cpu_s"], cores=cores
-        ),
+        )
+        | at_jobs(total["wall_s"], total["cpu_s"]),
         "uptime_after": uptime(),
     }
     print(json.dumps(result, indent=2))

@@ -9,7 +9,11 @@ in its own run (:func:`measure_floor`, best of a few repeats, before and after i
 work under the same load) and prints :func:`floor_fields` beside each throughput figure:
 the floor per control step and the figure as a multiple of it.
 
-Usage as a script: ``python benches/floor.py`` prints the floor as one JSON object.
+:func:`measure_floor_jobs` measures it with ``-j`` loops at once (one process each): the
+peer of a ``-j 2`` figure, since two busy cores of a shared machine are not two quiet ones.
+
+Usage as a script: ``python benches/floor.py`` prints both (one and two at once) as one
+JSON object.
 """
 
 from __future__ import annotations
@@ -114,6 +118,53 @@ def measure_floor(
     return Floor(min(runs), runs, cpu, what)
 
 
+def _floor_job(args: tuple[int, int, str, int, Path, Any, Any]) -> None:
+    """One of :func:`measure_floor_jobs`' processes: build, wait for the others, measure."""
+    index, steps, scenario, seed, params_path, barrier, results = args
+    run, what = _floor_loop(scenario, seed, params_path)
+    run(50)
+    barrier.wait()
+    results.put((index, what, [run(steps) for _ in range(3)]))
+
+
+def measure_floor_jobs(
+    jobs: int,
+    *,
+    steps: int = FLOOR_STEPS,
+    scenario: str = FLOOR_SCENARIO,
+    seed: int = FLOOR_SEED,
+    params_path: Path = REPO / "params.yaml",
+) -> Floor:
+    """The floor with ``jobs`` floor loops running at once, one process each (started
+    together after their setup): the floor per control step that ``-j jobs`` workers get
+    from this machine, where two busy cores are not two quiet ones (shared caches, memory
+    bandwidth, a host's other tenants). Per process the best of three runs; the figure is
+    their mean (wall and CPU)."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("fork")
+    barrier, results = ctx.Barrier(jobs), ctx.Queue()
+    procs = [
+        ctx.Process(
+            target=_floor_job, args=((i, steps, scenario, seed, params_path, barrier, results),)
+        )
+        for i in range(jobs)
+    ]
+    for proc in procs:
+        proc.start()
+    timed = [results.get(timeout=600) for _ in procs]
+    for proc in procs:
+        proc.join()
+    walls = [1e6 * min(w for w, _ in runs) / steps for _, _, runs in timed]
+    cpus = [1e6 * min(c for _, c in runs) / steps for _, _, runs in timed]
+    return Floor(
+        round(sum(walls) / jobs, 2),
+        tuple(round(w, 2) for w in walls),
+        round(sum(cpus) / jobs, 2),
+        f"{jobs} processes at once, each: {timed[0][1]}",
+    )
+
+
 def floor_fields(
     floor: Floor,
     *,
@@ -172,7 +223,15 @@ def uptime() -> str:
 
 def main() -> None:
     floor = measure_floor(repeats=5)
-    print(json.dumps(floor_summary(floor) | {"uptime": uptime()}, indent=2))
+    jobs = measure_floor_jobs(2)
+    print(
+        json.dumps(
+            floor_summary(floor)
+            | {f"jobs_2_{k}": v for k, v in floor_summary(jobs).items()}
+            | {"uptime": uptime()},
+            indent=2,
+        )
+    )
 
 
 if __name__ == "__main__":
