@@ -38,6 +38,7 @@ from pipeline.analysis.catalog import BY_NAME, FINAL_DRIFT_REL, METRIC_COLUMNS  
 from pipeline.analysis.episodes import episode_table, limits_table  # noqa: E402
 from pipeline.analysis.metrics import joint_metrics  # noqa: E402
 from pipeline.analysis.protocol import protocol_view  # noqa: E402
+from pipeline.analysis.verdict import ENCODER_RESOLUTION_RAD  # noqa: E402
 from pipeline.log.reader import read_recording  # noqa: E402
 from pipeline.params import Episode, Params, load_params  # noqa: E402
 from pipeline.stages.episode import run_one  # noqa: E402
@@ -47,9 +48,12 @@ TOLERANCE = 0.05
 """Largest relative change of any reported metric per halving of the physics step."""
 
 REALISTIC = "paper-realistic"
-FLOORS = {"rad": 1e-6, "rad/s": 1e-2, "s": 2e-3, "N m": 1e-3, "1": 1e-3}
-"""Per unit, the size below which a metric's change is measured absolutely: 1e-6 rad is
-the realistic plant's encoder noise scale (1e-5 rad), 1e-2 rad/s about 1 % of a moving
+FLOORS = {"rad": ENCODER_RESOLUTION_RAD, "rad/s": 1e-2, "s": 2e-3, "N m": 1e-3, "1": 1e-3}
+"""Per unit, the size below which a metric's change is measured absolutely: in rad the
+20-bit encoder's step (6.0e-6 rad), the smallest difference the report resolves (its
+verdicts call a smaller one *equivalent*; 1e-6 rad until the per-row draws were aligned
+to the motion, when a hunting pid's final drift of 2.6e-6 rad moved by 1.6e-7 rad, 6 %
+of itself), 1e-2 rad/s about 1 % of a moving
 joint's peak speed, 2 ms two control periods (a settling time is a sample index), 1e-3
 of a fraction one sample in a thousand. The time of the peak velocity is compared only
 for joints whose peak velocity is above its floor (a joint that does not move peaks
