@@ -51,7 +51,7 @@ def test_integral_state_is_read_only_where_a_controller_has_an_integrator(ur5):
         assert state is not None and state.shape == (ur5.dof,)
 
 
-def _episode(ur5, name, gains=None, *, preroll_s=2.0, seed=0, hold_max_s=None):
+def _episode(ur5, name, gains=None, *, preroll_s=2.0, seed=0, hold_max_s=None, **more):
     return run_episode(
         ur5,
         reference=QuinticReference.between(PAPER_START_RAD, PAPER_GOAL_RAD, duration_s=0.5),
@@ -61,6 +61,7 @@ def _episode(ur5, name, gains=None, *, preroll_s=2.0, seed=0, hold_max_s=None):
         hold_max_s=hold_max_s,
         seed=seed,
         position_noise_std_rad=1e-5,
+        **more,
     )
 
 
@@ -126,18 +127,10 @@ def test_the_motion_meets_the_same_noise_however_long_the_pre_roll_held(ur5):
     # the pre-roll ended: a settled episode meets the noise the full pre-roll's would, so
     # two laws (or a fixed and a settled pre-roll) are compared on the same noise
     def episode(settle):
-        return run_episode(
-            ur5,
-            reference=QuinticReference.between(PAPER_START_RAD, PAPER_GOAL_RAD, duration_s=0.5),
-            controller=make_controller("ctc", ur5),
-            hold_s=0.2,
-            preroll_s=1.0,
-            settle=settle,
-            seed=7,
-            position_noise_std_rad=1e-5,
-            velocity_noise_std_rad_s=1e-4,
-            effort_noise_std_nm=0.05,
-        )
+        return _episode(
+            ur5, "ctc", preroll_s=1.0, seed=7, settle=settle,
+            velocity_noise_std_rad_s=1e-4, effort_noise_std_nm=0.05,
+        )  # fmt: skip
 
     settled_, fixed = episode(True), episode(False)
     k0, k1 = settled_.motion_start_row, fixed.motion_start_row
