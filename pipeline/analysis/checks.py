@@ -49,16 +49,21 @@ def duplicate_stamps(frame: pl.DataFrame) -> Duplicates | None:
     return Duplicates(dup.height, int((dup["len"] - 1).sum()), int(dup["stamp_ns"][0]))
 
 
+def joint_blocks_repeat(joints: pl.Series, n: int) -> bool:
+    """True when ``joints`` (a tidy frame's joint column) is whole blocks of ``n`` rows,
+    each in the first block's order: the layout a recording is read in, a row per joint
+    at every time."""
+    h = joints.len()
+    return n > 0 and h % n == 0 and bool(joints.slice(n).eq_missing(joints.slice(0, h - n)).all())
+
+
 def _distinct_in_layout(frame: pl.DataFrame) -> bool:
     """True when the frame is laid out as recorded (a row per joint, the same joint order
     at every time) and each joint's stamps strictly increase: no (stamp, joint) twice, with
     no hashing. False says nothing (the group-by decides)."""
     joints = frame.get_column("joint")
-    h = frame.height
     n = joints.head(64).n_unique()
-    if h % n or joints.head(n).n_unique() != n:
-        return False
-    if not joints.slice(n).eq_missing(joints.slice(0, h - n)).all():
+    if joints.head(n).n_unique() != n or not joint_blocks_repeat(joints, n):
         return False
     stamps = frame.get_column("stamp_ns")
     if stamps.null_count():

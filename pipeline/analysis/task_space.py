@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from pipeline import transforms as tf
 from pipeline.analysis.catalog import TCP_JOINT
+from pipeline.analysis.checks import joint_blocks_repeat
 from pipeline.analysis.episodes import robot_spec
 from pipeline.errors import ReportError
 from pipeline.log.reader import Recording
@@ -240,12 +241,7 @@ def _states(group: pl.DataFrame, joints: Sequence[str]) -> tuple[Array, Array, A
     cols = ("reference_position_rad", "feedback_position_rad")
     n = len(joints)
     names = group.get_column("joint")
-    h = group.height
-    if (
-        h % n == 0
-        and names.head(n).to_list() == list(joints)
-        and names.slice(n).eq_missing(names.slice(0, h - n)).all()
-    ):
+    if names.head(n).to_list() == list(joints) and joint_blocks_repeat(names, n):
         t = group.get_column("time_s").to_numpy()[::n]
         ref, act = (group.get_column(c).cast(pl.Float64).to_numpy().reshape(-1, n) for c in cols)
     else:
