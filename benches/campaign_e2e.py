@@ -102,8 +102,8 @@ def main() -> None:
             ["git", "rev-parse", "--short", "HEAD"], cwd=repo, capture_output=True, text=True
         ).stdout.strip()
     floor: Floor = measure_floor()
-    parallel = 1 if args.demo else min(args.jobs, os.cpu_count() or 1)
-    floor_j = measure_floor_jobs(parallel) if parallel > 1 else None
+    cores = 1 if args.demo else min(args.jobs, os.cpu_count() or 1)
+    floor_j = measure_floor_jobs(cores) if cores > 1 else None
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or Path(tmp)
         work.mkdir(parents=True, exist_ok=True)
@@ -132,8 +132,7 @@ def main() -> None:
         episodes, steps = steps_in_report(rep / "metrics.json", control_dt_s=control_dt_s)
     floor = floor.merged(measure_floor())
     if floor_j is not None:
-        floor_j = floor_j.merged(measure_floor_jobs(parallel))
-    cores = parallel
+        floor_j = floor_j.merged(measure_floor_jobs(cores))
     total = {k: round(record[k] + report[k], 2) for k in record}
 
     def at_jobs(wall_s: float, cpu_s: float) -> dict[str, Any]:
