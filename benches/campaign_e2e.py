@@ -8,7 +8,7 @@ Runs the real commands as child processes, exactly as a user types them:
   ``--seeds``, ``keep_bags: {every: K}``), then ``pipeline report --recordings R/bench``;
 - ``--demo``: what ``make demo``'s DVC stages run, without DVC: ``pipeline record --params
   params.yaml --out R`` (the hand-listed episodes), ``pipeline record --campaign C`` for
-  each of ``campaigns`` (one job, as dvc.yaml), then ``pipeline report --baseline pid``.
+  each of ``campaigns`` (with dvc.yaml's ``-j``), then ``pipeline report --baseline pid``.
 
 Per command: wall (start to exit, imports included) and CPU (user + system of the child
 and its workers). The floor (``benches/floor.py``) is measured before and after the
@@ -52,6 +52,16 @@ from floor import (
     steps_in_report,
     uptime,
 )
+
+
+def _demo_campaign_jobs() -> list[str]:
+    """The ``-j N`` of dvc.yaml's campaign stage (``[]``: none), as ``make demo`` runs it."""
+    cmd = yaml.safe_load((REPO / "dvc.yaml").read_text())["stages"]["campaign"]["do"]["cmd"]
+    words = cmd.split()
+    for flag in ("-j", "--jobs"):
+        if flag in words:
+            return [flag, words[words.index(flag) + 1]]
+    return []
 
 
 def _children_cpu_s() -> float:
@@ -112,8 +122,8 @@ def main() -> None:
             params = str(REPO / "params.yaml")
             campaigns = list(yaml.safe_load(Path(params).read_text()).get("campaigns") or {})
             record_cmds = [["record", "--params", params, "--out", str(rec)]]
-            record_cmds += [["record", "--params", params, "--out", str(rec), "--campaign", c]
-                            for c in campaigns]  # fmt: skip
+            record_cmds += [["record", "--params", params, "--out", str(rec), "--campaign", c,
+                             *_demo_campaign_jobs()] for c in campaigns]  # fmt: skip
             report_cmd = ["report", "--recordings", str(rec), "--out", str(rep)]
             report_cmd += ["--baseline", "pid"]
         else:
