@@ -60,6 +60,16 @@ Outcome = Literal["better", "worse", "no clear difference", "equivalent", "too f
 TESTED: tuple[Outcome, ...] = ("better", "worse", "no clear difference")
 
 
+def resolution_text() -> str:
+    """The resolutions of :data:`RESOLUTION_BY_UNIT` as a report states them ("6.0e-06 rad
+    at a joint and, at the TCP, ..."): one wording for every sentence giving the rule."""
+    r = RESOLUTION_BY_UNIT
+    return (
+        f"{r['rad']:.1e} rad at a joint and, at the TCP, {r['mm']:.1e} mm and "
+        f"{r['mrad']:.1e} mrad (1 m of reach)"
+    )
+
+
 def equivalence_margin(unit: str, baseline_mean: float | None) -> float:
     """The practical-equivalence margin [the metric's unit]: the larger of the unit's
     resolution (0 for a unit without one) and :data:`EQUIVALENCE_REL` x |baseline mean|."""

@@ -35,7 +35,7 @@ from pipeline.analysis.campaign_tables import (
     win_loss,
 )
 from pipeline.analysis.headline import HEADLINE_TASK_METRICS
-from pipeline.analysis.verdict import EQUIVALENCE_REL
+from pipeline.analysis.verdict import EQUIVALENCE_REL, resolution_text
 from pipeline.report import md
 from pipeline.report.colors import controller_colors, mpl
 from pipeline.report.figures import (
@@ -404,7 +404,7 @@ def campaign_section(
             "baseline is near the noise, a ratio where the candidate is more than twice the "
             f"baseline. The verdict: the report's one rule (the Verdicts and the paper's "
             "claims use it too): *equivalent* when the difference is within the practical "
-            "margin (the larger of the encoder's resolution and "
+            f"margin (the larger of the encoder's resolution, {resolution_text()}, and "
             f"{EQUIVALENCE_REL * 100:.0f} % of the baseline); else a two-sided test "
             f"({'; '.join(tests) or 'none'}) only from "
             f"{MIN_PAIRS} pairs (where it can reach p < {ALPHA:g}), its p "

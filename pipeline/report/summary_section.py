@@ -12,10 +12,9 @@ from pipeline.analysis.aggregate import CONFIDENCE, MeanCI
 from pipeline.analysis.catalog import BY_NAME
 from pipeline.analysis.verdict import (
     ALPHA,
-    ENCODER_RESOLUTION_RAD,
     EQUIVALENCE_REL,
     MIN_PAIRS,
-    RESOLUTION_BY_UNIT,
+    resolution_text,
 )
 from pipeline.report import md
 from pipeline.report.inputs import ReportData
@@ -146,10 +145,8 @@ def summary_section(data: ReportData) -> list[str]:
             f"Does the candidate have a lower max error than the baseline **{data.baseline}**? "
             "One rule for every comparison of this report (the win/loss tables and the "
             "paper's claims use it too): *equivalent* when the difference is within the "
-            f"practical margin (the larger of the encoder's resolution, "
-            f"{ENCODER_RESOLUTION_RAD:.1e} rad at a joint and, at the TCP, "
-            f"{RESOLUTION_BY_UNIT['mm']:.1e} mm and {RESOLUTION_BY_UNIT['mrad']:.1e} mrad "
-            f"(1 m of reach), and {EQUIVALENCE_REL * 100:.0f} % of the baseline); "
+            f"practical margin (the larger of the encoder's resolution, {resolution_text()}, "
+            f"and {EQUIVALENCE_REL * 100:.0f} % of the baseline); "
             f"else, from {MIN_PAIRS} pairs, a two-sided Wilcoxon signed-rank test of the "
             f"per-pair differences (Mann-Whitney U when seeds do not pair), *lower* / "
             f"*higher* when p < {ALPHA:g}, else *no clear difference*; with fewer pairs no "

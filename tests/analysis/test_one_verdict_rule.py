@@ -155,3 +155,10 @@ def test_at_three_pairs_report_md_shows_no_verdict_from_a_test_anywhere(tmp_path
     assert "too few pairs for a test" in verdict
     assert "equivalent on joint 6" in verdict  # joint 6 never moved: both ~1e-7 rad
     assert "too few pairs for a test" in text.split("paper's claims here", 1)[1]
+    # the margin's figures are stated where the rule is, in the Verdicts and the win/loss
+    stated = f"{ENCODER_RESOLUTION_RAD:.1e} rad at a joint and, at the TCP, 6.0e-03 mm"
+    rule_lines = [line for line in text.splitlines() if "within the practical margin" in line]
+    win_loss = [line for line in rule_lines if line.startswith("Each cell, the size")]
+    verdicts = [line for line in rule_lines if line.startswith("Does the candidate")]
+    assert win_loss and verdicts
+    assert all(stated in line for line in win_loss + verdicts), rule_lines
