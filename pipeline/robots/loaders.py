@@ -88,7 +88,8 @@ def load_spec(name_or_path: str | Path, *, package_path: tuple[str, ...] = ()) -
             content = path.read_bytes()
         except OSError as err:
             raise SpecError(f"{text}: cannot read robot file ({err})") from err
-        return _load_file(str(path), hashlib.sha256(content).hexdigest(), package_path)
+        sha256 = hashlib.sha256(content).hexdigest()
+        return _load_file(str(path), str(path.resolve()), sha256, package_path)
     names = builtin_robot_names()
     if text not in names:
         hint = unknown_name_message("robot", text, names)
@@ -97,8 +98,10 @@ def load_spec(name_or_path: str | Path, *, package_path: tuple[str, ...] = ()) -
 
 
 @functools.lru_cache(maxsize=16)
-def _load_file(path: str, sha256: str, package_path: tuple[str, ...]) -> RobotSpec:
-    """A robot file, parsed once per process and content (``sha256`` keys the cache)."""
+def _load_file(path: str, resolved: str, sha256: str, package_path: tuple[str, ...]) -> RobotSpec:
+    """A robot file, parsed once per process, place and content: ``resolved`` (the file's
+    absolute path: a relative ``path`` names another file after a ``chdir``, with another
+    sidecar and SRDF beside it) and ``sha256`` key the cache."""
     import importlib
 
     module, func = LOADERS[loader_suffix(Path(path)) or ""].split(":")

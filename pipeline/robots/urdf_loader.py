@@ -62,6 +62,10 @@ MOVABLE = ("revolute", "continuous", "prismatic")
 MESH_SUFFIXES = (".stl", ".obj")  # what MuJoCo reads as a collision mesh
 CONTINUOUS_RANGE_RAD = 2 * math.pi
 MAX_MIMIC_MULTIPLIER = 1e3
+PLACEHOLDER_M2 = 1e-9
+"""A link stating less than ``caps.MIN_MASS_KG`` and no inertia entry above this
+[kg m^2] is read as a massless frame (a simulator's placeholder mass); one with more
+inertia is refused as out of range."""
 F64 = np.ndarray
 
 
@@ -188,10 +192,14 @@ def _parse_links(
             mass_el = inertial.find("mass")
             mass = xml_floats(mass_el.get("value") if mass_el is not None else None, 1,
                            f"{where}.mass", "0")[0]  # fmt: skip
-            caps.check_mass(mass, where)
             frame = xml_origin(inertial.find("origin"), where)
             inertia_el = inertial.find("inertia")
             tensor = _inertia(inertia_el, where) if inertia_el is not None else np.zeros((3, 3))
+            if 0.0 < mass < caps.MIN_MASS_KG and float(np.abs(tensor).max()) <= PLACEHOLDER_M2:
+                # Gazebo wants every link to have mass, so a frame link often says 1e-9 kg
+                # (SO-101's gripper_frame_link): a massless frame, not a body to simulate
+                mass, tensor = 0.0, np.zeros((3, 3))
+            caps.check_mass(mass, where)
             caps.check_inertia(tensor, where)
             check_physical(mass, tensor, where)
             rot = frame[:3, :3]
@@ -513,13 +521,18 @@ def load_urdf(
             )
         if own != link_name:
             frames.append(Frame(name=link_name, link=own, pose=as_pose(own_T)))
-    flange_name = opts.flange or ("tool0" if any(f.name == "tool0" for f in frames) else None)
+    # a tip fixed to the last chain link (SO-101's gripper_frame_link) is part of that
+    # link's body, and is where the arm ends unless a flange is named: its frame
+    tip_body = owner[tip][0]
+    flange_name = opts.flange or (tip if tip_body != tip else None)
+    if flange_name is None and any(f.name == "tool0" for f in frames):
+        flange_name = "tool0"
     flange = np.eye(4)
     if flange_name is not None:
-        match = [f for f in frames if f.name == flange_name and f.link == tip]
-        if not match and flange_name != tip:
+        match = [f for f in frames if f.name == flange_name and f.link == tip_body]
+        if not match and flange_name != tip_body:
             raise SpecError(f"{settings_source or source}: flange: '{flange_name}' is not a "
-                            f"frame fixed to the tip link '{tip}'")  # fmt: skip
+                            f"frame fixed to the tip link '{tip_body}'")  # fmt: skip
         if match:
             flange = np.array(match[0].pose)
     frames = [f for f in frames if f.name != "tool0"]
@@ -608,7 +621,7 @@ def load_urdf(
     if srdf is None:
         for guess in (path.with_suffix(".srdf"), base.parent / "srdf" / (path.stem + ".srdf")):
             if guess.is_file():
-                srdf = str(guess)
+                srdf = str(guess.resolve())  # (relative to the cwd, not to ``base``)
                 break
     if srdf is not None:
         from pipeline.robots.srdf import apply_srdf

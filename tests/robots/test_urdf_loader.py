@@ -12,6 +12,7 @@ import pinocchio as pin
 import pytest
 
 from pipeline.errors import SpecError
+from pipeline.kinematics.fk import flange_pose
 from pipeline.model.dh import forward_kinematics
 from pipeline.model.mjcf import build_mujoco_model
 from pipeline.robots import RobotSpec, load_spec
@@ -228,6 +229,81 @@ def test_srdf_naming_an_unknown_link_is_refused(tmp_path):
         SpecError, match=r"three.srdf: disable_collisions\[0\].link2: unknown link 'l9'"
     ):
         load_spec(tmp_path / "three.urdf")
+
+
+@pytest.mark.parametrize("srdf_at", ["urdf/three.srdf", "srdf/three.srdf"])
+def test_an_srdf_found_beside_a_urdf_given_by_a_relative_path_is_read(
+    tmp_path, monkeypatch, srdf_at
+):
+    # example-robot-data's layout (robots/X/urdf/X.urdf, robots/X/srdf/X.srdf), the URDF
+    # named relative to the working directory, as `pipeline fk robots/z1/urdf/z1.urdf`
+    (tmp_path / "arm" / "urdf").mkdir(parents=True)
+    (tmp_path / "arm" / "srdf").mkdir()
+    (tmp_path / "arm" / "urdf" / "three.urdf").write_text(THREE_JOINT)
+    (tmp_path / "arm" / srdf_at).write_text(
+        '<robot name="three"><disable_collisions link1="l1" link2="l3" reason="x"/>'
+        '<group_state name="bent" group="arm"><joint name="j1" value="0"/>'
+        '<joint name="j2" value="0.5"/><joint name="j3" value="0"/></group_state>'
+        "</robot>"
+    )
+    monkeypatch.chdir(tmp_path)
+    spec = load_spec("arm/urdf/three.urdf")
+    pairs = dict(spec.settings_sources)["collision_pairs"]
+    assert pairs == f"SRDF {(tmp_path / 'arm' / srdf_at).resolve()}"
+    assert dict(spec.named_states)["bent"] == (0.0, 0.5, 0.0)
+    assert spec.disabled_pairs  # the file's pair, not only the joints' own
+
+
+_CAM = """  <link name="cam"><inertial><mass value="{mass}"/>
+    <inertia ixx="{i}" iyy="{i}" izz="{i}" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="cam_joint" type="fixed"><parent link="l3"/><child link="cam"/>
+    <origin xyz="0.05 0.02 -0.03" rpy="0.3 -0.2 0.1"/></joint>
+</robot>"""
+
+
+def _three_with_cam(folder: Path, *, mass: str, i: str, sidecar: str = "") -> Path:
+    folder.mkdir()
+    path = folder / "three.urdf"
+    path.write_text(THREE_JOINT.replace("</robot>", _CAM.format(mass=mass, i=i)))
+    if sidecar:
+        (folder / "three.armlab.yaml").write_text(sidecar)
+    return path
+
+
+def test_a_placeholder_mass_on_a_frame_link_is_read_as_massless(tmp_path):
+    # Gazebo wants a mass on every link, so frame links often state 1e-9 kg (SO-101)
+    spec = load_spec(_three_with_cam(tmp_path / "placeholder", mass="1e-9", i="0"))
+    plain = load_spec(_three_with_cam(tmp_path / "massless", mass="0", i="0"))
+    assert spec.dof == 3 and "cam" in {f.name for f in spec.frames}
+    assert [j.inertial for j in spec.joints] == [j.inertial for j in plain.joints]
+
+
+def test_a_tiny_mass_with_a_real_inertia_is_still_refused(tmp_path):
+    with pytest.raises(SpecError, match=r"link 'cam': mass 1e-09 kg is out of range"):
+        load_spec(_three_with_cam(tmp_path / "arm", mass="1e-9", i="0.001"))
+
+
+def test_a_tip_fixed_to_the_last_link_is_where_the_arm_ends(tmp_path):
+    # tip: a frame link (SO-101's gripper_frame_link): the flange is its frame, as
+    # Pinocchio's own URDF parser places it
+    path = _three_with_cam(tmp_path / "arm", mass="0", i="0", sidecar="tip: cam\n")
+    spec = load_spec(path)
+    model = pin.buildModelFromUrdf(str(path))
+    data = model.createData()
+    q = np.array([0.4, -0.7, 1.1])
+    config = pin.neutral(model)
+    for name, value in zip(spec.joint_names, q, strict=True):
+        joint = model.joints[model.getJointId(name)]
+        if joint.nq == 2:  # continuous: (cos, sin)
+            config[joint.idx_q : joint.idx_q + 2] = [np.cos(value), np.sin(value)]
+        else:
+            config[joint.idx_q] = value
+    pin.framesForwardKinematics(model, data, config)
+    expected = data.oMf[model.getFrameId("cam")].homogeneous
+    np.testing.assert_allclose(flange_pose(spec, q), expected, atol=1e-12)
+    # the default flange of a tip that is a body is unchanged: tool0 where there is one
+    tool0 = load_spec(_three_with_cam(tmp_path / "tool0", mass="0", i="0"))
+    assert not np.allclose(flange_pose(tool0, q), expected)
 
 
 def test_sidecar_states_where_armature_comes_from(tmp_path):
