@@ -125,15 +125,22 @@ def check_inertia(tensor: np.ndarray[Any, Any], where: str) -> None:
         )
 
 
-def check_limit(limit: Mapping[str, float], kind: str, where: str) -> None:
-    """Refuse limits beyond :mod:`~pipeline.robots.caps` magnitudes (NaN: not stated)."""
+def check_limit(
+    limit: Mapping[str, float],
+    kind: str,
+    where: str,
+    keys: tuple[str, ...] = ("lower", "upper", "velocity", "effort"),
+) -> None:
+    """Refuse limits (``keys`` of them) beyond :mod:`~pipeline.robots.caps` magnitudes
+    (NaN: not stated)."""
     position = (MAX_ORIGIN_M, "m") if kind == "prismatic" else (MAX_JOINT_RAD, "rad")
     if kind == "continuous":
         position = (math.inf, "rad")  # a continuous joint's lower and upper are ignored
     bounds = {"lower": position, "upper": position,
               "velocity": (MAX_VELOCITY_RAD_S, "rad/s or m/s"),
               "effort": (MAX_EFFORT_NM, "N m or N")}  # fmt: skip
-    for key, (bound, unit) in bounds.items():
+    for key in keys:
+        bound, unit = bounds[key]
         if abs(limit[key]) > bound:
             raise SpecError(
                 f"{where}.limit.{key}: {limit[key]!r} is out of range, expected |value| <= "

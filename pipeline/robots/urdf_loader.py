@@ -76,6 +76,7 @@ class _Link:
     com: F64 = field(default_factory=lambda: np.zeros(3))
     inertia: F64 = field(default_factory=lambda: np.zeros((3, 3)))  # about com, link axes
     shapes: list[tuple[str, F64, tuple[float, ...], str]] = field(default_factory=list)
+    unphysical: str = ""  # why its inertial is not a rigid body's ("": it is)
 
 
 @dataclass
@@ -201,7 +202,10 @@ def _parse_links(
                 mass, tensor = 0.0, np.zeros((3, 3))
             caps.check_mass(mass, where)
             caps.check_inertia(tensor, where)
-            check_physical(mass, tensor, where)
+            try:
+                check_physical(mass, tensor, where)
+            except SpecError as err:  # refused in load_urdf if the link moves with the arm
+                link.unphysical = str(err)
             rot = frame[:3, :3]
             link.mass, link.com, link.inertia = mass, frame[:3, 3].copy(), rot @ tensor @ rot.T
         # visuals are not read here: kinematics, dynamics and planning never need them, and
@@ -298,7 +302,7 @@ def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link
         if kind in MOVABLE and norm == 0.0:
             raise SpecError(f"{where}: axis (0 0 0)")
         axis = (ax[0] / norm, ax[1] / norm, ax[2] / norm) if norm else (1.0, 0.0, 0.0)
-        limit_el = el.find("limit")
+        limit_el = el.find("limit") if kind in MOVABLE else None  # (a fixed joint's: unused)
         limit = None
         if limit_el is not None:
             limit = {
@@ -307,7 +311,9 @@ def _parse_joints(root: ElementTree.Element, source: str, links: dict[str, _Link
                 else math.nan
                 for k in ("lower", "upper", "velocity", "effort")
             }
-            caps.check_limit(limit, kind, where)
+            # the range here; speed and effort where they are used, on the arm's joints
+            # (a locked head's "velocity=10000", Baxter's, moves nothing)
+            caps.check_limit(limit, kind, where, keys=("lower", "upper"))
         mimic_el = el.find("mimic")
         mimic = None
         if mimic_el is not None:
@@ -504,7 +510,11 @@ def load_urdf(
     for link_name, (own, own_T) in owner.items():
         link = links[link_name]
         rot = own_T[:3, :3]
-        if link.mass > 0:
+        if link.unphysical and own != root_link:
+            raise SpecError(link.unphysical)
+        # (one rigid on the fixed base, TIAGo's antennas, never moves: its inertial acts on
+        # nothing the plant simulates, and the base's mass is not used)
+        if link.mass > 0 and not link.unphysical:
             com = (own_T @ np.append(link.com, 1.0))[:3]
             mass.setdefault(own, []).append((link.mass, com, rot @ link.inertia @ rot.T))
         for kind, pose, size, mesh in link.shapes:
@@ -566,6 +576,7 @@ def load_urdf(
             raise SpecError(f"{where}: limit lower {lower} must be < upper {upper}")
         if velocity is not None:  # the sidecar's, over the URDF's
             lim = {**lim, "velocity": velocity[i]}
+        caps.check_limit(lim, j.kind, where, keys=("velocity", "effort"))
         for k in ("velocity", "effort"):
             if not (math.isfinite(lim[k]) and lim[k] > 0):
                 raise SpecError(f"{where}: limit {k} {lim[k]} must be > 0")

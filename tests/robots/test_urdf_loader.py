@@ -306,6 +306,49 @@ def test_a_tip_fixed_to_the_last_link_is_where_the_arm_ends(tmp_path):
     assert not np.allclose(flange_pose(tool0, q), expected)
 
 
+_BAD_INERTIA = 'ixx="2e-8" iyy="3e-8" izz="4e-8" ixy="6e-8" ixz="1e-8" iyz="8e-9"'
+_EXTRAS = """  <link name="head"><inertial><mass value="0.5"/>
+    <inertia ixx="1e-3" iyy="1e-3" izz="1e-3" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="head_pan" type="revolute"><parent link="base"/><child link="head"/>
+    <axis xyz="0 0 1"/><limit lower="-1" upper="1" velocity="10000" effort="50000"/></joint>
+  <link name="antenna"><inertial><mass value="1e-6"/><inertia {bad}/></inertial></link>
+  <joint name="antenna_joint" type="fixed"><parent link="{on}"/><child link="antenna"/>
+    <limit lower="-3" upper="3" velocity="10000" effort="50000"/></joint>
+</robot>"""
+
+
+def _three_with_extras(folder: Path, *, antenna_on: str) -> Path:
+    # Baxter's head (velocity="10000"), its fixed torso joint with a <limit>, TIAGo's
+    # antenna (1e-6 kg, an inertia that is no rigid body's) on the base or on the arm
+    folder.mkdir()
+    (folder / "three.armlab.yaml").write_text("tip: l3\n")
+    path = folder / "three.urdf"
+    path.write_text(
+        THREE_JOINT.replace("</robot>", _EXTRAS.format(bad=_BAD_INERTIA, on=antenna_on))
+    )
+    return path
+
+
+def test_what_moves_nothing_the_arm_does_is_not_refused(tmp_path):
+    spec = load_spec(_three_with_extras(tmp_path / "base", antenna_on="base"))
+    assert spec.joint_names == ("j1", "j2", "j3")
+    assert spec.base_link == "base" and "antenna" in {f.name for f in spec.frames}
+
+
+def test_an_unphysical_inertial_moving_with_the_arm_is_refused(tmp_path):
+    with pytest.raises(SpecError, match=r"link 'antenna': non-physical inertia"):
+        load_spec(_three_with_extras(tmp_path / "arm", antenna_on="l3"))
+
+
+def test_an_arm_joints_speed_beyond_the_cap_is_refused_with_the_same_line(tmp_path):
+    path = _three_with_extras(tmp_path / "arm", antenna_on="base")
+    path.write_text(
+        path.read_text().replace('velocity="2" effort="30"', 'velocity="10000" effort="30"')
+    )
+    with pytest.raises(SpecError, match=r"joint 'j2'.limit.velocity: 10000.0 is out of range"):
+        load_spec(path)
+
+
 def test_sidecar_states_where_armature_comes_from(tmp_path):
     (tmp_path / "three.urdf").write_text(THREE_JOINT)
     (tmp_path / "three.armlab.yaml").write_text(
