@@ -128,6 +128,13 @@ def labels_of(
             f"({problem}): ignored; the robot's name, effort limits and saturation at the "
             "limit are n/a"
         )
+    if urdf is not None:
+        sliding = _prismatic(urdf, names)
+        if sliding:
+            notes.append(
+                f"{', '.join(sliding)}: prismatic: its position, errors and effort are in m, "
+                "m/s and N where this report's labels say rad, rad/s and N m"
+            )
     if not ours and urdf is not None:
         robot = urdf_robot_name(urdf)
         if robot:
@@ -214,6 +221,12 @@ def urdf_problem(urdf: str) -> str | None:
         if values.get("lower", -math.inf) > values.get("upper", math.inf):
             return f"{where} lower={values['lower']:g} is above upper={values['upper']:g}"
     return None
+
+
+def _prismatic(urdf: str, joints: Sequence[str]) -> list[str]:
+    """The recorded ``joints`` the (well-formed) URDF declares prismatic, in their order."""
+    kinds = {j.get("name"): j.get("type") for j in ElementTree.fromstring(urdf).iter("joint")}
+    return [name for name in joints if kinds.get(name) == "prismatic"]
 
 
 def _limits_note(urdf: str | None, joints: Sequence[str], topic: str | None) -> str:

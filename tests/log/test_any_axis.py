@@ -302,6 +302,9 @@ def test_a_robot_with_every_axis_records_and_reports_with_true_frames(
     goal = [0.4, -0.4, -0.1, -0.3, 0.4, 0.6, 0.05]
     bag = _record_and_report(tmp_path, capsys, any_axis_path, start, goal)
     assert_bag_tf_matches_yourdfpy(bag, any_axis_path)
+    # the report's labels say rad for every joint: the prismatic one is named as in m
+    text = (tmp_path / "rep" / "report.md").read_text(encoding="utf-8")
+    assert "**e-ctc**: j7: prismatic: its position, errors and effort are in m" in text
 
 
 @needs_ur
