@@ -427,9 +427,17 @@ def pick_roles(
             role = ROLES[name]
             what = f"no messages on {picked}" if picked else f"no {role.type} topic"
             shown = ", ".join(f"{t} ({ty})" for t, ty in sorted(present.items())) or "none"
+            # joint states and no reference: a log to identify from, not to track against
+            log_only = name == "controller_state" and chosen["joint_states"] in collector.decoders
             raise RecordingError(
                 f"{mcap_path}: {what} for {name} (default {role.name}; topics "
                 f"present: {shown}); remap with --topic {name}=/name"
+                + (
+                    "; a log of joint states alone has no reference to measure tracking "
+                    "against: `pipeline identify fit` reads it (docs/identify.md)"
+                    if log_only
+                    else ""
+                )
             )
     js_dec = collector.decoders[str(chosen["joint_states"])]
     if js_only:

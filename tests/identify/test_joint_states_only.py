@@ -106,8 +106,9 @@ def test_a_joint_states_only_bag_fits_and_validates(
         logs.append((path, log))
     (fit_bag, fit_log), (check_bag, check_log) = logs
     # the report still needs its controller state; identification does not
-    with pytest.raises(RecordingError, match="controller_state"):
+    with pytest.raises(RecordingError, match="controller_state") as refused:
         read_recording(fit_bag)
+    assert "no reference to measure tracking against: `pipeline identify fit`" in str(refused.value)
     model = tmp_path / "model.yaml"
     s = fit_command(
         [fit_bag], out=model, robot="ur5", cutoff_hz=5.0, topics={"joint_states": TOPIC}
