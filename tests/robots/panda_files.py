@@ -7,14 +7,48 @@ from __future__ import annotations
 import re
 import shutil
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 
+from pipeline.model.dh import forward_kinematics
 from pipeline.robots.packages import package_search_path
+from pipeline.robots.spec import RobotSpec
 
 ERD = next((p / "example-robot-data" for p in package_search_path()
             if (p / "example-robot-data").is_dir()), None)  # fmt: skip
 needs_erd = pytest.mark.skipif(ERD is None, reason="example-robot-data is not installed")
+
+
+def assert_fk_matches_yourdfpy(
+    spec: RobotSpec, urdf: Path | str, frame: str, *, seed: int, poses: int, atol: float
+) -> None:
+    """Our forward kinematics of ``spec`` equals yourdfpy's transform from the base to
+    ``frame`` of ``urdf`` at ``poses`` uniform random configurations (locked joints at 0)."""
+    robot: Any = yourdfpy_robot(urdf)
+    rng = np.random.default_rng(seed)
+    for _ in range(poses):
+        q = rng.uniform(spec.lower, spec.upper)
+        robot.update_cfg(dict(zip(spec.joint_names, q, strict=True)))
+        want = robot.get_transform(frame_to=frame, frame_from=spec.base_link)
+        np.testing.assert_allclose(forward_kinematics(spec, q), want, atol=atol)
+
+
+def yourdfpy_robot(urdf: Path | str) -> object:
+    """``urdf`` read by yourdfpy (an independent URDF reader; skips the test without it),
+    its ``package://`` files resolved in example-robot-data's share, meshes not loaded."""
+    yourdfpy = pytest.importorskip("yourdfpy")
+    assert ERD is not None
+    share = ERD.parent
+
+    def handler(fname: str) -> str:
+        return str(share / fname.removeprefix("package://"))
+
+    return yourdfpy.URDF.load(
+        str(urdf), load_meshes=False, build_collision_scene_graph=False, filename_handler=handler
+    )
+
 
 # The URDF's place in example-robot-data, and the settings the built-in panda's sidecar
 # (pipeline/robots/panda.armlab.yaml) gives it but its SRDF: fingers locked, TCP flange.

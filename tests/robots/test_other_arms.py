@@ -11,19 +11,12 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-from pipeline.model.dh import forward_kinematics
 from pipeline.robots import load_spec
-from pipeline.robots.packages import package_search_path
+from tests.robots.panda_files import ERD, assert_fk_matches_yourdfpy, needs_erd
 
-SHARE = next(
-    (p / "example-robot-data" / "robots" for p in package_search_path() if
-     (p / "example-robot-data").is_dir()),
-    None,
-)  # fmt: skip
-pytestmark = pytest.mark.skipif(SHARE is None, reason="example-robot-data share not found")
+pytestmark = needs_erd
 
 ARMS = [
     # (URDF under the share, tip: for the sidecar (None: the single leaf chain), joints)
@@ -40,26 +33,12 @@ ARMS = [
 def test_an_example_robot_data_arm_loads_and_agrees_with_yourdfpy(
     tmp_path: Path, urdf: str, tip: str | None, dof: int
 ) -> None:
-    yourdfpy = pytest.importorskip("yourdfpy")
-    assert SHARE is not None
+    assert ERD is not None
     path = tmp_path / Path(urdf).name  # beside its sidecar, as a user's copy would be
-    shutil.copy(SHARE / urdf, path)
+    shutil.copy(ERD / "robots" / urdf, path)
     if tip is not None:
         path.with_name(f"{path.stem}.armlab.yaml").write_text(f"tip: {tip}\n")
     spec = load_spec(path)
     assert spec.dof == dof
-    share = SHARE.parent.parent
-
-    def handler(fname: str) -> str:
-        return str(share / fname.removeprefix("package://"))
-
-    robot = yourdfpy.URDF.load(
-        str(path), load_meshes=False, build_collision_scene_graph=False, filename_handler=handler
-    )
     end = tip or spec.joints[-1].link_name
-    rng = np.random.default_rng(3)
-    for _ in range(5):
-        q = rng.uniform(spec.lower, spec.upper)
-        robot.update_cfg(dict(zip(spec.joint_names, q, strict=True)))
-        want = robot.get_transform(frame_to=end, frame_from=spec.base_link)
-        np.testing.assert_allclose(forward_kinematics(spec, q), want, atol=1e-9)
+    assert_fk_matches_yourdfpy(spec, path, end, seed=3, poses=5, atol=1e-9)

@@ -19,6 +19,7 @@ from pipeline.robots import RobotSpec, load_spec
 from pipeline.robots.packages import package_search_path
 from pipeline.robots.spec import pose_matrix
 from pipeline.robots.urdf import build_pinocchio_model
+from tests.robots.panda_files import assert_fk_matches_yourdfpy
 
 SHARE = next(
     (p / "example-robot-data" / "robots" for p in package_search_path() if
@@ -112,24 +113,8 @@ def test_fk_mass_matrix_and_gravity_agree_between_mujoco_and_pinocchio(any_robot
     ("urdf", "tip_frame"), [(UR5_URDF, "tool0"), (PANDA_URDF, "panda_hand_tcp")]
 )
 def test_fk_matches_yourdfpy(urdf, tip_frame):
-    yourdfpy = pytest.importorskip("yourdfpy")
     spec = load_spec("panda") if urdf == PANDA_URDF else load_spec(_urdf(urdf))
-    assert SHARE is not None
-    share = SHARE.parent.parent
-
-    def handler(fname: str) -> str:
-        return str(share / fname.removeprefix("package://"))
-
-    robot = yourdfpy.URDF.load(
-        _urdf(urdf), load_meshes=False, build_collision_scene_graph=False,
-        filename_handler=handler,
-    )  # fmt: skip
-    rng = np.random.default_rng(2)
-    for _ in range(10):
-        q = rng.uniform(spec.lower, spec.upper)
-        robot.update_cfg(dict(zip(spec.joint_names, q, strict=True)))
-        want = robot.get_transform(frame_to=tip_frame, frame_from=spec.base_link)
-        np.testing.assert_allclose(forward_kinematics(spec, q), want, atol=1e-12)
+    assert_fk_matches_yourdfpy(spec, _urdf(urdf), tip_frame, seed=2, poses=10, atol=1e-12)
 
 
 def test_urdf_ur5_and_dh_ur5_agree_at_the_flange():
